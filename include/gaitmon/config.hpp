@@ -1,0 +1,93 @@
+// Settings people edit, loaded from TOML files in config/ and validated on load.
+//
+// The main file (config/gaitmon.toml) names two more files relative to itself: the insole
+// layouts (insoles_file) and the seed's Appendix I tissue parameters (tissue_file). Loading
+// refuses unknown keys, missing keys, out-of-range numbers, a sensor in two regions, a sensor
+// in no region and an empty region, each with a ConfigError naming the file and the key.
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "gaitmon/tissue_model.hpp"
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+/// Where the sensors of a row sit relative to the insole's midline when rows differ in length.
+enum class RowAlignment { Centred, Lateral, Medial };
+
+/// Sensor cell size and spacing. The sensing area of one cell is width x height whatever the
+/// pitch; the pitch only places the cells on the foot.
+struct SensorGeometry {
+  double width_mm = 7.5;    ///< lateral-medial size of one sensor
+  double height_mm = 15.0;  ///< anterior-posterior size of one sensor
+  double pitch_x_mm = 7.5;  ///< centre-to-centre, lateral-medial
+  double pitch_y_mm = 15.0; ///< centre-to-centre, anterior-posterior
+  RowAlignment alignment = RowAlignment::Centred;
+  double area_mm2() const { return width_mm * height_mm; }
+};
+
+/// The manufacturer's linear calibration: full_scale_bits correspond to full_scale_n_per_cm2.
+struct Calibration {
+  double full_scale_bits = 255.0;
+  double full_scale_n_per_cm2 = 64.0;
+  /// Newtons that one bit on one sensor of the given area stands for (eq 42): 0.2824 N by default.
+  double newtons_per_bit(double sensor_area_mm2) const {
+    return full_scale_n_per_cm2 / full_scale_bits * sensor_area_mm2 / 100.0;
+  }
+};
+
+/// Step segmentation (seed 3.3.1) settings.
+struct SegmentationSettings {
+  int event_threshold_bits = 142;  ///< summed bits above the dc bias that mean contact (40 N)
+  int debounce_frames = 5;         ///< a contact starts/ends only after this many frames agree
+  int swing_window_frames = 5;     ///< frames averaged around each swing midpoint for the bias
+};
+
+/// One run of sensors within a row: sensors first..last (1-based, lateral to medial) of row.
+struct RowSpan {
+  int row = 0;  ///< 1 = most anterior (toe) row
+  int first = 0;
+  int last = 0;
+};
+
+/// One insole size as Appendix B gives it: which sensors of which rows form each region.
+struct InsoleSpec {
+  InsoleSize size = InsoleSize::S35_36;
+  double adaptive_threshold_pct = 0.2;  ///< the seed's Table 2, % of the step's max summed bits
+  std::array<std::vector<RowSpan>, kRegionCount> regions;
+};
+
+/// The seed's Appendix I result for one size and region: mean and SD across participants.
+struct SeedTissueStats {
+  EllipsoidParams mean;
+  EllipsoidParams sd;
+  double nrmse_pct_mean = 0.0;
+  double nrmse_pct_sd = 0.0;
+};
+
+struct Config {
+  std::filesystem::path source;  ///< the main file this was loaded from
+  double sample_rate_hz = 100.0;
+  SensorGeometry sensor;
+  Calibration calibration;
+  SegmentationSettings segmentation;
+  std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
+  std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
+
+  const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
+  const SeedTissueStats& tissue(InsoleSize size, Region region) const {
+    return seed_tissue[index_of(size)][index_of(region)];
+  }
+};
+
+/// Loads and validates the main config file and the files it names. Throws ConfigError.
+Config load_config(const std::filesystem::path& main_file);
+
+/// The config shipped with the source tree (config/gaitmon.toml), used when --config is absent.
+std::filesystem::path default_config_path();
+
+}  // namespace gaitmon

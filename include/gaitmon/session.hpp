@@ -1,0 +1,88 @@
+// Session CSV v1 (shared/docs/session-format.md): a streaming reader and a writer.
+//
+// The reader holds one line at a time, never the whole file. Bad input throws InputError naming
+// the file, the 1-based line and the reason; nothing partial is returned silently.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+/// The number of sensor columns the format fixes for each insole size (93 ... 161).
+std::size_t session_sensor_count(InsoleSize size);
+
+struct SessionHeader {
+  int version = 1;
+  InsoleSize insole_size = InsoleSize::S37_38;
+  double sample_rate_hz = 100.0;
+  std::size_t sensors = 107;
+  std::optional<std::string> subject;
+  std::optional<std::string> recorded_at;
+  std::optional<std::string> note;
+  std::optional<double> body_mass_kg;
+  /// Every other `# key: value` line, in file order; kept and otherwise ignored.
+  std::vector<std::pair<std::string, std::string>> extra;
+};
+
+/// One frame of one foot: raw readings 0..255, sensor i at bits[i].
+struct Frame {
+  double t_s = 0.0;
+  Foot foot = Foot::Left;
+  std::vector<std::uint8_t> bits;
+};
+
+class SessionReader {
+ public:
+  /// Opens the file and parses the metadata and column header. Throws InputError.
+  explicit SessionReader(const std::filesystem::path& path);
+  ~SessionReader();
+  SessionReader(const SessionReader&) = delete;
+  SessionReader& operator=(const SessionReader&) = delete;
+
+  const SessionHeader& header() const;
+  const std::filesystem::path& path() const;
+
+  /// Reads the next frame into `frame` (its bits buffer is reused). Returns false at the end of
+  /// the file. Throws InputError for a bad line.
+  bool next(Frame& frame);
+
+  /// The 1-based line number of the frame last returned by next().
+  std::uint64_t line() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+class SessionWriter {
+ public:
+  /// Creates (truncates) the file and writes the metadata and column header.
+  /// Throws std::runtime_error naming the file if it cannot be written.
+  SessionWriter(const std::filesystem::path& path, const SessionHeader& header);
+  ~SessionWriter();
+  SessionWriter(const SessionWriter&) = delete;
+  SessionWriter& operator=(const SessionWriter&) = delete;
+
+  /// Appends one frame. Throws std::invalid_argument for a wrong sensor count or a time that
+  /// does not increase for its foot, std::runtime_error on an I/O failure.
+  void write(const Frame& frame);
+
+  /// Flushes and closes; throws std::runtime_error on failure. Called by the destructor if
+  /// needed (which then swallows errors).
+  void close();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace gaitmon

@@ -1,0 +1,22 @@
+// Paths and scratch folders for tests and benchmarks; free of any test framework.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+namespace gaitmon::test {
+
+/// The source tree (for config/ and replay/).
+std::filesystem::path source_dir();
+/// The project's shared/ folder beside the checkout (seed data, real recordings).
+std::filesystem::path shared_dir();
+/// The gaitmon executable built with the tests (empty in benchmarks).
+std::filesystem::path gaitmon_binary();
+/// A fresh, empty scratch folder unique to this process and `name`.
+std::filesystem::path scratch_dir(const std::string& name);
+/// Writes `text` to `path`, creating folders; returns path.
+std::filesystem::path write_text(const std::filesystem::path& path, const std::string& text);
+/// Runs a shell command, returns its exit status, and captures stdout+stderr into `output`.
+int run_command(const std::string& command, std::string* output = nullptr);
+
+}  // namespace gaitmon::test
