@@ -4,13 +4,14 @@
 namespace gaitmon {
 namespace {
 constexpr std::array<std::string_view, kRegionCount> kRegionNames{
-    "heel",   "midfoot_posterior", "midfoot_anterior", "met1_2",
-    "met3_5", "toe1",              "toe2",             "toes3_5"};
+    "heel", "midfoot_posterior", "midfoot_anterior", "met1_2", "met3_5", "toe1", "toe2", "toes3_5"};
 constexpr std::array<std::string_view, kInsoleSizeCount> kSizeNames{"35-36", "37-38", "39-40",
                                                                     "41-42", "43-44", "45-46"};
 }  // namespace
 
-std::string_view foot_name(Foot foot) { return foot == Foot::Left ? "L" : "R"; }
+std::string_view foot_name(Foot foot) {
+  return foot == Foot::Left ? "L" : "R";
+}
 
 std::optional<Foot> parse_foot(std::string_view text) {
   if (text == "L") return Foot::Left;
@@ -18,7 +19,9 @@ std::optional<Foot> parse_foot(std::string_view text) {
   return std::nullopt;
 }
 
-std::string_view region_name(Region region) { return kRegionNames[index_of(region)]; }
+std::string_view region_name(Region region) {
+  return kRegionNames[index_of(region)];
+}
 
 std::optional<Region> parse_region(std::string_view text) {
   for (Region r : kRegions) {
@@ -27,7 +30,9 @@ std::optional<Region> parse_region(std::string_view text) {
   return std::nullopt;
 }
 
-std::string_view insole_size_name(InsoleSize size) { return kSizeNames[index_of(size)]; }
+std::string_view insole_size_name(InsoleSize size) {
+  return kSizeNames[index_of(size)];
+}
 
 std::optional<InsoleSize> parse_insole_size(std::string_view text) {
   for (InsoleSize s : kInsoleSizes) {

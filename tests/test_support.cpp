@@ -11,9 +11,13 @@
 
 namespace gaitmon::test {
 
-std::filesystem::path source_dir() { return GAITMON_SOURCE_DIR; }
+std::filesystem::path source_dir() {
+  return GAITMON_SOURCE_DIR;
+}
 
-std::filesystem::path shared_dir() { return GAITMON_SHARED_DIR; }
+std::filesystem::path shared_dir() {
+  return GAITMON_SHARED_DIR;
+}
 
 std::filesystem::path gaitmon_binary() {
 #ifdef GAITMON_BINARY
@@ -46,7 +50,8 @@ int run_command(const std::string& command, std::string* output) {
   std::array<char, 4096> buffer{};
   std::string text;
   std::size_t got = 0;
-  while ((got = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) text.append(buffer.data(), got);
+  while ((got = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0)
+    text.append(buffer.data(), got);
   int status = ::pclose(pipe);
   if (output != nullptr) *output = std::move(text);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;

@@ -22,10 +22,10 @@ enum class RowAlignment { Centred, Lateral, Medial };
 /// Sensor cell size and spacing. The sensing area of one cell is width x height whatever the
 /// pitch; the pitch only places the cells on the foot.
 struct SensorGeometry {
-  double width_mm = 7.5;    ///< lateral-medial size of one sensor
-  double height_mm = 15.0;  ///< anterior-posterior size of one sensor
-  double pitch_x_mm = 7.5;  ///< centre-to-centre, lateral-medial
-  double pitch_y_mm = 15.0; ///< centre-to-centre, anterior-posterior
+  double width_mm = 7.5;     ///< lateral-medial size of one sensor
+  double height_mm = 15.0;   ///< anterior-posterior size of one sensor
+  double pitch_x_mm = 7.5;   ///< centre-to-centre, lateral-medial
+  double pitch_y_mm = 15.0;  ///< centre-to-centre, anterior-posterior
   RowAlignment alignment = RowAlignment::Centred;
   double area_mm2() const { return width_mm * height_mm; }
 };
@@ -46,6 +46,11 @@ struct SegmentationSettings {
   int debounce_frames = 5;         ///< a contact starts/ends only after this many frames agree
   int swing_window_frames = 5;     ///< frames averaged around each swing midpoint for the bias
 };
+
+/// Bounds on row and sensor numbers, far above any real insole (18 rows, 11 per row): they keep
+/// a typo such as "1:1-10000" from building a huge grid.
+inline constexpr int kMaxInsoleRows = 100;
+inline constexpr int kMaxSensorsPerRow = 100;
 
 /// One run of sensors within a row: sensors first..last (1-based, lateral to medial) of row.
 struct RowSpan {
@@ -84,7 +89,11 @@ struct Config {
   }
 };
 
-/// Loads and validates the main config file and the files it names. Throws ConfigError.
+/// Loads and validates the main config file and the files it names. Throws ConfigError whose
+/// key is the dotted path of the offending key (array elements 0-based, e.g.
+/// `sizes."37-38".regions.toe1[1]`), "(file)" when the main file cannot be read (a named file
+/// that cannot be read is reported at insoles_file or tissue_file of the main file), or
+/// "(syntax)" when a file is not valid TOML (the reason then starts with "line L, column C").
 Config load_config(const std::filesystem::path& main_file);
 
 /// The config shipped with the source tree (config/gaitmon.toml), used when --config is absent.

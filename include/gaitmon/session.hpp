@@ -58,6 +58,9 @@ class SessionReader {
   /// The 1-based line number of the frame last returned by next().
   std::uint64_t line() const;
 
+  /// Bytes of the file consumed so far, through the end of the last line read (for progress).
+  std::uint64_t bytes_read() const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

@@ -1,4 +1,5 @@
-// Vocabulary shared by every unit: feet, anatomical regions and insole sizes, with their text names.
+// Vocabulary shared by every unit: feet, anatomical regions and insole sizes, with their text
+// names.
 #pragma once
 
 #include <array>
@@ -29,13 +30,16 @@ enum class Region : std::uint8_t {
 };
 inline constexpr std::size_t kRegionCount = 8;
 inline constexpr std::array<Region, kRegionCount> kRegions{
-    Region::Heel,   Region::MidfootPosterior, Region::MidfootAnterior, Region::Met1_2,
-    Region::Met3_5, Region::Toe1,             Region::Toe2,            Region::Toes3_5};
+    Region::Heel,   Region::MidfootPosterior, Region::MidfootAnterior,
+    Region::Met1_2, Region::Met3_5,           Region::Toe1,
+    Region::Toe2,   Region::Toes3_5};
 
 /// heel, midfoot_posterior, midfoot_anterior, met1_2, met3_5, toe1, toe2, toes3_5.
 std::string_view region_name(Region region);
 std::optional<Region> parse_region(std::string_view text);
-constexpr std::size_t index_of(Region region) { return static_cast<std::size_t>(region); }
+constexpr std::size_t index_of(Region region) {
+  return static_cast<std::size_t>(region);
+}
 constexpr bool is_toe(Region region) {
   return region == Region::Toe1 || region == Region::Toe2 || region == Region::Toes3_5;
 }
@@ -50,6 +54,8 @@ inline constexpr std::array<InsoleSize, kInsoleSizeCount> kInsoleSizes{
 /// "35-36" ... "45-46".
 std::string_view insole_size_name(InsoleSize size);
 std::optional<InsoleSize> parse_insole_size(std::string_view text);
-constexpr std::size_t index_of(InsoleSize size) { return static_cast<std::size_t>(size); }
+constexpr std::size_t index_of(InsoleSize size) {
+  return static_cast<std::size_t>(size);
+}
 
 }  // namespace gaitmon

@@ -1,9 +1,50 @@
-// gaitmon command line: one subcommand per job.
+// gaitmon command line: one subcommand per job; errors at the edges become one clear line.
+#include <spdlog/spdlog.h>
+
 #include <CLI/CLI.hpp>
+#include <exception>
+#include <iostream>
+
+#include "commands.hpp"
+#include "gaitmon/error.hpp"
+
+namespace gaitmon::cli {
+
+Config load_global_config(const GlobalOptions& global) {
+  spdlog::set_level(spdlog::level::from_str(global.log_level));
+  return load_config(global.config_path.empty() ? default_config_path() : global.config_path);
+}
+
+}  // namespace gaitmon::cli
 
 int main(int argc, char** argv) {
-  CLI::App app{"gaitmon: real-time gait monitor for pressure-measuring insoles"};
+  using namespace gaitmon::cli;
+  CLI::App app{
+      "gaitmon: step segmentation and plantar-tissue models from Medilogic pressure insoles"};
   app.require_subcommand(1);
-  CLI11_PARSE(app, argc, argv);
+  GlobalOptions global;
+  app.add_option("--config", global.config_path,
+                 "Main config file (default: $GAITMON_CONFIG or the source tree's "
+                 "config/gaitmon.toml)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
+  add_simulate_command(app, global);
+  add_segment_command(app, global);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const gaitmon::InputError& e) {
+    std::cerr << "gaitmon: bad input: " << e.what() << '\n';
+    return 2;
+  } catch (const gaitmon::ConfigError& e) {
+    std::cerr << "gaitmon: bad config: " << e.what() << '\n';
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "gaitmon: error: " << e.what() << '\n';
+    return 1;
+  }
   return 0;
 }

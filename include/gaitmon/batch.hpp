@@ -1,0 +1,33 @@
+// Batch processing of a recorded session: the same per-foot segmenters the live monitor uses,
+// fed from a session file.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+
+#include "gaitmon/config.hpp"
+#include "gaitmon/segmentation.hpp"
+#include "gaitmon/session.hpp"
+
+namespace gaitmon {
+
+struct SegmentedSessionInfo {
+  SessionHeader header;
+  std::array<std::int64_t, 2> frames_per_foot{};  ///< indexed by Foot
+};
+
+/// Segmenter memory bounds for a sample rate: contacts longer than 60 s are cut as incomplete,
+/// and a swing midpoint sits at most 1.5 s from its step.
+SegmenterLimits segmenter_limits(double sample_rate_hz);
+
+/// Streams the session at `path` through one StepSegmenter per foot and hands every step to
+/// `on_step` as soon as it is final (feet interleave as in the file; within a foot in time
+/// order). `on_progress`, if set, receives the fraction of the file read, now and then.
+/// Throws InputError for a bad session, std::invalid_argument if the config lacks the size.
+SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Config& config,
+                                     const std::function<void(Step&&)>& on_step,
+                                     const std::function<void(double)>& on_progress = {});
+
+}  // namespace gaitmon

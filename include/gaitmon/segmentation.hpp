@@ -1,0 +1,217 @@
+// Step segmentation per foot (seed 3.3.1) and per-sensor zeroing with the adaptive threshold
+// (3.3.2).
+//
+// One incremental algorithm serves both the live monitor and batch analysis: batch segmentation
+// feeds every frame of a foot to a StepSegmenter and then calls finish(), so both produce exactly
+// the same steps.
+//
+// Algorithm, per foot, on the summed bits S(t) of each frame:
+// - Baseline. Until the first swing midpoint is known, the baseline is the minimum of S over the
+//   frames seen so far, applied retroactively to them (the frames are kept and re-classified
+//   whenever the minimum falls), so a recording that starts in stance shows that first contact
+//   from frame 0 rather than from wherever S first rose 142 bits above an in-stance minimum.
+//   This start-up phase ends at the first swing between two contacts, or after
+//   max_stance_frames frames; from then on each frame is classified once, against the bias of the
+//   latest swing midpoint. (A recording that starts while standing with weight shifts larger than
+//   the event threshold can show spurious contacts before the first lift; walking, sitting or a
+//   lift at the start is fine.)
+// - Contacts. A frame is "above" when S - baseline > event_threshold_bits. A contact starts at the
+//   first frame of a run of debounce_frames frames above and ends at the last frame above before
+//   a run of debounce_frames frames at or below: the rule of the real data's ground truth.
+// - Swing midpoints. The swing between a toe off and the next heel strike, frames g0..g1, has its
+//   midpoint at its middle frame g0 + (g1 - g0) / 2, except that it is never placed more than
+//   max_swing_half_frames from the contact it belongs to (so a long pause still bounds memory
+//   and latency: the post-swing midpoint becomes min(middle, g0 + H), the pre-swing one
+//   max(middle, g1 - H)). The seed reads the summed bits at single instants; here the bias is the
+//   mean of S over swing_window_frames frames centred on the midpoint (clipped to the swing), which
+//   averages out the swing noise. A step's bias is the mean of its pre- and post-swing biases, its
+//   per-sensor zero the same average taken per sensor (so the zeros sum to the bias).
+// - Final boundaries. With the step's own bias the contact rule is run again over the frames
+//   between the two midpoints; the heel strike and toe off are the first start and last end of
+//   the contacts found there that overlap the candidate (normally within a frame of it).
+// - Status. A step is Ok when it has a swing of at least debounce_frames frames on both sides.
+//   Incomplete steps are a contact that starts fewer than debounce_frames frames after the start
+//   of the recording (including at frame 0), a contact still open at the end of the recording, and
+//   a contact that reaches max_stance_frames frames (standing). They are emitted with their frames,
+//   candidate boundaries and a best-effort bias (the swing windows that exist, or else the frame of
+//   lowest S) so they can be reported, but they are not meant to be analysed.
+//
+// Latency: a step is final once its post-swing midpoint is known, i.e. when the next contact of
+// the same foot is confirmed, debounce_frames - 1 frames after that heel strike (about one swing
+// plus 4 frames after toe off in walking: ~0.45 s at 100 Hz), or, after a long pause, 2 H + 1
+// frames after toe off. A contact reaching max_stance_frames is emitted at once as Incomplete and
+// the rest of it is skipped. At finish(), a step followed by at least debounce_frames swing frames
+// is final with its post-swing midpoint at the middle of that remaining swing.
+//
+// Memory: the frames from the current step's pre-swing midpoint onwards, i.e. at most
+// max_stance_frames + 2 H + swing_window_frames frames, plus max_stance_frames during start-up.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "gaitmon/config.hpp"
+#include "gaitmon/session.hpp"
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+enum class StepStatus : std::uint8_t { Ok, Incomplete };
+
+/// "ok" or "incomplete".
+std::string_view step_status_name(StepStatus status);
+
+struct Step {
+  Foot foot = Foot::Left;
+  int index = 0;  ///< per foot, 0-based, in time order, counting incomplete steps too
+  StepStatus status = StepStatus::Ok;
+  std::int64_t heel_strike_frame = 0;    ///< 0-based index among this foot's frames
+  std::int64_t toe_off_frame = 0;        ///< inclusive
+  double t_heel_strike_s = 0.0;          ///< t_s of the heel strike frame
+  double t_toe_off_s = 0.0;              ///< t_s of the toe off frame
+  double bias_bits = 0.0;                ///< summed-bits dc bias (mean of the two swing biases)
+  std::vector<double> sensor_zero_bits;  ///< per sensor, mean over the swing-midpoint windows
+  double max_summed_bits = 0.0;          ///< max over the stance of the zeroed summed bits
+  double adaptive_threshold_bits = 0.0;  ///< adaptive_threshold_bits(max_summed_bits, pct)
+  double peak_force_n = 0.0;             ///< max over the stance of (S - bias) * newtons_per_bit
+  std::vector<Frame> stance;             ///< raw frames heel strike..toe off inclusive
+};
+
+/// Bounds that keep a live segmenter's memory finite; the defaults are 60 s and 1.5 s at 100 Hz.
+struct SegmenterLimits {
+  std::int64_t max_stance_frames = 6000;     ///< longer contacts become Incomplete steps
+  std::int64_t max_swing_half_frames = 150;  ///< H: farthest a swing midpoint sits from its step
+};
+
+/// Segments the frames of one foot into steps. Not thread-safe; frames must come in time order.
+class StepSegmenter {
+ public:
+  /// Throws std::invalid_argument for a zero sensor count, a debounce or window below 1, a
+  /// negative event threshold, pct outside 0..100, newtons_per_bit <= 0, or limits that cannot
+  /// hold a contact (max_stance_frames <= debounce) or a window (H < swing_window_frames).
+  StepSegmenter(Foot foot, std::size_t sensors, const SegmentationSettings& settings,
+                double adaptive_threshold_pct, double newtons_per_bit,
+                const SegmenterLimits& limits = {});
+
+  /// Consumes the next frame of this foot and appends the steps it finalises (0..n) to
+  /// `finalised`. Throws std::invalid_argument for another foot, a wrong sensor count or a time
+  /// that does not increase, std::logic_error after finish().
+  void push(const Frame& frame, std::vector<Step>& finalised);
+
+  /// Marks the end of the recording and appends the remaining steps. Call once.
+  void finish(std::vector<Step>& finalised);
+
+  /// Frames consumed so far.
+  std::int64_t frames() const { return next_; }
+
+ private:
+  struct Entry {
+    Frame frame;
+    std::int64_t sum = 0;
+  };
+
+  /// The contact rule: debounced threshold crossings, fed one classification at a time.
+  struct ContactDetector {
+    enum class Event : std::uint8_t { None, Start, End };
+    int debounce = 1;
+    bool in_contact = false;
+    int run = 0;  ///< length of the current run against the state (above in swing, not in contact)
+    std::int64_t run_start = -1;
+    std::int64_t contact_start = -1;
+    std::int64_t last_above = -1;
+    Event step(std::int64_t index, bool above);
+    /// The earliest frame a contact not yet confirmed could start at, given frames up to next - 1.
+    std::int64_t earliest_start(std::int64_t next) const;
+  };
+
+  /// A swing-midpoint window's means (summed bits and per sensor), and the swing's floor: the
+  /// lowest mean of as many consecutive frames between the window and the step.
+  struct Window {
+    std::int64_t midpoint = 0;
+    double bias_bits = 0.0;
+    double floor_bits = 0.0;
+    std::vector<double> zero_bits;
+  };
+  enum class Side : std::uint8_t { BeforeStep, AfterStep };
+
+  /// Start-up classification against the running minimum of S.
+  struct StartUp {
+    ContactDetector detector;
+    bool seen_end = false;         ///< a contact has ended: a swing may follow
+    std::int64_t max_sum = 0;      ///< highest S so far
+    std::int64_t peak_sum = 0;     ///< highest S before the latest swing
+    std::int64_t swing_floor = 0;  ///< lowest S in the latest swing
+  };
+
+  /// The contact being tracked, from its confirmed start until it becomes a Step.
+  struct Pending {
+    int index = 0;
+    std::int64_t heel_strike = 0;
+    std::int64_t toe_off = -1;  ///< -1 while the contact is open
+    bool complete_start = false;
+    std::optional<Window> pre;
+  };
+
+  const Entry& at(std::int64_t index) const;
+  double baseline() const;
+  bool above(std::int64_t index, double baseline) const;
+  void process(std::int64_t index, std::vector<Step>& out);
+  /// Classifies frames from..next_ - 1 against the running minimum (from first_ = afresh);
+  /// returns true once a swing (falling to half the peak before it) between two contacts, or
+  /// longer than 2 H + 1 frames after a contact, is confirmed.
+  bool start_up_classify(std::int64_t from);
+  void end_start_up(std::vector<Step>& out);
+  void on_contact_start(std::int64_t heel_strike, std::vector<Step>& out);
+  void on_contact_end(std::int64_t toe_off);
+  Window window(std::int64_t midpoint, std::int64_t g0, std::int64_t g1, Side side) const;
+  void add_floor(double floor_bits);
+  /// Turns pending_ into a Step with its post-swing window and clears it.
+  void finalise(const Window& post, std::vector<Step>& out);
+  Step make_step(const Pending& pending, std::int64_t toe_off, const std::optional<Window>& post,
+                 StepStatus status) const;
+  void trim();
+
+  Foot foot_;
+  std::size_t sensors_;
+  SegmentationSettings settings_;
+  double pct_;
+  double newtons_per_bit_;
+  SegmenterLimits limits_;
+
+  std::deque<Entry> buffer_;  ///< frames first_ .. next_ - 1
+  std::int64_t first_ = 0;
+  std::int64_t next_ = 0;
+  double last_t_s_ = 0.0;
+  bool finished_ = false;
+
+  bool starting_up_ = true;
+  StartUp start_up_;
+  std::int64_t min_sum_ = 0;
+  std::vector<std::uint8_t> min_bits_;  ///< the frame of lowest S: last-resort zero
+
+  ContactDetector detector_;
+  /// Floors of the latest swings, each seen from the step before and the step after it.
+  static constexpr std::size_t kFloorHistory = 6;
+  std::deque<double> recent_floors_;
+  std::int64_t swing_start_ = 0;  ///< first frame of the current or next swing
+  std::optional<Pending> pending_;
+  bool skipping_ = false;  ///< inside a contact already emitted for reaching max_stance_frames
+  int next_index_ = 0;
+};
+
+/// The seed's adaptive threshold: pct % of the step's maximum zeroed summed bits, never below 0.
+/// adaptive_threshold_bits(2500, 0.2) == 5.
+double adaptive_threshold_bits(double max_summed_bits, double pct);
+
+/// Zeroes one frame with the step's per-sensor zero and applies the adaptive threshold: values
+/// below the threshold (after zeroing) become 0 (inactive). Output in bits. Throws
+/// std::invalid_argument if the spans differ in size or the threshold is negative.
+void zero_and_threshold(std::span<const std::uint8_t> raw, std::span<const double> zero,
+                        double threshold_bits, std::span<double> out);
+
+}  // namespace gaitmon

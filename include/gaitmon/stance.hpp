@@ -1,0 +1,41 @@
+// Per region and per frame of one stance: force (eq 42), active-sensor area and contact ellipse.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <vector>
+
+#include "gaitmon/config.hpp"
+#include "gaitmon/contact_ellipse.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/segmentation.hpp"
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+/// One region at one instant of a stance.
+struct RegionSample {
+  double force_n = 0.0;          ///< eq 42 over the region's active sensors (zeroed bits)
+  double sensor_area_mm2 = 0.0;  ///< active sensors x sensing area
+  int active_sensors = 0;        ///< sensors at or above the adaptive threshold
+  ContactEllipse ellipse;        ///< seed chapter 4; ellipse.kase None when no contact
+};
+
+/// Every frame of one stance, heel strike to toe off inclusive.
+struct StanceSeries {
+  std::vector<double> t_s;                                     ///< per frame, the session's clock
+  std::vector<std::array<RegionSample, kRegionCount>> frames;  ///< per frame, per region
+  std::vector<double> total_force_n;                           ///< per frame, the sum over regions
+
+  std::size_t size() const { return t_s.size(); }
+  const RegionSample& at(std::size_t frame, Region region) const {
+    return frames[frame][index_of(region)];
+  }
+};
+
+/// Zeroes each stance frame with the step's per-sensor zero, applies its adaptive threshold, and
+/// measures every region. The first frame of the stance is the "first instant" of Case 1.
+StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
+                            const Calibration& calibration);
+
+}  // namespace gaitmon

@@ -1,0 +1,61 @@
+// Drives the per-foot segmenters from a session file, exactly as the live monitor would.
+#include "gaitmon/batch.hpp"
+
+#include <algorithm>
+#include <optional>
+#include <vector>
+
+#include "gaitmon/error.hpp"
+#include "gaitmon/insole.hpp"
+
+namespace gaitmon {
+
+SegmenterLimits segmenter_limits(double sample_rate_hz) {
+  SegmenterLimits limits;
+  limits.max_stance_frames = static_cast<std::int64_t>(60.0 * sample_rate_hz);
+  limits.max_swing_half_frames = static_cast<std::int64_t>(1.5 * sample_rate_hz);
+  return limits;
+}
+
+SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Config& config,
+                                     const std::function<void(Step&&)>& on_step,
+                                     const std::function<void(double)>& on_progress) {
+  SessionReader reader(path);
+  SegmentedSessionInfo info;
+  info.header = reader.header();
+  const InsoleSpec& spec = config.insole(info.header.insole_size);
+  const double newtons_per_bit = config.calibration.newtons_per_bit(config.sensor.area_mm2());
+  const SegmenterLimits limits = segmenter_limits(info.header.sample_rate_hz);
+  std::array<std::optional<StepSegmenter>, 2> segmenters;
+  for (Foot foot : kFeet) {
+    segmenters[static_cast<std::size_t>(foot)].emplace(
+        foot, info.header.sensors, config.segmentation, spec.adaptive_threshold_pct,
+        newtons_per_bit, limits);
+  }
+  const auto file_bytes = static_cast<double>(std::filesystem::file_size(path));
+  std::vector<Step> finalised;
+  Frame frame;
+  auto deliver = [&] {
+    for (Step& step : finalised) on_step(std::move(step));
+    finalised.clear();
+  };
+  while (reader.next(frame)) {
+    const auto foot = static_cast<std::size_t>(frame.foot);
+    try {
+      segmenters[foot]->push(frame, finalised);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(path.string(), reader.line(), e.what());
+    }
+    ++info.frames_per_foot[foot];
+    deliver();
+    if (on_progress && (reader.line() & 0x3FFF) == 0 && file_bytes > 0) {
+      on_progress(std::min(1.0, static_cast<double>(reader.bytes_read()) / file_bytes));
+    }
+  }
+  for (auto& segmenter : segmenters) segmenter->finish(finalised);
+  deliver();
+  if (on_progress) on_progress(1.0);
+  return info;
+}
+
+}  // namespace gaitmon

@@ -1,0 +1,152 @@
+// `gaitmon simulate`: a session CSV v1 and its ground truth from the forward model.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <map>
+#include <memory>
+
+#include "commands.hpp"
+#include "gaitmon/simulator.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+struct SimulateArgs {
+  SimulationOptions options;
+  std::string size = "37-38";
+  std::string model = "correct";
+  std::string rasterisation = "centre";
+  std::vector<std::string> params;
+  std::filesystem::path out;
+  std::filesystem::path truth;
+};
+
+/// Applies one `REGION.FIELD=VALUE` override on top of the region's default parameters.
+void apply_param(const std::string& text, const Config& config, SimulationOptions& options) {
+  const auto dot = text.find('.');
+  const auto eq = text.find('=');
+  if (dot == std::string::npos || eq == std::string::npos || eq < dot) {
+    throw std::invalid_argument("--param '" + text + "': expected REGION.FIELD=VALUE");
+  }
+  const auto region = parse_region(text.substr(0, dot));
+  if (!region) throw std::invalid_argument("--param '" + text + "': unknown region");
+  const std::string field = text.substr(dot + 1, eq - dot - 1);
+  double value = 0.0;
+  try {
+    std::size_t used = 0;
+    value = std::stod(text.substr(eq + 1), &used);
+    if (used != text.size() - eq - 1) throw std::invalid_argument("trailing text");
+  } catch (const std::exception&) {
+    throw std::invalid_argument("--param '" + text + "': the value is not a number");
+  }
+  if (!(value > 0.0)) throw std::invalid_argument("--param '" + text + "': must be > 0");
+  auto& slot = options.region_params[index_of(*region)];
+  if (!slot) slot = config.tissue(options.size, *region).mean;
+  const std::map<std::string, double EllipsoidParams::*> fields{
+      {"A_mm", &EllipsoidParams::A_mm},
+      {"B_mm", &EllipsoidParams::B_mm},
+      {"C_mm", &EllipsoidParams::C_mm},
+      {"d0_mm", &EllipsoidParams::d0_mm},
+      {"kbar_n_per_mm3", &EllipsoidParams::kbar_n_per_mm3},
+      {"n", &EllipsoidParams::n},
+      {"cbar_ns_per_mm3", &EllipsoidParams::cbar_ns_per_mm3},
+      {"m", &EllipsoidParams::m}};
+  const auto it = fields.find(field);
+  if (it == fields.end()) {
+    throw std::invalid_argument("--param '" + text + "': unknown field '" + field +
+                                "' (A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, "
+                                "cbar_ns_per_mm3, m)");
+  }
+  (*slot).*(it->second) = value;
+}
+
+void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
+  const Config config = load_global_config(global);
+  SimulationOptions& options = args.options;
+  options.size = *parse_insole_size(args.size);
+  options.model = *parse_model_variant(args.model);
+  options.rasterisation = *parse_rasterisation(args.rasterisation);
+  for (const auto& p : args.params) apply_param(p, config, options);
+  if (args.truth.empty()) {
+    args.truth = args.out;
+    args.truth.replace_extension(".truth.json");
+  }
+  if (args.out.has_parent_path()) std::filesystem::create_directories(args.out.parent_path());
+  const SimulationTruth truth = simulate_session(config, options, args.out, args.truth);
+
+  int partial = 0;
+  for (const auto& step : truth.steps) partial += step.partial ? 1 : 0;
+  fmt::print("simulated {:.1f} s, insole {}, {} frames per foot at {} Hz, seed {}, model {}\n",
+             options.duration_s, insole_size_name(options.size), truth.frames_per_foot,
+             truth.sample_rate_hz, options.seed, model_variant_name(options.model));
+  fmt::print("{} steps ({} cut by the recording's ends); {} readings clipped at 255\n",
+             truth.steps.size(), partial, truth.clipped_high_samples);
+  fmt::print("wrote {} and {}\n", args.out.string(), args.truth.string());
+}
+
+std::vector<std::string> names_of_sizes() {
+  std::vector<std::string> names;
+  for (InsoleSize s : kInsoleSizes) names.emplace_back(insole_size_name(s));
+  return names;
+}
+
+}  // namespace
+
+void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
+  auto args = std::make_shared<SimulateArgs>();
+  CLI::App* sub = app.add_subcommand(
+      "simulate",
+      "Simulate a two-foot walking session from the ellipsoid model: writes a session CSV v1 "
+      "and a ground-truth JSON");
+  sub->add_option("--out,-o", args->out, "Session CSV to write")->required();
+  sub->add_option("--truth", args->truth, "Ground-truth JSON (default: OUT with .truth.json)");
+  sub->add_option("--size", args->size, "Insole size")
+      ->check(CLI::IsMember(names_of_sizes()))
+      ->capture_default_str();
+  sub->add_option("--duration", args->options.duration_s, "Length of the recording, s")
+      ->check(CLI::Range(0.1, 86400.0))
+      ->capture_default_str();
+  sub->add_option("--seed", args->options.seed, "Random seed (same seed, same file)")
+      ->capture_default_str();
+  sub->add_option("--body-mass", args->options.body_mass_kg, "Body mass, kg")
+      ->check(CLI::Range(1.0, 300.0))
+      ->capture_default_str();
+  sub->add_option("--stride", args->options.timing.stride_s,
+                  "Stride time (heel strike to the same foot's next), s")
+      ->check(CLI::Range(0.5, 3.0))
+      ->capture_default_str();
+  sub->add_option("--stance-fraction", args->options.timing.stance_fraction,
+                  "Stance time / stride time")
+      ->check(CLI::Range(0.3, 0.8))
+      ->capture_default_str();
+  sub->add_option("--jitter", args->options.timing.jitter_pct,
+                  "Step-to-step SD of stride and stance time, % of nominal")
+      ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
+  sub->add_option("--model", args->model,
+                  "Damping sign: correct (the integral of eq 22) or seed_eq25 (the seed's sign)")
+      ->check(CLI::IsMember({"correct", "seed_eq25"}))
+      ->capture_default_str();
+  sub->add_option("--rasterisation", args->rasterisation,
+                  "centre: a cell reads when its centre is in contact; coverage: cells average "
+                  "over partial contact")
+      ->check(CLI::IsMember({"centre", "coverage"}))
+      ->capture_default_str();
+  sub->add_option("--noise", args->options.noise_sd_bits, "Sensor noise SD, bits")
+      ->check(CLI::Range(0.0, 50.0))
+      ->capture_default_str();
+  sub->add_option("--max-bias", args->options.max_bias_bits,
+                  "Per-sensor dc bias, uniform integer 0..MAX bits")
+      ->check(CLI::Range(0, 50))
+      ->capture_default_str();
+  sub->add_option("--param", args->params,
+                  "Override one tissue parameter, REGION.FIELD=VALUE (e.g. "
+                  "heel.kbar_n_per_mm3=0.15); the rest are the seed's Appendix I means");
+  sub->add_option("--effect", args->options.effects,
+                  "Named physical effect to apply on top of the model (default: none)");
+  sub->add_option("--subject", args->options.subject, "Subject label in the session metadata")
+      ->capture_default_str();
+  sub->callback([&global, args] { run_simulate(global, *args); });
+}
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,484 @@
+// Loads config/gaitmon.toml and the two files it names, refusing anything gaitmon does not know.
+#include "gaitmon/config.hpp"
+
+#include <fmt/format.h>
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <climits>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "gaitmon/error.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+
+// "37-38" is a valid bare key, but quoting it reads as a name rather than a subtraction and
+// matches how the files write it.
+std::string key_text(std::string_view key) {
+  const bool bare = !key.empty() && std::all_of(key.begin(), key.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_';
+  });
+  return bare ? std::string(key) : fmt::format("\"{}\"", key);
+}
+
+std::string child_path(const std::string& parent, std::string_view key) {
+  return parent.empty() ? key_text(key) : parent + "." + key_text(key);
+}
+
+std::string_view type_text(const toml::node& node) {
+  switch (node.type()) {
+    case toml::node_type::table:
+      return "a table";
+    case toml::node_type::array:
+      return "an array";
+    case toml::node_type::string:
+      return "a string";
+    case toml::node_type::integer:
+      return "an integer";
+    case toml::node_type::floating_point:
+      return "a floating-point number";
+    case toml::node_type::boolean:
+      return "a boolean";
+    case toml::node_type::date:
+    case toml::node_type::time:
+    case toml::node_type::date_time:
+      return "a date or time";
+    case toml::node_type::none:
+      break;
+  }
+  return "nothing";
+}
+
+std::string expected(std::string_view what, const toml::node& node) {
+  return fmt::format("expected {}, got {}", what, type_text(node));
+}
+
+// Appended to reasons so that a person can find the value in a long file.
+std::string at_line(const toml::node& node) {
+  const auto line = node.source().begin.line;
+  return line > 0 ? fmt::format(" (line {})", line) : std::string();
+}
+
+// Reads one TOML table and remembers which keys were read, so that finish() can refuse all
+// others: supporting a new key or section is one more read call, and a misspelt key is never
+// silently ignored.
+class TableReader {
+ public:
+  TableReader(const toml::table& table, std::string file, std::string path)
+      : table_(&table), file_(std::move(file)), path_(std::move(path)) {}
+
+  const std::string& file() const { return file_; }
+  std::string key_path(std::string_view key) const { return child_path(path_, key); }
+
+  [[noreturn]] void fail(std::string_view key, const std::string& reason) const {
+    const toml::node* node = table_->get(key);
+    throw ConfigError(file_, key_path(key), node == nullptr ? reason : reason + at_line(*node));
+  }
+  [[noreturn]] void fail_here(const std::string& reason) const {
+    throw ConfigError(file_, path_, reason + at_line(*table_));
+  }
+
+  std::vector<std::string> keys() const {
+    std::vector<std::string> out;
+    for (auto&& [key, value] : *table_) out.emplace_back(key.str());
+    return out;
+  }
+
+  const toml::node& node(std::string_view key) {
+    const toml::node* found = table_->get(key);
+    if (found == nullptr) fail(key, "missing");
+    read_.emplace(key);
+    return *found;
+  }
+
+  double number(std::string_view key) {
+    const toml::node& n = node(key);
+    double value = 0.0;
+    if (const auto* i = n.as_integer()) {
+      value = static_cast<double>(i->get());
+    } else if (const auto* f = n.as_floating_point()) {
+      value = f->get();
+    } else {
+      fail(key, expected("a number", n));
+    }
+    if (!std::isfinite(value)) fail(key, "must be a finite number");
+    return value;
+  }
+
+  std::int64_t integer(std::string_view key) {
+    const toml::node& n = node(key);
+    const auto* i = n.as_integer();
+    if (i == nullptr) fail(key, expected("an integer", n));
+    return i->get();
+  }
+
+  std::string string(std::string_view key) {
+    const toml::node& n = node(key);
+    const auto* s = n.as_string();
+    if (s == nullptr) fail(key, expected("a string", n));
+    return s->get();
+  }
+
+  const toml::array& array(std::string_view key) {
+    const toml::node& n = node(key);
+    const auto* a = n.as_array();
+    if (a == nullptr) fail(key, expected("an array", n));
+    return *a;
+  }
+
+  TableReader table(std::string_view key) {
+    const toml::node& n = node(key);
+    const auto* t = n.as_table();
+    if (t == nullptr) fail(key, expected("a table", n));
+    return TableReader(*t, file_, key_path(key));
+  }
+
+  void finish() const {
+    for (auto&& [key, value] : *table_) {
+      if (!read_.contains(key.str())) fail(key.str(), "unknown key");
+    }
+  }
+
+ private:
+  const toml::table* table_;
+  std::string file_;
+  std::string path_;
+  std::set<std::string, std::less<>> read_;
+};
+
+double number_above(TableReader& table, std::string_view key, double floor) {
+  const double value = table.number(key);
+  if (!(value > floor)) table.fail(key, fmt::format("must be > {}, got {}", floor, value));
+  return value;
+}
+
+double number_at_least(TableReader& table, std::string_view key, double floor) {
+  const double value = table.number(key);
+  if (!(value >= floor)) table.fail(key, fmt::format("must be >= {}, got {}", floor, value));
+  return value;
+}
+
+int integer_in(TableReader& table, std::string_view key, int low, int high) {
+  const std::int64_t value = table.integer(key);
+  if (value < low || value > high) {
+    table.fail(key, fmt::format("must be in [{}, {}], got {}", low, high, value));
+  }
+  return static_cast<int>(value);
+}
+
+// Tables keyed by size or region names: a name gaitmon does not know is reported as such
+// rather than as a generic unknown key, with the names it does know.
+template <typename Parse>
+void refuse_unknown_names(const TableReader& table, Parse parse, std::string_view known) {
+  for (const std::string& key : table.keys()) {
+    if (!parse(key)) table.fail(key, fmt::format("unknown name; expected one of {}", known));
+  }
+}
+
+std::string joined_size_names() {
+  std::string out;
+  for (InsoleSize size : kInsoleSizes)
+    out += (out.empty() ? "" : ", ") + std::string(insole_size_name(size));
+  return out;
+}
+
+std::string joined_region_names() {
+  std::string out;
+  for (Region region : kRegions)
+    out += (out.empty() ? "" : ", ") + std::string(region_name(region));
+  return out;
+}
+
+toml::table parse_document(const fs::path& path, const std::string& unreadable_file,
+                           const std::string& unreadable_key) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) {
+    throw ConfigError(unreadable_file, unreadable_key,
+                      fmt::format("cannot read {}: {}", path.string(),
+                                  fs::exists(path, ec) ? "not a regular file" : "no such file"));
+  }
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (!in) throw ConfigError(unreadable_file, unreadable_key, "cannot read " + path.string());
+  try {
+    return toml::parse(text.str(), path.string());
+  } catch (const toml::parse_error& e) {
+    throw ConfigError(path.string(), "(syntax)",
+                      fmt::format("line {}, column {}: {}", e.source().begin.line,
+                                  e.source().begin.column, e.description()));
+  }
+}
+
+void read_sensor(TableReader table, SensorGeometry& sensor) {
+  sensor.width_mm = number_above(table, "width_mm", 0.0);
+  sensor.height_mm = number_above(table, "height_mm", 0.0);
+  // Overlapping cells would count the same patch of sole twice.
+  sensor.pitch_x_mm = number_at_least(table, "pitch_x_mm", sensor.width_mm);
+  sensor.pitch_y_mm = number_at_least(table, "pitch_y_mm", sensor.height_mm);
+  const std::string alignment = table.string("row_alignment");
+  if (alignment == "centred") {
+    sensor.alignment = RowAlignment::Centred;
+  } else if (alignment == "lateral") {
+    sensor.alignment = RowAlignment::Lateral;
+  } else if (alignment == "medial") {
+    sensor.alignment = RowAlignment::Medial;
+  } else {
+    table.fail("row_alignment",
+               fmt::format(R"(must be "centred", "lateral" or "medial", got "{}")", alignment));
+  }
+  table.finish();
+}
+
+void read_calibration(TableReader table, Calibration& calibration) {
+  calibration.full_scale_bits = number_above(table, "full_scale_bits", 0.0);
+  calibration.full_scale_n_per_cm2 = number_above(table, "full_scale_n_per_cm2", 0.0);
+  table.finish();
+}
+
+void read_segmentation(TableReader table, SegmentationSettings& segmentation) {
+  // The largest summed reading the biggest insole can give: 255 bits on each of 161 sensors.
+  constexpr int kMaxSummedBits = 255 * 161;
+  segmentation.event_threshold_bits = integer_in(table, "event_threshold_bits", 1, kMaxSummedBits);
+  segmentation.debounce_frames = integer_in(table, "debounce_frames", 1, 100);
+  segmentation.swing_window_frames = integer_in(table, "swing_window_frames", 1, 100);
+  table.finish();
+}
+
+// A positive whole number written in digits only; INT_MAX if too long, so range checks catch it.
+std::optional<int> parse_count(std::string_view text) {
+  if (text.empty() ||
+      !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+    return std::nullopt;
+  }
+  int value = 0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec == std::errc::result_out_of_range) return INT_MAX;
+  if (ec != std::errc() || end != text.data() + text.size()) return std::nullopt;
+  return value;
+}
+
+// "row:first-last" or "row:n".
+std::optional<RowSpan> parse_span(std::string_view text) {
+  const auto colon = text.find(':');
+  if (colon == std::string_view::npos) return std::nullopt;
+  const auto row = parse_count(text.substr(0, colon));
+  const std::string_view sensors = text.substr(colon + 1);
+  const auto dash = sensors.find('-');
+  const auto first = parse_count(sensors.substr(0, dash));
+  const auto last = dash == std::string_view::npos ? first : parse_count(sensors.substr(dash + 1));
+  if (!row || !first || !last) return std::nullopt;
+  return RowSpan{*row, *first, *last};
+}
+
+std::string span_problem(const RowSpan& span) {
+  if (span.row < 1) return fmt::format("row must be >= 1, got {}", span.row);
+  if (span.row > kMaxInsoleRows) {
+    return fmt::format("row must be <= {}, got {}", kMaxInsoleRows, span.row);
+  }
+  if (span.first < 1) return fmt::format("first sensor must be >= 1, got {}", span.first);
+  if (span.first > span.last) {
+    return fmt::format("first sensor {} is after last sensor {}", span.first, span.last);
+  }
+  if (span.last > kMaxSensorsPerRow) {
+    return fmt::format("sensor numbers must be <= {}, got {}", kMaxSensorsPerRow, span.last);
+  }
+  return {};
+}
+
+[[noreturn]] void fail_element(const std::string& file, const std::string& key,
+                               const toml::node& element, const std::string& reason) {
+  throw ConfigError(file, key, reason + at_line(element));
+}
+
+// Region spans of one size, checked so that InsoleLayout's invariant holds: every sensor of
+// rows 1..N in exactly one region, every region non-empty.
+void read_regions(TableReader table, InsoleSpec& spec) {
+  refuse_unknown_names(
+      table, [](std::string_view name) { return parse_region(name).has_value(); },
+      joined_region_names());
+  std::map<std::pair<int, int>, Region> owner;  // (row, number) -> region
+  for (Region region : kRegions) {
+    const std::string name(region_name(region));
+    const toml::array& list = table.array(name);
+    if (list.empty()) table.fail(name, "lists no sensors; every region needs at least one");
+    auto& spans = spec.regions[index_of(region)];
+    spans.clear();
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const toml::node& element = *list.get(i);
+      const std::string key = fmt::format("{}[{}]", table.key_path(name), i);
+      const auto* text = element.as_string();
+      if (text == nullptr) {
+        fail_element(table.file(), key, element,
+                     expected(R"(a string "row:first-last" or "row:n")", element));
+      }
+      const std::optional<RowSpan> span = parse_span(text->get());
+      if (!span) {
+        fail_element(table.file(), key, element,
+                     fmt::format(R"(malformed span "{}"; expected "row:first-last" or "row:n")",
+                                 text->get()));
+      }
+      if (const std::string problem = span_problem(*span); !problem.empty()) {
+        fail_element(table.file(), key, element, problem);
+      }
+      for (int number = span->first; number <= span->last; ++number) {
+        const auto [it, fresh] = owner.try_emplace({span->row, number}, region);
+        if (fresh) continue;
+        if (it->second == region) {
+          fail_element(
+              table.file(), key, element,
+              fmt::format("row {} sensor {} is listed twice in {}", span->row, number, name));
+        }
+        fail_element(table.file(), key, element,
+                     fmt::format("row {} sensor {} is in both {} and {}", span->row, number,
+                                 region_name(it->second), name));
+      }
+      spans.push_back(*span);
+    }
+  }
+  std::map<int, int> row_length;
+  for (const auto& [cell, region] : owner) {
+    row_length[cell.first] = std::max(row_length[cell.first], cell.second);
+  }
+  const int last_row = row_length.rbegin()->first;
+  for (int row = 1; row <= last_row; ++row) {
+    const auto found = row_length.find(row);
+    if (found == row_length.end()) {
+      table.fail_here(fmt::format(
+          "row {} has no sensors but row {} does; rows are numbered from 1 without gaps", row,
+          last_row));
+    }
+    for (int number = 1; number <= found->second; ++number) {
+      if (!owner.contains({row, number})) {
+        table.fail_here(
+            fmt::format("row {} sensor {} is in no region (the row has sensors up to {})", row,
+                        number, found->second));
+      }
+    }
+  }
+  table.finish();
+}
+
+void read_insoles(const fs::path& path, const std::string& main_file, Config& config) {
+  const toml::table doc = parse_document(path, main_file, "insoles_file");
+  TableReader root(doc, path.string(), "");
+  TableReader sizes = root.table("sizes");
+  refuse_unknown_names(
+      sizes, [](std::string_view name) { return parse_insole_size(name).has_value(); },
+      joined_size_names());
+  for (InsoleSize size : kInsoleSizes) {
+    TableReader entry = sizes.table(insole_size_name(size));
+    InsoleSpec& spec = config.insoles[index_of(size)];
+    spec.size = size;
+    spec.adaptive_threshold_pct = number_above(entry, "adaptive_threshold_pct", 0.0);
+    if (spec.adaptive_threshold_pct > 100.0) {
+      entry.fail("adaptive_threshold_pct",
+                 fmt::format("must be <= 100, got {}", spec.adaptive_threshold_pct));
+    }
+    read_regions(entry.table("regions"), spec);
+    entry.finish();
+  }
+  sizes.finish();
+  root.finish();
+}
+
+// One { mean = ..., sd = ... } pair; every Appendix I quantity is positive on average.
+std::pair<double, double> read_stat(TableReader& region, std::string_view key) {
+  TableReader stat = region.table(key);
+  const double mean = number_above(stat, "mean", 0.0);
+  const double sd = number_at_least(stat, "sd", 0.0);
+  stat.finish();
+  return {mean, sd};
+}
+
+void read_tissue_region(TableReader table, SeedTissueStats& stats) {
+  const auto read = [&](std::string_view key, double& mean, double& sd) {
+    std::tie(mean, sd) = read_stat(table, key);
+  };
+  read("d0_mm", stats.mean.d0_mm, stats.sd.d0_mm);
+  read("A_mm", stats.mean.A_mm, stats.sd.A_mm);
+  read("B_mm", stats.mean.B_mm, stats.sd.B_mm);
+  read("C_mm", stats.mean.C_mm, stats.sd.C_mm);
+  read("kbar_n_per_mm3", stats.mean.kbar_n_per_mm3, stats.sd.kbar_n_per_mm3);
+  read("cbar_ns_per_mm3", stats.mean.cbar_ns_per_mm3, stats.sd.cbar_ns_per_mm3);
+  read("n", stats.mean.n, stats.sd.n);
+  read("m", stats.mean.m, stats.sd.m);
+  read("nrmse_pct", stats.nrmse_pct_mean, stats.nrmse_pct_sd);
+  table.finish();
+}
+
+void read_tissue(const fs::path& path, const std::string& main_file, Config& config) {
+  const toml::table doc = parse_document(path, main_file, "tissue_file");
+  TableReader root(doc, path.string(), "");
+  TableReader sizes = root.table("sizes");
+  refuse_unknown_names(
+      sizes, [](std::string_view name) { return parse_insole_size(name).has_value(); },
+      joined_size_names());
+  for (InsoleSize size : kInsoleSizes) {
+    TableReader entry = sizes.table(insole_size_name(size));
+    refuse_unknown_names(
+        entry, [](std::string_view name) { return parse_region(name).has_value(); },
+        joined_region_names());
+    for (Region region : kRegions) {
+      read_tissue_region(entry.table(region_name(region)),
+                         config.seed_tissue[index_of(size)][index_of(region)]);
+    }
+    entry.finish();
+  }
+  sizes.finish();
+  root.finish();
+}
+
+fs::path named_file(TableReader& root, std::string_view key, const fs::path& main_file) {
+  const std::string name = root.string(key);
+  if (name.empty()) root.fail(key, "must name a file");
+  return main_file.parent_path() / name;
+}
+
+}  // namespace
+
+Config load_config(const fs::path& main_file) {
+  Config config;
+  config.source = main_file;
+  const std::string file = main_file.string();
+  const toml::table doc = parse_document(main_file, file, "(file)");
+  TableReader root(doc, file, "");
+  config.sample_rate_hz = number_above(root, "sample_rate_hz", 0.0);
+  if (config.sample_rate_hz > 10000.0) {
+    root.fail("sample_rate_hz", fmt::format("must be <= 10000, got {}", config.sample_rate_hz));
+  }
+  const fs::path insoles_file = named_file(root, "insoles_file", main_file);
+  const fs::path tissue_file = named_file(root, "tissue_file", main_file);
+  read_sensor(root.table("sensor"), config.sensor);
+  read_calibration(root.table("calibration"), config.calibration);
+  read_segmentation(root.table("segmentation"), config.segmentation);
+  root.finish();
+  read_insoles(insoles_file, file, config);
+  read_tissue(tissue_file, file, config);
+  return config;
+}
+
+fs::path default_config_path() {
+  const char* from_env = std::getenv("GAITMON_CONFIG");
+  if (from_env != nullptr && *from_env != '\0') return from_env;
+  return GAITMON_DEFAULT_CONFIG;
+}
+
+}  // namespace gaitmon

@@ -1,0 +1,60 @@
+// Turns a segmented step into per-region force, area and ellipse series (seed 3.4, 3.5, ch. 4).
+#include "gaitmon/stance.hpp"
+
+#include <stdexcept>
+
+namespace gaitmon {
+
+StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
+                            const Calibration& calibration) {
+  const std::size_t sensors = layout.sensor_count();
+  if (step.sensor_zero_bits.size() != sensors) {
+    throw std::invalid_argument("measure_stance: the step's zero has " +
+                                std::to_string(step.sensor_zero_bits.size()) +
+                                " sensors, the layout " + std::to_string(sensors));
+  }
+  const double sensor_area_mm2 = layout.geometry().area_mm2();
+  const double newtons_per_bit = calibration.newtons_per_bit(sensor_area_mm2);
+  const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
+
+  StanceSeries series;
+  series.t_s.reserve(step.stance.size());
+  series.frames.reserve(step.stance.size());
+  series.total_force_n.reserve(step.stance.size());
+  std::vector<double> zeroed(sensors);
+  std::vector<ActiveCell> cells;
+  cells.reserve(sensors);
+  for (std::size_t f = 0; f < step.stance.size(); ++f) {
+    const Frame& frame = step.stance[f];
+    if (frame.bits.size() != sensors) {
+      throw std::invalid_argument("measure_stance: a frame has " +
+                                  std::to_string(frame.bits.size()) + " sensors, the layout " +
+                                  std::to_string(sensors));
+    }
+    zero_and_threshold(frame.bits, step.sensor_zero_bits, step.adaptive_threshold_bits, zeroed);
+    std::array<RegionSample, kRegionCount> samples{};
+    double total = 0.0;
+    for (Region region : kRegions) {
+      RegionSample& sample = samples[index_of(region)];
+      double bits = 0.0;
+      cells.clear();
+      for (std::size_t i : layout.region_sensors(region)) {
+        if (zeroed[i] <= 0.0) continue;
+        bits += zeroed[i];
+        const Sensor& s = layout.sensor(i);
+        cells.push_back({s.grid_x_mm, s.grid_y_mm, s.row == layout.outermost_heel_row()});
+      }
+      sample.force_n = bits * newtons_per_bit;
+      sample.active_sensors = static_cast<int>(cells.size());
+      sample.sensor_area_mm2 = static_cast<double>(cells.size()) * sensor_area_mm2;
+      sample.ellipse = fit_contact_ellipse(cells, cell, region, f == 0);
+      total += sample.force_n;
+    }
+    series.t_s.push_back(frame.t_s);
+    series.frames.push_back(samples);
+    series.total_force_n.push_back(total);
+  }
+  return series;
+}
+
+}  // namespace gaitmon

@@ -1,0 +1,94 @@
+// The gaitmon program end to end: simulate, segment, help and its errors on bad input.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+std::string run(const std::string& args, int* status) {
+  std::string output;
+  *status = test::run_command(test::gaitmon_binary().string() + " " + args, &output);
+  return output;
+}
+
+std::string first_line(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
+TEST(Cli, HelpListsTheSubcommands) {
+  int status = -1;
+  const std::string out = run("--help", &status);
+  EXPECT_EQ(status, 0);
+  EXPECT_NE(out.find("simulate"), std::string::npos) << out;
+  EXPECT_NE(out.find("segment"), std::string::npos) << out;
+}
+
+TEST(Cli, SimulateThenSegmentWritesTheDocumentedFiles) {
+  const auto dir = test::scratch_dir("cli-sim");
+  int status = -1;
+  std::string out = run(
+      "simulate --size 39-40 --duration 12 --seed 4 --out " + (dir / "s.csv").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir / "s.truth.json"));
+  out = run("segment " + (dir / "s.csv").string() + " --out " + (dir / "seg").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(first_line(dir / "seg" / "steps.csv"),
+            "foot,step,t_heel_strike_s,t_toe_off_s,stance_s,peak_force_n,status");
+  EXPECT_EQ(first_line(dir / "seg" / "frames.csv"),
+            "foot,step,t_s,region,force_n,sensor_area_mm2,ellipse_area_mm2,case,cx_mm,cy_mm,"
+            "ra_mm,rb_mm,angle_rad,pi");
+  EXPECT_NE(out.find("stance s"), std::string::npos) << out;
+  std::ifstream steps(dir / "seg" / "steps.csv");
+  std::string line;
+  int ok = 0;
+  while (std::getline(steps, line)) ok += line.ends_with(",ok") ? 1 : 0;
+  EXPECT_GE(ok, 14) << "a 12 s walk at 1.1 s strides has at least 7 whole steps per foot";
+}
+
+TEST(Cli, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
+  const auto dir = test::scratch_dir("cli-bad");
+  std::string text =
+      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
+  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
+  text += "\n0.0,X";
+  for (int i = 1; i <= 93; ++i) text += ",0";
+  text += "\n";
+  test::write_text(dir / "bad.csv", text);
+  int status = -1;
+  const std::string out =
+      run("segment " + (dir / "bad.csv").string() + " --out " + (dir / "o").string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("bad.csv:6"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "o" / "steps.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "o" / "frames.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "o" / "frames.csv.partial"));
+}
+
+TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
+  const auto dir = test::scratch_dir("cli-config");
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    std::filesystem::copy_file(test::source_dir() / "config" / name, dir / name);
+  }
+  std::ifstream in(dir / "gaitmon.toml");
+  std::stringstream text;
+  text << in.rdbuf();
+  in.close();
+  test::write_text(dir / "gaitmon.toml", text.str() + "\n[surprise]\nvalue = 1\n");
+  int status = -1;
+  const std::string out = run("--config " + (dir / "gaitmon.toml").string() +
+                                  " simulate --duration 1 --out " + (dir / "x.csv").string(),
+                              &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("gaitmon.toml"), std::string::npos) << out;
+  EXPECT_NE(out.find("surprise"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace gaitmon

@@ -1,0 +1,491 @@
+// Config loading: the shipped files, their agreement with the seed data, and every refusal rule.
+#include "gaitmon/config.hpp"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gaitmon/error.hpp"
+#include "gaitmon/insole.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+constexpr const char* kMain = "gaitmon.toml";
+constexpr const char* kInsoles = "insoles.toml";
+constexpr const char* kTissue = "tissue_seed_appendix_i.toml";
+
+fs::path shipped_config() {
+  return test::source_dir() / "config" / kMain;
+}
+
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read " + path.string());
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// The three shipped files copied into a fresh folder, so that one can be edited.
+fs::path copy_config(const std::string& name) {
+  const fs::path dir = test::scratch_dir("config-" + name);
+  for (const char* file : {kMain, kInsoles, kTissue}) {
+    fs::copy_file(test::source_dir() / "config" / file, dir / file);
+  }
+  return dir;
+}
+
+using Edit = std::function<void(std::string&)>;
+
+// Replaces the first `from` after `anchor`; both must exist, or the test itself is wrong.
+Edit replace(std::string anchor, std::string from, std::string to) {
+  return [=](std::string& text) {
+    const auto at = text.find(anchor);
+    if (at == std::string::npos) throw std::logic_error("anchor not found: " + anchor);
+    const auto pos = text.find(from, at);
+    if (pos == std::string::npos) throw std::logic_error("text not found: " + from);
+    text.replace(pos, from.size(), to);
+  };
+}
+
+Edit replace(std::string from, std::string to) {
+  return replace(from, from, std::move(to));
+}
+
+Edit prepend(std::string line) {
+  return [=](std::string& text) { text.insert(0, line); };
+}
+
+Edit append(std::string lines) {
+  return [=](std::string& text) { text += lines; };
+}
+
+Edit truncate_at(std::string anchor) {
+  return [=](std::string& text) {
+    const auto at = text.find(anchor);
+    if (at == std::string::npos) throw std::logic_error("anchor not found: " + anchor);
+    text.erase(at);
+  };
+}
+
+Edit erase_from_to(std::string first, std::string until) {
+  return [=](std::string& text) {
+    const auto a = text.find(first);
+    const auto b = text.find(until, a);
+    if (a == std::string::npos || b == std::string::npos) throw std::logic_error("not found");
+    text.erase(a, b - a);
+  };
+}
+
+void edit_file(const fs::path& path, const Edit& edit) {
+  std::string text = read_text(path);
+  edit(text);
+  test::write_text(path, text);
+}
+
+TEST(Config, ShippedConfigHasTheDocumentedDefaults) {
+  const Config config = load_config(shipped_config());
+  EXPECT_EQ(config.source, shipped_config());
+  EXPECT_DOUBLE_EQ(config.sample_rate_hz, 100.0);
+  EXPECT_DOUBLE_EQ(config.sensor.width_mm, 7.5);
+  EXPECT_DOUBLE_EQ(config.sensor.height_mm, 15.0);
+  EXPECT_DOUBLE_EQ(config.sensor.pitch_x_mm, 7.5);
+  EXPECT_DOUBLE_EQ(config.sensor.pitch_y_mm, 15.0);
+  EXPECT_EQ(config.sensor.alignment, RowAlignment::Centred);
+  EXPECT_DOUBLE_EQ(config.calibration.full_scale_bits, 255.0);
+  EXPECT_DOUBLE_EQ(config.calibration.full_scale_n_per_cm2, 64.0);
+  EXPECT_EQ(config.segmentation.event_threshold_bits, 142);
+  EXPECT_EQ(config.segmentation.debounce_frames, 5);
+  EXPECT_EQ(config.segmentation.swing_window_frames, 5);
+  // Seed Table 2.
+  const std::vector<double> threshold_pct{0.2, 0.2, 0.1, 0.1, 0.2, 0.2};
+  for (InsoleSize size : kInsoleSizes) {
+    EXPECT_EQ(config.insole(size).size, size);
+    EXPECT_DOUBLE_EQ(config.insole(size).adaptive_threshold_pct, threshold_pct[index_of(size)])
+        << insole_size_name(size);
+  }
+}
+
+TEST(Config, NewtonsPerBitOfTheShippedCalibration) {
+  const Config config = load_config(shipped_config());
+  // 64 N/cm^2 / 255 bits x 1.125 cm^2 = 0.282353 N, worked out by hand.
+  EXPECT_NEAR(config.calibration.newtons_per_bit(112.5), 0.28235, 1e-5);
+  EXPECT_DOUBLE_EQ(config.sensor.area_mm2(), 112.5);
+  // The seed's 142-bit event threshold is 40 N (142 x 0.28235 = 40.09).
+  EXPECT_NEAR(config.segmentation.event_threshold_bits * 0.28235, 40.0, 0.1);
+}
+
+struct CsvSensor {
+  std::size_t index;
+  int row;
+  int number_in_row;
+  std::string region;
+};
+
+std::map<std::string, std::vector<CsvSensor>> read_region_csv(const fs::path& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "insole_size,sensor_index,row,number_in_row,region");
+  std::map<std::string, std::vector<CsvSensor>> out;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    std::vector<std::string> cells;
+    std::stringstream fields(line);
+    std::string cell;
+    while (std::getline(fields, cell, ',')) cells.push_back(cell);
+    EXPECT_EQ(cells.size(), 5u) << line;
+    if (cells.size() != 5) continue;
+    out[cells[0]].push_back(
+        {std::stoul(cells[1]) - 1, std::stoi(cells[2]), std::stoi(cells[3]), cells[4]});
+  }
+  return out;
+}
+
+TEST(Config, InsoleLayoutsEqualTheSeedRegionCsv) {
+  const fs::path csv = test::shared_dir() / "seed-data" / "insole_sensor_regions.csv";
+  if (!fs::exists(csv)) GTEST_SKIP() << "seed data missing: " << csv;
+  const auto expected = read_region_csv(csv);
+  const Config config = load_config(shipped_config());
+  // Appendix B's counts (Table 1 states 130 and 162 for 41-42 and 45-46).
+  const std::vector<std::size_t> counts{93, 107, 116, 129, 151, 161};
+  for (InsoleSize size : kInsoleSizes) {
+    const std::string name(insole_size_name(size));
+    SCOPED_TRACE(name);
+    const InsoleLayout layout(config.insole(size), config.sensor);
+    ASSERT_TRUE(expected.contains(name));
+    const auto& rows = expected.at(name);
+    EXPECT_EQ(layout.sensor_count(), counts[index_of(size)]);
+    ASSERT_EQ(layout.sensor_count(), rows.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const Sensor& s = layout.sensor(i);
+      EXPECT_EQ(s.index, rows[i].index);
+      EXPECT_EQ(s.row, rows[i].row) << "sensor " << i;
+      EXPECT_EQ(s.number_in_row, rows[i].number_in_row) << "sensor " << i;
+      EXPECT_EQ(region_name(s.region), rows[i].region) << "sensor " << i;
+    }
+  }
+}
+
+TEST(Config, SeedTissueMatchesAppendixI) {
+  const Config config = load_config(shipped_config());
+  const SeedTissueStats& heel = config.tissue(InsoleSize::S37_38, Region::Heel);
+  EXPECT_DOUBLE_EQ(heel.mean.d0_mm, 16.4);
+  EXPECT_DOUBLE_EQ(heel.sd.d0_mm, 0.9);
+  EXPECT_DOUBLE_EQ(heel.mean.A_mm, 80.2);
+  EXPECT_DOUBLE_EQ(heel.sd.B_mm, 4.6);
+  EXPECT_DOUBLE_EQ(heel.mean.C_mm, 69.9);
+  EXPECT_DOUBLE_EQ(heel.mean.kbar_n_per_mm3, 0.117);
+  EXPECT_DOUBLE_EQ(heel.sd.kbar_n_per_mm3, 0.027);
+  EXPECT_DOUBLE_EQ(heel.mean.cbar_ns_per_mm3, 0.011);
+  EXPECT_DOUBLE_EQ(heel.mean.n, 0.294);
+  EXPECT_DOUBLE_EQ(heel.sd.n, 0.116);
+  EXPECT_DOUBLE_EQ(heel.mean.m, 1.18);
+  EXPECT_DOUBLE_EQ(heel.nrmse_pct_mean, 25.5);
+  EXPECT_DOUBLE_EQ(heel.nrmse_pct_sd, 4.2);
+  // An SD of zero is allowed (35-36 heel c-bar 0.010 (0.000)).
+  EXPECT_DOUBLE_EQ(config.tissue(InsoleSize::S35_36, Region::Heel).mean.cbar_ns_per_mm3, 0.010);
+  EXPECT_DOUBLE_EQ(config.tissue(InsoleSize::S35_36, Region::Heel).sd.cbar_ns_per_mm3, 0.0);
+  // Printed inline as "9.0 (3.0)" in the seed.
+  EXPECT_DOUBLE_EQ(config.tissue(InsoleSize::S43_44, Region::MidfootPosterior).nrmse_pct_mean, 9.0);
+  EXPECT_DOUBLE_EQ(config.tissue(InsoleSize::S43_44, Region::MidfootPosterior).nrmse_pct_sd, 3.0);
+  EXPECT_DOUBLE_EQ(config.tissue(InsoleSize::S45_46, Region::Met1_2).mean.C_mm, 154.1);
+  EXPECT_DOUBLE_EQ(config.tissue(InsoleSize::S45_46, Region::Toes3_5).mean.A_mm, 76.7);
+}
+
+TEST(Config, SeedTissueEqualsTheAppendixICsv) {
+  const fs::path csv = test::shared_dir() / "seed-data" / "seed_table_I_results.csv";
+  if (!fs::exists(csv)) GTEST_SKIP() << "seed data missing: " << csv;
+  const Config config = load_config(shipped_config());
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  ASSERT_EQ(line, "insole_size,region,param,mean,sd");
+  int checked = 0;
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::stringstream fields(line);
+    std::string cell;
+    while (std::getline(fields, cell, ',')) c.push_back(cell);
+    ASSERT_EQ(c.size(), 5u) << line;
+    const auto size = parse_insole_size(c[0]);
+    const auto region = parse_region(c[1]);
+    ASSERT_TRUE(size && region) << line;
+    const SeedTissueStats& t = config.tissue(*size, *region);
+    const std::map<std::string, std::pair<double, double>> by_param{
+        {"d0", {t.mean.d0_mm, t.sd.d0_mm}},
+        {"A", {t.mean.A_mm, t.sd.A_mm}},
+        {"B", {t.mean.B_mm, t.sd.B_mm}},
+        {"C", {t.mean.C_mm, t.sd.C_mm}},
+        {"k", {t.mean.kbar_n_per_mm3, t.sd.kbar_n_per_mm3}},
+        {"c", {t.mean.cbar_ns_per_mm3, t.sd.cbar_ns_per_mm3}},
+        {"n", {t.mean.n, t.sd.n}},
+        {"m", {t.mean.m, t.sd.m}},
+        {"NRMSE", {t.nrmse_pct_mean, t.nrmse_pct_sd}}};
+    ASSERT_TRUE(by_param.contains(c[2])) << line;
+    EXPECT_DOUBLE_EQ(by_param.at(c[2]).first, std::stod(c[3])) << line;
+    EXPECT_DOUBLE_EQ(by_param.at(c[2]).second, std::stod(c[4])) << line;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 6 * 8 * 9);
+}
+
+TEST(Config, AcceptsBoundaryValuesAndAnAbsoluteInsolesPath) {
+  const fs::path dir = copy_config("boundaries");
+  const fs::path elsewhere = test::scratch_dir("config-boundaries-elsewhere");
+  fs::rename(dir / kInsoles, elsewhere / "layouts.toml");
+  const fs::path main = dir / kMain;
+  edit_file(main, replace("insoles_file = \"insoles.toml\"",
+                          "insoles_file = \"" + (elsewhere / "layouts.toml").string() + "\""));
+  edit_file(main, replace("sample_rate_hz = 100", "sample_rate_hz = 10000"));
+  edit_file(main, replace("pitch_x_mm = 7.5", "pitch_x_mm = 10"));
+  edit_file(main, replace("pitch_y_mm = 15.0", "pitch_y_mm = 20"));
+  edit_file(main, replace("row_alignment = \"centred\"", "row_alignment = \"medial\""));
+  edit_file(main, replace("event_threshold_bits = 142", "event_threshold_bits = 41055"));
+  edit_file(main, replace("debounce_frames = 5", "debounce_frames = 100"));
+  edit_file(main, replace("swing_window_frames = 5", "swing_window_frames = 1"));
+  edit_file(elsewhere / "layouts.toml", replace("[sizes.\"37-38\"]", "adaptive_threshold_pct = 0.2",
+                                                "adaptive_threshold_pct = 100"));
+  const Config config = load_config(main);
+  EXPECT_DOUBLE_EQ(config.sample_rate_hz, 10000.0);
+  EXPECT_DOUBLE_EQ(config.sensor.pitch_x_mm, 10.0);
+  EXPECT_DOUBLE_EQ(config.sensor.pitch_y_mm, 20.0);
+  EXPECT_EQ(config.sensor.alignment, RowAlignment::Medial);
+  EXPECT_EQ(config.segmentation.event_threshold_bits, 41055);
+  EXPECT_EQ(config.segmentation.debounce_frames, 100);
+  EXPECT_EQ(config.segmentation.swing_window_frames, 1);
+  EXPECT_DOUBLE_EQ(config.insole(InsoleSize::S37_38).adaptive_threshold_pct, 100.0);
+}
+
+TEST(Config, DefaultConfigPathHonoursTheEnvironment) {
+  const char* before = std::getenv("GAITMON_CONFIG");
+  const std::optional<std::string> saved =
+      before ? std::optional<std::string>(before) : std::nullopt;
+  ::unsetenv("GAITMON_CONFIG");
+  EXPECT_EQ(default_config_path(), shipped_config());
+  ::setenv("GAITMON_CONFIG", "", 1);
+  EXPECT_EQ(default_config_path(), shipped_config());
+  ::setenv("GAITMON_CONFIG", "/somewhere/else.toml", 1);
+  EXPECT_EQ(default_config_path(), fs::path("/somewhere/else.toml"));
+  if (saved) {
+    ::setenv("GAITMON_CONFIG", saved->c_str(), 1);
+  } else {
+    ::unsetenv("GAITMON_CONFIG");
+  }
+}
+
+TEST(Config, RefusesAMissingMainFile) {
+  const fs::path dir = test::scratch_dir("config-absent");
+  try {
+    load_config(dir / "absent.toml");
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.file(), (dir / "absent.toml").string());
+    EXPECT_EQ(e.key(), "(file)");
+    EXPECT_THAT(e.reason(), HasSubstr("no such file"));
+  }
+}
+
+// One refusal rule: which file to edit, how, and what the error must name.
+struct Refusal {
+  std::string name;
+  std::string file;
+  Edit edit;
+  std::string key;
+  std::string reason;  ///< a part of the reason
+};
+
+void PrintTo(const Refusal& r, std::ostream* os) {
+  *os << r.name;
+}
+
+class ConfigRefusal : public ::testing::TestWithParam<Refusal> {};
+
+TEST_P(ConfigRefusal, ThrowsConfigErrorNamingFileAndKey) {
+  const Refusal& r = GetParam();
+  const fs::path dir = copy_config(r.name);
+  edit_file(dir / r.file, r.edit);
+  const std::string file = (dir / r.file).string();
+  try {
+    load_config(dir / kMain);
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.file(), file);
+    EXPECT_EQ(e.key(), r.key);
+    EXPECT_THAT(e.reason(), HasSubstr(r.reason));
+    EXPECT_THAT(e.what(), HasSubstr(file));
+    EXPECT_THAT(e.what(), HasSubstr(r.key));
+  }
+}
+
+const char* const kSize37 = "[sizes.\"37-38\"]";
+const char* const kRegions37 = "[sizes.\"37-38\".regions]";
+const char* const kHeel37 = "[sizes.\"37-38\".heel]";
+
+// clang-format off
+const Refusal kRefusals[] = {
+    // The main file.
+    {"MainSyntaxError", kMain, prepend("oops = = 1\n"), "(syntax)", "line 1, column"},
+    {"UnknownTopLevelKey", kMain, prepend("colour = \"red\"\n"), "colour", "unknown key"},
+    {"UnknownKeyInSection", kMain, replace("[sensor]\n", "[sensor]\nwidht_mm = 7.5\n"),
+     "sensor.widht_mm", "unknown key"},
+    {"UnknownSection", kMain, append("\n[fit]\nmax_iterations = 50\n"), "fit", "unknown key"},
+    {"MissingKey", kMain, replace("debounce_frames = 5\n", ""), "segmentation.debounce_frames",
+     "missing"},
+    {"MissingSection", kMain, erase_from_to("[calibration]", "[segmentation]"), "calibration",
+     "missing"},
+    {"SectionNotATable", kMain, replace("[sensor]\n", "sensor = 1\n[sensor_moved]\n"), "sensor",
+     "expected a table"},
+    {"WrongTypeString", kMain, replace("row_alignment = \"centred\"", "row_alignment = 1"),
+     "sensor.row_alignment", "expected a string, got an integer"},
+    {"WrongTypeInteger", kMain, replace("event_threshold_bits = 142", "event_threshold_bits = 142.0"),
+     "segmentation.event_threshold_bits", "expected an integer, got a floating-point number"},
+    {"WrongTypeNumber", kMain, replace("sample_rate_hz = 100", "sample_rate_hz = \"100\""),
+     "sample_rate_hz", "expected a number, got a string"},
+    {"SampleRateZero", kMain, replace("sample_rate_hz = 100", "sample_rate_hz = 0"),
+     "sample_rate_hz", "must be > 0"},
+    {"SampleRateTooHigh", kMain, replace("sample_rate_hz = 100", "sample_rate_hz = 10000.5"),
+     "sample_rate_hz", "must be <= 10000"},
+    {"SampleRateNan", kMain, replace("sample_rate_hz = 100", "sample_rate_hz = nan"),
+     "sample_rate_hz", "finite"},
+    {"WidthZero", kMain, replace("width_mm = 7.5", "width_mm = 0"), "sensor.width_mm",
+     "must be > 0"},
+    {"HeightNegative", kMain, replace("height_mm = 15.0", "height_mm = -1"), "sensor.height_mm",
+     "must be > 0"},
+    {"PitchXBelowWidth", kMain, replace("pitch_x_mm = 7.5", "pitch_x_mm = 7.4"),
+     "sensor.pitch_x_mm", "must be >= 7.5"},
+    {"PitchYBelowHeight", kMain, replace("pitch_y_mm = 15.0", "pitch_y_mm = 14.9"),
+     "sensor.pitch_y_mm", "must be >= 15"},
+    {"AlignmentUnknown", kMain, replace("row_alignment = \"centred\"", "row_alignment = \"left\""),
+     "sensor.row_alignment", "got \"left\""},
+    {"FullScaleBitsZero", kMain, replace("full_scale_bits = 255", "full_scale_bits = 0"),
+     "calibration.full_scale_bits", "must be > 0"},
+    {"FullScalePressureNegative", kMain,
+     replace("full_scale_n_per_cm2 = 64.0", "full_scale_n_per_cm2 = -64.0"),
+     "calibration.full_scale_n_per_cm2", "must be > 0"},
+    {"EventThresholdZero", kMain, replace("event_threshold_bits = 142", "event_threshold_bits = 0"),
+     "segmentation.event_threshold_bits", "must be in [1, 41055]"},
+    {"EventThresholdTooHigh", kMain,
+     replace("event_threshold_bits = 142", "event_threshold_bits = 41056"),
+     "segmentation.event_threshold_bits", "must be in [1, 41055]"},
+    {"DebounceZero", kMain, replace("debounce_frames = 5", "debounce_frames = 0"),
+     "segmentation.debounce_frames", "must be in [1, 100]"},
+    {"DebounceTooHigh", kMain, replace("debounce_frames = 5", "debounce_frames = 101"),
+     "segmentation.debounce_frames", "must be in [1, 100]"},
+    {"SwingWindowZero", kMain, replace("swing_window_frames = 5", "swing_window_frames = 0"),
+     "segmentation.swing_window_frames", "must be in [1, 100]"},
+    {"SwingWindowTooHigh", kMain, replace("swing_window_frames = 5", "swing_window_frames = 101"),
+     "segmentation.swing_window_frames", "must be in [1, 100]"},
+    {"InsolesFileMissing", kMain, replace("\"insoles.toml\"", "\"nope.toml\""), "insoles_file",
+     "nope.toml: no such file"},
+    {"InsolesFileEmpty", kMain, replace("\"insoles.toml\"", "\"\""), "insoles_file",
+     "must name a file"},
+    {"TissueFileMissing", kMain, replace("\"tissue_seed_appendix_i.toml\"", "\"nope.toml\""),
+     "tissue_file", "nope.toml: no such file"},
+
+    // The insole layouts.
+    {"InsolesSyntaxError", kInsoles, prepend("[sizes\n"), "(syntax)", "line 1, column"},
+    {"InsolesUnknownTopLevelKey", kInsoles, prepend("version = 2\n"), "version", "unknown key"},
+    {"UnknownKeyInSize", kInsoles,
+     replace(kSize37, "adaptive_threshold_pct = 0.2\n", "adaptive_threshold_pct = 0.2\nextra = 1\n"),
+     "sizes.\"37-38\".extra", "unknown key"},
+    {"ThresholdZero", kInsoles,
+     replace(kSize37, "adaptive_threshold_pct = 0.2", "adaptive_threshold_pct = 0"),
+     "sizes.\"37-38\".adaptive_threshold_pct", "must be > 0"},
+    {"ThresholdAbove100", kInsoles,
+     replace(kSize37, "adaptive_threshold_pct = 0.2", "adaptive_threshold_pct = 100.5"),
+     "sizes.\"37-38\".adaptive_threshold_pct", "must be <= 100"},
+    {"ThresholdMissing", kInsoles, replace(kSize37, "adaptive_threshold_pct = 0.2\n", ""),
+     "sizes.\"37-38\".adaptive_threshold_pct", "missing"},
+    {"MissingSize", kInsoles, truncate_at("[sizes.\"45-46\"]"), "sizes.\"45-46\"", "missing"},
+    {"UnknownSize", kInsoles, replace("[sizes.\"45-46\"]", "[sizes.\"47-48\"]"),
+     "sizes.\"47-48\"", "unknown name"},
+    {"UnknownRegion", kInsoles, replace(kRegions37, "toes3_5           =", "toes3_6 ="),
+     "sizes.\"37-38\".regions.toes3_6", "unknown name"},
+    {"MissingRegion", kInsoles, replace(kRegions37, "toe2              = [\"1:4\", \"2:5\"]\n", ""),
+     "sizes.\"37-38\".regions.toe2", "missing"},
+    {"EmptyRegion", kInsoles, replace(kRegions37, "[\"1:4\", \"2:5\"]", "[]"),
+     "sizes.\"37-38\".regions.toe2", "lists no sensors"},
+    {"RegionNotAnArray", kInsoles, replace(kRegions37, "[\"1:5\", \"2:6-7\"]", "\"1:5\""),
+     "sizes.\"37-38\".regions.toe1", "expected an array"},
+    {"SpanNotAString", kInsoles, replace(kRegions37, "\"1:5\"", "5"),
+     "sizes.\"37-38\".regions.toe1[0]", "expected a string"},
+    {"MalformedSpan", kInsoles, replace(kRegions37, "\"1:5\"", "\"1-5\""),
+     "sizes.\"37-38\".regions.toe1[0]", "malformed span \"1-5\""},
+    {"MalformedSpanTrailingDash", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"2:6-\""),
+     "sizes.\"37-38\".regions.toe1[1]", "malformed span \"2:6-\""},
+    {"MalformedSpanNegative", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"-2:6-7\""),
+     "sizes.\"37-38\".regions.toe1[1]", "malformed span"},
+    {"RowZero", kInsoles, replace(kRegions37, "\"1:5\"", "\"0:5\""),
+     "sizes.\"37-38\".regions.toe1[0]", "row must be >= 1, got 0"},
+    {"FirstSensorZero", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"2:0-7\""),
+     "sizes.\"37-38\".regions.toe1[1]", "first sensor must be >= 1, got 0"},
+    {"FirstAfterLast", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"2:7-6\""),
+     "sizes.\"37-38\".regions.toe1[1]", "first sensor 7 is after last sensor 6"},
+    {"SensorNumberHuge", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"2:6-99999999999\""),
+     "sizes.\"37-38\".regions.toe1[1]", "must be <= 100"},
+    // toe1 (read before toe2) already holds row 1 sensor 5.
+    {"SensorInTwoRegions", kInsoles, replace(kRegions37, "\"1:4\"", "\"1:4-5\""),
+     "sizes.\"37-38\".regions.toe2[0]", "row 1 sensor 5 is in both toe1 and toe2"},
+    {"SensorListedTwice", kInsoles,
+     replace(kRegions37, "[\"1:5\", \"2:6-7\"]", "[\"1:5\", \"2:6-7\", \"1:5\"]"),
+     "sizes.\"37-38\".regions.toe1[2]", "row 1 sensor 5 is listed twice in toe1"},
+    {"SensorInNoRegion", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"2:7\""),
+     "sizes.\"37-38\".regions", "row 2 sensor 6 is in no region"},
+    {"EmptyRowBetweenRows", kInsoles,
+     replace(kRegions37, "[\"8:1-7\", \"9:1-7\"]", "[\"8:1-7\"]"), "sizes.\"37-38\".regions",
+     "row 9 has no sensors"},
+
+    // The seed's tissue parameters.
+    {"TissueSyntaxError", kTissue, prepend("x =\n"), "(syntax)", "line 1, column"},
+    {"TissueMissingSize", kTissue, truncate_at("[sizes.\"45-46\".heel]"), "sizes.\"45-46\"",
+     "missing"},
+    {"TissueUnknownSize", kTissue, replace("[sizes.\"35-36\".heel]", "[sizes.\"34-35\".heel]"),
+     "sizes.\"34-35\"", "unknown name"},
+    {"TissueMissingRegion", kTissue, truncate_at("[sizes.\"45-46\".toes3_5]"),
+     "sizes.\"45-46\".toes3_5", "missing"},
+    {"TissueUnknownRegion", kTissue, replace("[sizes.\"37-38\".toe2]", "[sizes.\"37-38\".toe_2]"),
+     "sizes.\"37-38\".toe_2", "unknown name"},
+    {"TissueMissingParam", kTissue,
+     replace(kHeel37, "nrmse_pct       = { mean = 25.5, sd = 4.2 }\n", ""),
+     "sizes.\"37-38\".heel.nrmse_pct", "missing"},
+    {"TissueUnknownParam", kTissue,
+     replace(kHeel37, "[sizes.\"37-38\".heel]\n", "[sizes.\"37-38\".heel]\nq = { mean = 1.0, sd = 0.1 }\n"),
+     "sizes.\"37-38\".heel.q", "unknown key"},
+    {"TissueParamNotATable", kTissue, replace(kHeel37, "{ mean = 16.4, sd = 0.9 }", "16.4"),
+     "sizes.\"37-38\".heel.d0_mm", "expected a table, got a floating-point number"},
+    {"TissueMissingSd", kTissue, replace(kHeel37, "{ mean = 16.4, sd = 0.9 }", "{ mean = 16.4 }"),
+     "sizes.\"37-38\".heel.d0_mm.sd", "missing"},
+    {"TissueUnknownStatKey", kTissue,
+     replace(kHeel37, "{ mean = 16.4, sd = 0.9 }", "{ mean = 16.4, sd = 0.9, median = 16.0 }"),
+     "sizes.\"37-38\".heel.d0_mm.median", "unknown key"},
+    {"TissueMeanZero", kTissue,
+     replace(kHeel37, "{ mean = 0.117, sd = 0.027 }", "{ mean = 0.0, sd = 0.027 }"),
+     "sizes.\"37-38\".heel.kbar_n_per_mm3.mean", "must be > 0"},
+    {"TissueSdNegative", kTissue,
+     replace(kHeel37, "{ mean = 0.117, sd = 0.027 }", "{ mean = 0.117, sd = -0.027 }"),
+     "sizes.\"37-38\".heel.kbar_n_per_mm3.sd", "must be >= 0"},
+};
+// clang-format on
+
+INSTANTIATE_TEST_SUITE_P(Rules, ConfigRefusal, ::testing::ValuesIn(kRefusals),
+                         [](const ::testing::TestParamInfo<Refusal>& info) {
+                           return info.param.name;
+                         });
+
+}  // namespace
+}  // namespace gaitmon

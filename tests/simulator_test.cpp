@@ -1,0 +1,484 @@
+// Tests of the session simulator: rasterisation, determinism, the written session and its truth.
+#include "gaitmon/simulator.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gaitmon/config.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/session.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+const Config& shipped_config() {
+  static const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  return config;
+}
+
+const InsoleLayout& layout_37_38() {
+  static const InsoleLayout layout(shipped_config().insole(InsoleSize::S37_38),
+                                   shipped_config().sensor);
+  return layout;
+}
+
+EllipsoidParams seed_means(Region region) {
+  return shipped_config().tissue(InsoleSize::S37_38, region).mean;
+}
+
+// The model written out again here, so that the expected values do not come from the code under
+// test: eq 32, eqs 5-6, eqs 14-15 and the integral of eq 22 (model-notes section 1).
+double deformation(const EllipsoidParams& p, double area) {
+  return p.C_mm * (1.0 - std::sqrt(1.0 - area / (kPi * p.A_mm * p.B_mm)));
+}
+
+double radius_a(const EllipsoidParams& p, double d) {
+  return p.A_mm * std::sqrt(2 * p.C_mm * d - d * d) / p.C_mm;
+}
+
+double radius_b(const EllipsoidParams& p, double d) {
+  return p.B_mm * std::sqrt(2 * p.C_mm * d - d * d) / p.C_mm;
+}
+
+double closed_form_force(const EllipsoidParams& p, double d, double ddot) {
+  const double C = p.C_mm;
+  const double k = p.kbar_n_per_mm3 * std::pow(d / p.d0_mm, p.n);
+  const double c = p.cbar_ns_per_mm3 * std::pow(d / p.d0_mm, p.m);
+  return kPi * p.A_mm * p.B_mm * d / C *
+         (k * (d - d * d / (3 * C)) +
+          c * ddot * (6 * C * C - 4 * C * d + d * d) / (3 * C * (2 * C - d)));
+}
+
+double pressure(const EllipsoidParams& p, double d, double ddot, double rho2) {
+  if (rho2 > 1.0) return 0.0;
+  const double C = p.C_mm;
+  const double k = p.kbar_n_per_mm3 * std::pow(d / p.d0_mm, p.n);
+  const double c = p.cbar_ns_per_mm3 * std::pow(d / p.d0_mm, p.m);
+  const double root = std::sqrt(C * C - rho2 * (2 * C * d - d * d));
+  return k * (d - C + root) + c * ddot * (1.0 - rho2 * (C - d) / root);
+}
+
+struct Cells {
+  std::vector<double> x;
+  std::vector<double> y;
+  double cx = 0.0;
+  double cy = 0.0;
+};
+
+Cells region_cells(Region region) {
+  Cells cells;
+  for (std::size_t index : layout_37_38().region_sensors(region)) {
+    cells.x.push_back(layout_37_38().sensor(index).grid_x_mm);
+    cells.y.push_back(layout_37_38().sensor(index).grid_y_mm);
+  }
+  for (std::size_t i = 0; i < cells.x.size(); ++i) {
+    cells.cx += cells.x[i] / static_cast<double>(cells.x.size());
+    cells.cy += cells.y[i] / static_cast<double>(cells.y.size());
+  }
+  return cells;
+}
+
+struct RasterCase {
+  Region region;
+  double area_fraction_of_sensors;
+  double ddot_mm_per_s;
+};
+
+const std::vector<RasterCase> kRasterCases{
+    {Region::Heel, 0.3, 40.0},
+    {Region::Heel, 0.85, -20.0},
+    {Region::Met3_5, 0.5, 10.0},
+    {Region::Met1_2, 0.9, -60.0},
+    {Region::Toe2, 0.6, 30.0},
+    {Region::Toes3_5, 0.2, 0.0},
+    {Region::MidfootAnterior, 0.7, 25.0},
+};
+
+double sensor_area(Region region) {
+  return static_cast<double>(layout_37_38().region_sensors(region).size()) * 7.5 * 15.0;
+}
+
+TEST(Simulator, RasterisedCellsSumToTheModelForceInBothModes) {
+  for (const RasterCase& rc : kRasterCases) {
+    const EllipsoidParams p = seed_means(rc.region);
+    const double d = deformation(p, rc.area_fraction_of_sensors * sensor_area(rc.region));
+    const double force = closed_form_force(p, d, rc.ddot_mm_per_s);
+    ASSERT_GT(force, 0.0);
+    for (Rasterisation mode : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
+      const std::vector<double> loads = rasterise_region(
+          layout_37_38(), rc.region, p, d, rc.ddot_mm_per_s, ModelVariant::Correct, mode, force);
+      ASSERT_EQ(loads.size(), layout_37_38().region_sensors(rc.region).size());
+      double sum = 0.0;
+      for (double load : loads) {
+        EXPECT_GE(load, 0.0);
+        sum += load;
+      }
+      EXPECT_NEAR(sum, force, 1e-12 * force) << region_name(rc.region);
+    }
+  }
+}
+
+TEST(Simulator, CellCentreLoadsFollowThePressureAtCellCentres) {
+  for (const RasterCase& rc : kRasterCases) {
+    const EllipsoidParams p = seed_means(rc.region);
+    const double d = deformation(p, rc.area_fraction_of_sensors * sensor_area(rc.region));
+    const double ddot = rc.ddot_mm_per_s;
+    const double force = closed_form_force(p, d, ddot);
+    const Cells cells = region_cells(rc.region);
+    const double ra = radius_a(p, d);
+    const double rb = radius_b(p, d);
+    std::vector<double> expected(cells.x.size(), 0.0);
+    double total = 0.0;
+    for (std::size_t i = 0; i < cells.x.size(); ++i) {
+      const double u = (cells.x[i] - cells.cx) / ra;
+      const double v = (cells.y[i] - cells.cy) / rb;
+      expected[i] = std::max(0.0, pressure(p, d, ddot, u * u + v * v));
+      total += expected[i];
+    }
+    if (total == 0.0) {
+      // No centre inside (toe2's two cells sit in two rows, and its ellipse is wide
+      // and low): the cell nearest the ellipse's centre, the first on a tie, takes everything.
+      std::size_t nearest = 0;
+      for (std::size_t i = 1; i < cells.x.size(); ++i) {
+        if (std::hypot(cells.x[i] - cells.cx, cells.y[i] - cells.cy) <
+            std::hypot(cells.x[nearest] - cells.cx, cells.y[nearest] - cells.cy)) {
+          nearest = i;
+        }
+      }
+      expected[nearest] = 1.0;
+      total = 1.0;
+    }
+    const std::vector<double> loads =
+        rasterise_region(layout_37_38(), rc.region, p, d, ddot, ModelVariant::Correct,
+                         Rasterisation::CellCentre, force);
+    for (std::size_t i = 0; i < loads.size(); ++i) {
+      EXPECT_NEAR(loads[i], force * expected[i] / total, 1e-9 * force) << region_name(rc.region);
+    }
+  }
+}
+
+TEST(Simulator, CellCentreGivesATinyContactToTheNearestCell) {
+  const EllipsoidParams p = seed_means(Region::Heel);
+  const double d = deformation(p, 10.0);  // a 10 mm^2 ellipse: no cell centre inside
+  const Cells cells = region_cells(Region::Heel);
+  std::size_t nearest = 0;
+  double best = 1e300;
+  for (std::size_t i = 0; i < cells.x.size(); ++i) {
+    const double dist = std::hypot(cells.x[i] - cells.cx, cells.y[i] - cells.cy);
+    if (dist > 1e-9 && dist < radius_a(p, d)) FAIL() << "a centre is inside the tiny ellipse";
+    if (dist < best) {
+      best = dist;
+      nearest = i;
+    }
+  }
+  const std::vector<double> loads =
+      rasterise_region(layout_37_38(), Region::Heel, p, d, 5.0, ModelVariant::Correct,
+                       Rasterisation::CellCentre, 3.0);
+  for (std::size_t i = 0; i < loads.size(); ++i) EXPECT_EQ(loads[i], i == nearest ? 3.0 : 0.0);
+}
+
+TEST(Simulator, CoverageLoadsFullCellsWithTheirMeanPressureAndEmptyCellsWithNothing) {
+  // A heel contact of 1000 mm^2 lies within the heel's cells, so the rescaling is close to 1
+  // and a fully covered cell carries its mean pressure times its area.
+  const Region region = Region::Heel;
+  const EllipsoidParams p = seed_means(region);
+  const double d = deformation(p, 1000.0);
+  const double ddot = 30.0;
+  const double force = closed_form_force(p, d, ddot);
+  const Cells cells = region_cells(region);
+  const double ra = radius_a(p, d);
+  const double rb = radius_b(p, d);
+  const double w = 7.5;
+  const double h = 15.0;
+  const std::vector<double> loads = rasterise_region(
+      layout_37_38(), region, p, d, ddot, ModelVariant::Correct, Rasterisation::Coverage, force);
+  int full = 0;
+  int empty = 0;
+  int partial = 0;
+  for (std::size_t i = 0; i < cells.x.size(); ++i) {
+    // Corners inside the ellipse -> the convex ellipse covers the whole cell.
+    int corners_inside = 0;
+    for (double sx : {-0.5, 0.5}) {
+      for (double sy : {-0.5, 0.5}) {
+        const double u = (cells.x[i] + sx * w - cells.cx) / ra;
+        const double v = (cells.y[i] + sy * h - cells.cy) / rb;
+        corners_inside += u * u + v * v < 1.0 ? 1 : 0;
+      }
+    }
+    const double gap_x = std::max(0.0, std::abs(cells.x[i] - cells.cx) - 0.5 * w);
+    const double gap_y = std::max(0.0, std::abs(cells.y[i] - cells.cy) - 0.5 * h);
+    const bool disjoint = (gap_x / ra) * (gap_x / ra) + (gap_y / rb) * (gap_y / rb) >= 1.0;
+    if (corners_inside == 4) {
+      ++full;
+      // The mean pressure over the cell by a 200 x 200 midpoint rule.
+      double sum = 0.0;
+      for (int a = 0; a < 200; ++a) {
+        for (int b = 0; b < 200; ++b) {
+          const double u = (cells.x[i] + w * ((a + 0.5) / 200 - 0.5) - cells.cx) / ra;
+          const double v = (cells.y[i] + h * ((b + 0.5) / 200 - 0.5) - cells.cy) / rb;
+          sum += pressure(p, d, ddot, u * u + v * v);
+        }
+      }
+      const double expected = sum / (200.0 * 200.0) * w * h;
+      EXPECT_NEAR(loads[i], expected, 0.02 * expected) << "cell " << i;
+    } else if (disjoint) {
+      ++empty;
+      EXPECT_EQ(loads[i], 0.0) << "cell " << i;
+    } else {
+      ++partial;
+    }
+  }
+  EXPECT_GE(full, 2);
+  EXPECT_GE(empty, 5);
+  EXPECT_GE(partial, 4);
+}
+
+TEST(Simulator, CoverageActivatesMoreCellsThanCellCentre) {
+  int more = 0;
+  for (const RasterCase& rc : kRasterCases) {
+    const EllipsoidParams p = seed_means(rc.region);
+    const double d = deformation(p, rc.area_fraction_of_sensors * sensor_area(rc.region));
+    const double force = closed_form_force(p, d, rc.ddot_mm_per_s);
+    const auto count = [&](Rasterisation mode) {
+      const auto loads = rasterise_region(layout_37_38(), rc.region, p, d, rc.ddot_mm_per_s,
+                                          ModelVariant::Correct, mode, force);
+      return std::count_if(loads.begin(), loads.end(), [](double v) { return v > 0.0; });
+    };
+    const auto centre = count(Rasterisation::CellCentre);
+    const auto coverage = count(Rasterisation::Coverage);
+    EXPECT_GE(coverage, centre) << region_name(rc.region);
+    more += coverage > centre ? 1 : 0;
+  }
+  EXPECT_GE(more, 3);
+}
+
+TEST(Simulator, PeakAreaBisectionHitsTheTargetElasticForce) {
+  const EllipsoidParams p = seed_means(Region::Met3_5);
+  const double area = contact_area_for_elastic_force(p, 250.0, 3000.0);
+  EXPECT_NEAR(closed_form_force(p, deformation(p, area), 0.0), 250.0, 1e-6);
+  // Unreachable within the cap: the cap itself.
+  EXPECT_EQ(contact_area_for_elastic_force(p, 1e6, 3000.0), 3000.0);
+  EXPECT_EQ(contact_area_for_elastic_force(p, 0.0, 3000.0), 0.0);
+}
+
+TEST(Simulator, EffectRegistryHasOnlyNone) {
+  EXPECT_EQ(simulation_effect_names(), std::vector<std::string_view>{"none"});
+  EXPECT_EQ(make_simulation_effect("none"), nullptr);
+  EXPECT_THROW(make_simulation_effect("hysteresis"), std::invalid_argument);
+}
+
+std::string slurp(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+SimulationOptions short_options(std::uint64_t seed) {
+  SimulationOptions o;
+  o.duration_s = 12.0;
+  o.seed = seed;
+  return o;
+}
+
+TEST(Simulator, SameSeedSameBytesOtherSeedOtherBytes) {
+  const auto dir = test::scratch_dir("sim-determinism");
+  for (Rasterisation mode : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
+    SimulationOptions o = short_options(7);
+    o.rasterisation = mode;
+    simulate_session(shipped_config(), o, dir / "a.csv", dir / "a.json");
+    simulate_session(shipped_config(), o, dir / "b.csv", dir / "b.json");
+    o.effects = {"none"};
+    simulate_session(shipped_config(), o, dir / "n.csv", dir / "n.json");
+    o.seed = 8;
+    simulate_session(shipped_config(), o, dir / "c.csv", dir / "c.json");
+    const std::string a = slurp(dir / "a.csv");
+    ASSERT_GT(a.size(), 100000u);
+    EXPECT_EQ(a, slurp(dir / "b.csv"));
+    EXPECT_EQ(slurp(dir / "a.json"), slurp(dir / "b.json"));
+    EXPECT_EQ(a, slurp(dir / "n.csv"));
+    EXPECT_NE(a, slurp(dir / "c.csv"));
+  }
+}
+
+TEST(Simulator, WrittenSessionReadsBackAndTheTruthIsPlausible) {
+  const auto dir = test::scratch_dir("sim-readback");
+  SimulationOptions o = short_options(11);
+  o.duration_s = 15.0;
+  o.body_mass_kg = 55.0;
+  o.subject = "unit test";
+  const SimulationTruth truth =
+      simulate_session(shipped_config(), o, dir / "s.csv", dir / "s.json");
+
+  SessionReader reader(dir / "s.csv");
+  const SessionHeader& header = reader.header();
+  EXPECT_EQ(header.version, 1);
+  EXPECT_EQ(header.insole_size, InsoleSize::S37_38);
+  EXPECT_EQ(header.sample_rate_hz, 100.0);
+  EXPECT_EQ(header.sensors, 107u);
+  EXPECT_EQ(header.subject, "unit test");
+  EXPECT_EQ(header.body_mass_kg, 55.0);
+  EXPECT_EQ(header.note, "SIMULATED by gaitmon simulate (seed 11, model correct)");
+
+  // Summed bits above each sensor's dc bias, per foot and frame.
+  std::array<std::vector<double>, 2> summed;
+  Frame frame;
+  std::int64_t frames = 0;
+  int max_bits = 0;
+  while (reader.next(frame)) {
+    const auto foot = static_cast<std::size_t>(frame.foot);
+    EXPECT_EQ(frame.foot, frames % 2 == 0 ? Foot::Left : Foot::Right);
+    EXPECT_NEAR(frame.t_s, static_cast<double>(frames / 2) / 100.0, 1e-12);
+    double sum = 0.0;
+    for (std::size_t s = 0; s < frame.bits.size(); ++s) {
+      sum += frame.bits[s] - truth.dc_bias_bits[foot][s];
+      max_bits = std::max<int>(max_bits, frame.bits[s]);
+    }
+    summed[foot].push_back(sum);
+    ++frames;
+  }
+  EXPECT_EQ(frames, 2 * 1500);
+  EXPECT_EQ(truth.frames_per_foot, 1500);
+  EXPECT_GT(max_bits, 50);
+  EXPECT_LT(max_bits, 255);
+  EXPECT_EQ(truth.clipped_high_samples, 0u);
+  EXPECT_EQ(truth.negative_force_samples, 0u);
+
+  const double body_weight = 55.0 * 9.80665;
+  ASSERT_GE(truth.steps.size(), 24u);
+  int complete = 0;
+  for (std::size_t i = 0; i < truth.steps.size(); ++i) {
+    const SimulatedStep& step = truth.steps[i];
+    if (i > 0) {
+      EXPECT_NE(step.foot, truth.steps[i - 1].foot) << "step " << i;
+    }
+    if (step.partial) {
+      EXPECT_TRUE(i < 2 || i + 2 >= truth.steps.size()) << "partial step " << i << " mid-file";
+      continue;
+    }
+    ++complete;
+    const double stance = step.t_toe_off_s - step.t_heel_strike_s;
+    EXPECT_GE(stance, 0.5) << "step " << i;
+    EXPECT_LE(stance, 0.9) << "step " << i;
+    EXPECT_GE(step.peak_total_force_n, 0.8 * body_weight) << "step " << i;
+    EXPECT_LE(step.peak_total_force_n, 1.6 * body_weight) << "step " << i;
+    EXPECT_GT(step.peak_force_n[index_of(Region::Heel)], 0.3 * body_weight);
+    EXPECT_GT(step.peak_force_n[index_of(Region::Met3_5)], 0.3 * body_weight);
+    // The file agrees with the events: 142 bits (40 N) is crossed at heel strike and toe off,
+    // up to the noise (0.5 bit SD on 107 sensors, ~5 bits).
+    const auto& sums = summed[static_cast<std::size_t>(step.foot)];
+    const auto hs = static_cast<std::size_t>(step.heel_strike_frame);
+    const auto to = static_cast<std::size_t>(step.toe_off_frame);
+    EXPECT_LT(sums[hs - 2], 142.0) << "step " << i;
+    EXPECT_GT(sums[hs + 2], 142.0) << "step " << i;
+    EXPECT_GT(sums[to - 2], 142.0) << "step " << i;
+    EXPECT_LT(sums[to + 2], 142.0) << "step " << i;
+    EXPECT_GT(sums[(hs + to) / 2], 0.25 * body_weight / truth.newtons_per_bit);
+  }
+  EXPECT_GE(complete, 22);
+}
+
+TEST(Simulator, TruthJsonRecordsParametersAndSteps) {
+  const auto dir = test::scratch_dir("sim-truth");
+  SimulationOptions o = short_options(3);
+  EllipsoidParams heel = seed_means(Region::Heel);
+  heel.kbar_n_per_mm3 = 0.2;
+  o.region_params[index_of(Region::Heel)] = heel;
+  o.rasterisation = Rasterisation::Coverage;
+  const SimulationTruth truth =
+      simulate_session(shipped_config(), o, dir / "s.csv", dir / "s.json");
+  std::ifstream in(dir / "s.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j.at("simulated"), true);
+  EXPECT_EQ(j.at("model"), "correct");
+  EXPECT_EQ(j.at("rasterisation"), "coverage");
+  EXPECT_EQ(j.at("options").at("seed"), 3);
+  EXPECT_EQ(j.at("options").at("insole_size"), "37-38");
+  EXPECT_NEAR(j.at("event_threshold_n").get<double>(), 142 * 64.0 / 255.0 * 1.125, 1e-9);
+  EXPECT_EQ(j.at("regions").size(), kRegionCount);
+  EXPECT_EQ(j.at("regions").at("heel").at("kbar_n_per_mm3"), 0.2);
+  EXPECT_EQ(j.at("regions").at("met3_5").at("A_mm"), 139.7);  // Appendix I, 37-38
+  EXPECT_EQ(j.at("regions").at("toe2").at("m"), 1.11);
+  for (const char* key :
+       {"A_mm", "B_mm", "C_mm", "d0_mm", "kbar_n_per_mm3", "n", "cbar_ns_per_mm3", "m"}) {
+    EXPECT_TRUE(j.at("regions").at("toe1").contains(key)) << key;
+  }
+  std::size_t steps = 0;
+  for (const char* foot : {"L", "R"}) {
+    EXPECT_EQ(j.at("dc_bias_bits").at(foot).size(), 107u);
+    for (const auto& step : j.at("steps").at(foot)) {
+      EXPECT_EQ(step.at("t_heel_strike_s").get<double>(),
+                step.at("heel_strike_frame").get<double>() / 100.0);
+      EXPECT_TRUE(step.at("peak_force_n").contains("toes3_5"));
+      ++steps;
+    }
+  }
+  EXPECT_EQ(steps, truth.steps.size());
+}
+
+TEST(Simulator, SeedSignWithHeavyDampingClampsNegativeForcesAndSaysSo) {
+  const auto dir = test::scratch_dir("sim-seed-sign");
+  SimulationOptions o = short_options(5);
+  o.model = ModelVariant::SeedEq25;
+  for (Region r : kRegions) {
+    EllipsoidParams p = seed_means(r);
+    p.cbar_ns_per_mm3 *= 300.0;
+    o.region_params[index_of(r)] = p;
+  }
+  const SimulationTruth truth =
+      simulate_session(shipped_config(), o, dir / "s.csv", dir / "s.json");
+  EXPECT_GT(truth.negative_force_samples, 0u);
+  std::ifstream in(dir / "s.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j.at("negative_force_samples").get<std::uint64_t>(), truth.negative_force_samples);
+  EXPECT_EQ(j.at("model"), "seed_eq25");
+}
+
+TEST(Simulator, RejectsBadOptions) {
+  const auto dir = test::scratch_dir("sim-bad");
+  const auto run = [&](const SimulationOptions& o) {
+    simulate_session(shipped_config(), o, dir / "s.csv", dir / "s.json");
+  };
+  SimulationOptions o = short_options(1);
+  o.duration_s = 0.0;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.timing.stance_fraction = 0.95;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.effects = {"creep"};
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  EllipsoidParams soft = seed_means(Region::Heel);
+  soft.kbar_n_per_mm3 = -0.1;
+  o.region_params[index_of(Region::Heel)] = soft;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  EllipsoidParams flat = seed_means(Region::Toe1);
+  flat.C_mm = 0.0;
+  o.region_params[index_of(Region::Toe1)] = flat;
+  EXPECT_THROW(run(o), std::invalid_argument);
+}
+
+TEST(Simulator, RasterisationNames) {
+  EXPECT_EQ(rasterisation_name(Rasterisation::CellCentre), "centre");
+  EXPECT_EQ(rasterisation_name(Rasterisation::Coverage), "coverage");
+  EXPECT_EQ(parse_rasterisation("centre"), Rasterisation::CellCentre);
+  EXPECT_EQ(parse_rasterisation("coverage"), Rasterisation::Coverage);
+  EXPECT_EQ(parse_rasterisation("center"), std::nullopt);
+}
+
+}  // namespace
+}  // namespace gaitmon

@@ -1,0 +1,92 @@
+// Per-region force, area and ellipse of a hand-made stance on the shipped 37-38 layout.
+#include "gaitmon/stance.hpp"
+
+#include <gtest/gtest.h>
+
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+class StanceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    config_ = load_config(test::source_dir() / "config" / "gaitmon.toml");
+    layout_.emplace(config_.insole(InsoleSize::S37_38), config_.sensor);
+  }
+
+  /// A step whose zero is 2 bits on every sensor and whose threshold is 5 bits.
+  Step make_step(const std::vector<std::vector<std::uint8_t>>& frames) const {
+    Step step;
+    step.sensor_zero_bits.assign(layout_->sensor_count(), 2.0);
+    step.adaptive_threshold_bits = 5.0;
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      step.stance.push_back({0.01 * static_cast<double>(i), Foot::Left, frames[i]});
+    }
+    return step;
+  }
+
+  /// Sensor index (0-based) of row `row`, number `number` (1-based, Appendix B form).
+  std::size_t sensor_at(int row, int number) const {
+    for (const Sensor& s : layout_->sensors()) {
+      if (s.row == row && s.number_in_row == number) return s.index;
+    }
+    ADD_FAILURE() << "no sensor at row " << row << " number " << number;
+    return 0;
+  }
+
+  Config config_;
+  std::optional<InsoleLayout> layout_;
+};
+
+TEST_F(StanceTest, ForceIsEq42OverActiveSensorsAfterZeroing) {
+  // Heel rows 12-13, sensors 2-4 (size 37-38, Appendix B: the heel spans rows 12-15), loaded
+  // with 102 raw bits each: 100 bits after the 2-bit zero. One more heel sensor reads 6 raw bits
+  // (4 after zeroing, under the 5-bit threshold) and must not count.
+  std::vector<std::uint8_t> bits(layout_->sensor_count(), 2);
+  for (int row : {12, 13}) {
+    for (int number : {2, 3, 4}) bits[sensor_at(row, number)] = 102;
+  }
+  bits[sensor_at(15, 1)] = 6;
+  const StanceSeries series = measure_stance(make_step({bits}), *layout_, config_.calibration);
+  ASSERT_EQ(series.size(), 1u);
+  const RegionSample& heel = series.at(0, Region::Heel);
+  // 6 sensors x 100 bits x (64 N/cm^2 / 255 bits x 1.125 cm^2 = 0.282353 N/bit) = 169.412 N.
+  EXPECT_NEAR(heel.force_n, 169.412, 1e-3);
+  EXPECT_EQ(heel.active_sensors, 6);
+  EXPECT_DOUBLE_EQ(heel.sensor_area_mm2, 675.0);
+  // A 3 x 2 block is Case 2: rA = 3 x 7.5 / sqrt(pi) = 12.6943 mm, rB = 2 x 15 / sqrt(pi)
+  // = 16.9257 mm, and the ellipse area equals the sensor area.
+  EXPECT_EQ(heel.ellipse.kase, EllipseCase::Rectangle);
+  EXPECT_NEAR(heel.ellipse.ra_mm, 12.6943, 1e-4);
+  EXPECT_NEAR(heel.ellipse.rb_mm, 16.9257, 1e-4);
+  EXPECT_NEAR(heel.ellipse.pi, 1.0, 1e-9);
+  for (Region r : kRegions) {
+    if (r == Region::Heel) continue;
+    EXPECT_EQ(series.at(0, r).force_n, 0.0) << region_name(r);
+    EXPECT_EQ(series.at(0, r).ellipse.kase, EllipseCase::None) << region_name(r);
+  }
+  EXPECT_NEAR(series.total_force_n[0], 169.412, 1e-3);
+}
+
+TEST_F(StanceTest, IsolatedHeelSensorCountsOnlyAtTheFirstInstantInTheOutermostRow) {
+  std::vector<std::uint8_t> bits(layout_->sensor_count(), 2);
+  bits[sensor_at(15, 2)] = 52;  // the most posterior row of 37-38 is row 15
+  const StanceSeries series =
+      measure_stance(make_step({bits, bits}), *layout_, config_.calibration);
+  ASSERT_EQ(series.size(), 2u);
+  EXPECT_EQ(series.at(0, Region::Heel).ellipse.kase, EllipseCase::Isolated);
+  EXPECT_NEAR(series.at(0, Region::Heel).ellipse.pi, 1.0, 1e-9);
+  EXPECT_EQ(series.at(1, Region::Heel).ellipse.kase, EllipseCase::None);
+  // The force is the sensors' reading either way: Case 1 concerns the contact area only.
+  EXPECT_NEAR(series.at(1, Region::Heel).force_n, 50 * 0.2823529, 1e-5);
+}
+
+TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {
+  Step step = make_step({std::vector<std::uint8_t>(layout_->sensor_count(), 0)});
+  step.sensor_zero_bits.resize(3);
+  EXPECT_THROW(measure_stance(step, *layout_, config_.calibration), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace gaitmon
