@@ -14,6 +14,7 @@ SegmenterLimits segmenter_limits(double sample_rate_hz) {
   SegmenterLimits limits;
   limits.max_stance_frames = static_cast<std::int64_t>(60.0 * sample_rate_hz);
   limits.max_swing_half_frames = static_cast<std::int64_t>(1.5 * sample_rate_hz);
+  limits.min_first_swing_frames = static_cast<std::int64_t>(0.2 * sample_rate_hz);
   return limits;
 }
 

@@ -2,11 +2,16 @@
 // geometric ellipse fit for irregular shapes (see contact_ellipse.hpp for the rules).
 #include "gaitmon/contact_ellipse.hpp"
 
-#include <algorithm>
-#include <array>
 #include <ceres/jet.h>
 #include <ceres/tiny_solver.h>
 #include <ceres/tiny_solver_autodiff_function.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <numbers>
@@ -15,15 +20,13 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Dense>
-
 namespace gaitmon {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
 const double kSqrtPi = std::sqrt(kPi);
 
-/// A cell on the lattice: ix in half cell widths, iy in rows, both from the anchor cell.
+/// A cell on the lattice: ix in half cell widths, iy in rows, from the lattice origin.
 struct LatticeCell {
   int ix = 0;
   int iy = 0;
@@ -110,8 +113,7 @@ bool is_rectangle(std::span<const LatticeCell> sorted) {
 
 /// Exposed parts of the side [lo, hi] (quarter widths) at height Y, given the covering intervals.
 void add_exposed_parts(std::int64_t lo, std::int64_t hi, std::int64_t Y,
-                       std::span<std::array<std::int64_t, 2>> covers,
-                       std::vector<GridPoint>& out) {
+                       std::span<std::array<std::int64_t, 2>> covers, std::vector<GridPoint>& out) {
   // At most three covers: an insertion sort (std::sort here trips a GCC -Warray-bounds false
   // positive on the fixed-size buffer).
   for (std::size_t i = 1; i < covers.size(); ++i) {
@@ -208,7 +210,11 @@ void keep_hull_points(std::vector<GridPoint>& sorted_points, std::vector<GridPoi
 std::array<double, 2> closest_point_major_x(double a, double b, double u, double v, double& t) {
   const double a2 = a * a;
   const double b2 = b * b;
-  if (v <= 0.0) {
+  const double p = a * u;
+  const double q = b * v;
+  const double t_lo = std::max(q - b2, p - a2);
+  // On the major axis, or so near it that t_lo rounds onto the pole at -b^2: closed form.
+  if (!(t_lo + b2 > 0.0)) {
     const double focal = a2 - b2;
     if (a * u < focal) {
       const double x = a2 * u / focal;
@@ -216,12 +222,9 @@ std::array<double, 2> closest_point_major_x(double a, double b, double u, double
       t = -b2;
       return {x, b * std::sqrt(std::max(0.0, 1.0 - r * r))};
     }
-    t = a * u - a2;
+    t = p - a2;
     return {a, 0.0};
   }
-  const double p = a * u;
-  const double q = b * v;
-  const double t_lo = std::max(q - b2, p - a2);
   t = std::isfinite(t) ? std::max(t, t_lo) : t_lo;
   for (int it = 0; it < 100; ++it) {
     const double ia = 1.0 / (t + a2);
@@ -252,7 +255,9 @@ std::array<double, 2> closest_point(double a, double b, double u, double v, doub
   return {std::copysign(f[0], u), std::copysign(f[1], v)};
 }
 
-inline double value_of(double x) { return x; }
+inline double value_of(double x) {
+  return x;
+}
 template <int N>
 double value_of(const ceres::Jet<double, N>& x) {
   return x.a;
@@ -310,10 +315,12 @@ std::optional<Ellipse> conic_to_ellipse(const Eigen::Matrix<double, 6, 1>& k) {
   if (!(den < 0.0)) return std::nullopt;
   const double x0 = (2.0 * C * D - B * E) / den;
   const double y0 = (2.0 * A * E - B * D) / den;
+  if (!(std::isfinite(x0) && std::isfinite(y0))) return std::nullopt;
   const double fc = A * x0 * x0 + B * x0 * y0 + C * y0 * y0 + D * x0 + E * y0 + F;
   Eigen::Matrix2d q;
   q << A, B / 2.0, B / 2.0, C;
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(q);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig;
+  eig.computeDirect(q);
   const Eigen::Vector2d lambda = eig.eigenvalues();
   const double a2 = -fc / lambda[0];
   const double b2 = -fc / lambda[1];
@@ -322,8 +329,12 @@ std::optional<Ellipse> conic_to_ellipse(const Eigen::Matrix<double, 6, 1>& k) {
   return Ellipse{x0, y0, std::sqrt(a2), std::sqrt(b2), std::atan2(axis.y(), axis.x())};
 }
 
-/// Direct least-squares ellipse fit (Fitzgibbon, Pilu, Fisher 1999) in the numerically stable
-/// form of Halir and Flusser (1998), on points centred and scaled for conditioning.
+/// Direct least-squares ellipse fit (Fitzgibbon, Pilu, Fisher 1999) with Halir and Flusser's
+/// (1998) elimination of the linear terms, on points centred and scaled for conditioning. Their
+/// eigenproblem Sr a = lambda C1 a (Sr = S1 - S2 S3^-1 S2^T positive definite, C1 the 4ac - b^2
+/// constraint) is solved in its symmetric form: with Sr = L L^T, K = L^-1 C1 L^-T has the
+/// eigenvalues 1 / lambda, and by Sylvester's law of inertia exactly one is positive, as for C1;
+/// its eigenvector b gives the ellipse a = L^-T b. Closed-form 3 x 3 symmetric eigensolver.
 std::optional<Ellipse> fit_algebraic(std::span<const Point> points) {
   if (points.size() < 5) return std::nullopt;
   double mx = 0.0, my = 0.0;
@@ -349,28 +360,29 @@ std::optional<Ellipse> fit_algebraic(std::span<const Point> points) {
     s2 += d1 * d2.transpose();
     s3 += d2 * d2.transpose();
   }
-  const Eigen::FullPivLU<Eigen::Matrix3d> s3_lu(s3);
-  if (!s3_lu.isInvertible()) return std::nullopt;
-  const Eigen::Matrix3d t = -s3_lu.solve(s2.transpose());
-  const Eigen::Matrix3d m = s1 + s2 * t;
-  Eigen::Matrix3d reduced;
-  reduced.row(0) = m.row(2) / 2.0;
-  reduced.row(1) = -m.row(1);
-  reduced.row(2) = m.row(0) / 2.0;
-  const Eigen::EigenSolver<Eigen::Matrix3d> eig(reduced);
-  if (eig.info() != Eigen::Success) return std::nullopt;
-  int best = -1;
-  double best_cond = 0.0;
-  for (int i = 0; i < 3; ++i) {
-    const Eigen::Vector3d v = eig.eigenvectors().col(i).real();
-    const double cond = 4.0 * v[0] * v[2] - v[1] * v[1];
-    if (cond > best_cond) {
-      best_cond = cond;
-      best = i;
-    }
+  const Eigen::LLT<Eigen::Matrix3d> s3_llt(s3);
+  if (s3_llt.info() != Eigen::Success) return std::nullopt;
+  const Eigen::Matrix3d t = -s3_llt.solve(s2.transpose());
+  const Eigen::Matrix3d sr = s1 + s2 * t;
+  const Eigen::LLT<Eigen::Matrix3d> sr_llt(sr);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+  Eigen::Vector3d a1;
+  if (sr_llt.info() == Eigen::Success) {
+    Eigen::Matrix3d c1;
+    c1 << 0.0, 0.0, 2.0, 0.0, -1.0, 0.0, 2.0, 0.0, 0.0;
+    const auto l = sr_llt.matrixL();
+    const Eigen::Matrix3d y = l.solve(c1);
+    Eigen::Matrix3d k = l.solve(y.transpose());
+    k = (0.5 * (k + k.transpose())).eval();
+    eig.computeDirect(k);
+    if (!(eig.eigenvalues()[2] > 0.0)) return std::nullopt;
+    a1 = sr_llt.matrixU().solve(eig.eigenvectors().col(2));
+  } else {
+    // Sr singular: the points lie exactly on a conic, its null vector.
+    eig.computeDirect(sr);
+    a1 = eig.eigenvectors().col(0);
   }
-  if (best < 0) return std::nullopt;
-  const Eigen::Vector3d a1 = eig.eigenvectors().col(best).real();
+  if (!(4.0 * a1[0] * a1[2] - a1[1] * a1[1] > 0.0)) return std::nullopt;
   const Eigen::Vector3d a2 = t * a1;
   Eigen::Matrix<double, 6, 1> conic;
   conic << a1, a2;
@@ -396,7 +408,8 @@ Ellipse moment_ellipse(std::span<const Point> centres, CellSize size) {
   }
   cov(0, 0) += size.width_mm * size.width_mm / 12.0;
   cov(1, 1) += size.height_mm * size.height_mm / 12.0;
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(cov);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig;
+  eig.computeDirect(cov);
   // A uniform ellipse's variance along a semi-axis r is r^2 / 4.
   const double a = 2.0 * std::sqrt(eig.eigenvalues()[0]);
   const double b = 2.0 * std::sqrt(eig.eigenvalues()[1]);
@@ -463,22 +476,6 @@ void to_points(std::span<const GridPoint> grid, CellSize size, std::vector<Point
   }
 }
 
-ContactEllipse make_result(EllipseCase kase, const Ellipse& e, const Anchor& anchor, int cells,
-                           CellSize size) {
-  ContactEllipse r;
-  r.kase = kase;
-  r.cx_mm = anchor.x_mm + e.cx;
-  r.cy_mm = anchor.y_mm + e.cy;
-  r.ra_mm = e.a;
-  r.rb_mm = e.b;
-  r.angle_rad = e.angle;
-  r.area_mm2 = kPi * e.a * e.b;
-  r.cells_used = cells;
-  r.sensor_area_mm2 = cells * size.width_mm * size.height_mm;
-  r.pi = r.area_mm2 / r.sensor_area_mm2;
-  return r;
-}
-
 void check_size(CellSize size) {
   if (!(std::isfinite(size.width_mm) && std::isfinite(size.height_mm) && size.width_mm > 0.0 &&
         size.height_mm > 0.0)) {
@@ -517,11 +514,76 @@ std::optional<Anchor> snap_cells(std::span<const ActiveCell> cells, CellSize siz
   return anchor;
 }
 
-void cell_centres(std::span<const LatticeCell> cells, CellSize size, std::vector<Point>& out) {
-  out.clear();
-  for (const LatticeCell& c : cells) {
-    out.push_back({c.ix * size.width_mm / 2.0, c.iy * size.height_mm});
+/// Shifts the sorted cells so that the lowest row and leftmost half-column are 0, so every later
+/// computation, and so a cached fit, is the same wherever the pattern sits. Returns the origin
+/// of the shifted lattice in the grid frame.
+Anchor normalise(std::vector<LatticeCell>& sorted, const Anchor& anchor, CellSize size) {
+  int min_ix = sorted.front().ix;
+  for (const LatticeCell& c : sorted) min_ix = std::min(min_ix, c.ix);
+  const int min_iy = sorted.front().iy;
+  for (LatticeCell& c : sorted) {
+    c.ix -= min_ix;
+    c.iy -= min_iy;
   }
+  return {anchor.x_mm + min_ix * size.width_mm / 2.0, anchor.y_mm + min_iy * size.height_mm};
+}
+
+/// Rules 0 and 1: the normalised cells that count, in s.kept, and their origin; nullopt if none.
+std::optional<Anchor> prepare(std::span<const ActiveCell> cells, CellSize size, Region region,
+                              bool first_instant, Scratch& s) {
+  check_size(size);
+  const auto anchor = snap_cells(cells, size, s);
+  if (!anchor) return std::nullopt;
+  const bool toe = is_toe(region);
+  const bool heel_strike = region == Region::Heel && first_instant;
+  s.kept.clear();
+  for (const LatticeCell& c : s.cells) {
+    if (toe || (heel_strike && c.heel_edge) || touches_another(s.cells, c)) s.kept.push_back(c);
+  }
+  if (s.kept.empty()) return std::nullopt;
+  return normalise(s.kept, *anchor, size);
+}
+
+/// A result before it is placed: the ellipse relative to the normalised lattice origin.
+struct Shape {
+  EllipseCase kase = EllipseCase::None;
+  Ellipse ellipse;
+};
+
+/// Rules 1 (one cell left), 2 and 4; nullopt if the pattern is irregular (rule 3).
+std::optional<Shape> closed_form(std::span<const LatticeCell> kept, CellSize size) {
+  const double W = size.width_mm;
+  const double H = size.height_mm;
+  const int n = static_cast<int>(kept.size());
+  double sum_x = 0.0, sum_y = 0.0;
+  int max_ix = 0;
+  for (const LatticeCell& c : kept) {
+    sum_x += c.ix * W / 2.0;
+    sum_y += c.iy * H;
+    max_ix = std::max(max_ix, c.ix);
+  }
+  const double mean_x = sum_x / n;
+  const double mean_y = sum_y / n;
+  if (n == 1) {
+    return Shape{EllipseCase::Isolated, {mean_x, mean_y, W / kSqrtPi, H / kSqrtPi, 0.0}};
+  }
+  const double nc = kept.back().iy + 1;  // rows, normalised to start at 0
+  if (is_rectangle(kept)) {
+    const double per_row = n / nc;
+    return Shape{EllipseCase::Rectangle,
+                 {mean_x, mean_y, per_row * W / kSqrtPi, nc * H / kSqrtPi, 0.0}};
+  }
+  const double nr = std::round(max_ix / 2.0 + 1.0);
+  const double ratio = nc / nr;
+  if (ratio <= 0.4) {
+    return Shape{EllipseCase::Long,
+                 {mean_x, mean_y, (nr + nc - 1.0) * W / kSqrtPi, nc * H / kSqrtPi, 0.0}};
+  }
+  if (ratio >= 2.0) {
+    return Shape{EllipseCase::Long,
+                 {mean_x, mean_y, nr * W / kSqrtPi, (nr + nc - 1.0) * H / kSqrtPi, 0.0}};
+  }
+  return std::nullopt;
 }
 
 /// The Case 3 fit on the neighbour points or on their hull outline; nullopt if it fails.
@@ -535,6 +597,41 @@ std::optional<Ellipse> fit_irregular(std::span<const LatticeCell> cells, CellSiz
     return std::nullopt;
   }
   return canonical(*e);
+}
+
+Ellipse cell_moments(std::span<const LatticeCell> cells, CellSize size, Scratch& s) {
+  s.points.clear();
+  for (const LatticeCell& c : cells) {
+    s.points.push_back({c.ix * size.width_mm / 2.0, c.iy * size.height_mm});
+  }
+  return moment_ellipse(s.points, size);
+}
+
+/// Rule 3 and its fallbacks (rule 5).
+Shape irregular(std::span<const LatticeCell> kept, CellSize size, Scratch& s) {
+  const Ellipse moments = cell_moments(kept, size, s);
+  if (auto e = fit_irregular(kept, size, BoundaryPoints::Neighbours, moments, s)) {
+    return {EllipseCase::Neighbours, *e};
+  }
+  if (auto e = fit_irregular(kept, size, BoundaryPoints::ConvexHull, moments, s)) {
+    return {EllipseCase::Boundary, *e};
+  }
+  return {EllipseCase::Boundary, canonical(moments)};
+}
+
+ContactEllipse place(const Shape& shape, const Anchor& origin, std::size_t cells, CellSize size) {
+  ContactEllipse r;
+  r.kase = shape.kase;
+  r.cx_mm = origin.x_mm + shape.ellipse.cx;
+  r.cy_mm = origin.y_mm + shape.ellipse.cy;
+  r.ra_mm = shape.ellipse.a;
+  r.rb_mm = shape.ellipse.b;
+  r.angle_rad = shape.ellipse.angle;
+  r.area_mm2 = kPi * r.ra_mm * r.rb_mm;
+  r.cells_used = static_cast<int>(cells);
+  r.sensor_area_mm2 = r.cells_used * size.width_mm * size.height_mm;
+  r.pi = r.area_mm2 / r.sensor_area_mm2;
+  return r;
 }
 
 }  // namespace
@@ -559,74 +656,11 @@ std::string_view ellipse_case_name(EllipseCase kase) {
 
 ContactEllipse fit_contact_ellipse(std::span<const ActiveCell> cells, CellSize size, Region region,
                                    bool first_instant) {
-  check_size(size);
   Scratch& s = scratch();
-  const auto anchor = snap_cells(cells, size, s);
-  if (!anchor) return {};
-  const double W = size.width_mm;
-  const double H = size.height_mm;
-
-  // Case 1: drop isolated cells unless an exception applies.
-  const bool toe = is_toe(region);
-  const bool heel_strike = region == Region::Heel && first_instant;
-  s.kept.clear();
-  for (const LatticeCell& c : s.cells) {
-    if (toe || (heel_strike && c.heel_edge) || touches_another(s.cells, c)) s.kept.push_back(c);
-  }
-  const std::span<const LatticeCell> kept = s.kept;
-  const int n = static_cast<int>(kept.size());
-  if (n == 0) return {};
-
-  double sum_x = 0.0, sum_y = 0.0;
-  int min_ix = kept.front().ix, max_ix = kept.front().ix;
-  for (const LatticeCell& c : kept) {
-    sum_x += c.ix * W / 2.0;
-    sum_y += c.iy * H;
-    min_ix = std::min(min_ix, c.ix);
-    max_ix = std::max(max_ix, c.ix);
-  }
-  const double mean_x = sum_x / n;
-  const double mean_y = sum_y / n;
-
-  if (n == 1) {
-    return make_result(EllipseCase::Isolated, {mean_x, mean_y, W / kSqrtPi, H / kSqrtPi, 0.0},
-                       *anchor, 1, size);
-  }
-
-  // Case 2: an exact rectangle.
-  if (is_rectangle(kept)) {
-    const int rows = kept.back().iy - kept.front().iy + 1;
-    const int per_row = n / rows;
-    return make_result(EllipseCase::Rectangle,
-                       {mean_x, mean_y, per_row * W / kSqrtPi, rows * H / kSqrtPi, 0.0}, *anchor,
-                       n, size);
-  }
-
-  // Case 4: long shapes.
-  const double nr = std::round((max_ix - min_ix) / 2.0 + 1.0);
-  const double nc = kept.back().iy - kept.front().iy + 1;
-  const double ratio = nc / nr;
-  if (ratio <= 0.4) {
-    return make_result(EllipseCase::Long,
-                       {mean_x, mean_y, (nr + nc - 1.0) * W / kSqrtPi, nc * H / kSqrtPi, 0.0},
-                       *anchor, n, size);
-  }
-  if (ratio >= 2.0) {
-    return make_result(EllipseCase::Long,
-                       {mean_x, mean_y, nr * W / kSqrtPi, (nr + nc - 1.0) * H / kSqrtPi, 0.0},
-                       *anchor, n, size);
-  }
-
-  // Case 3, then its fallbacks.
-  cell_centres(kept, size, s.points);
-  const Ellipse moments = moment_ellipse(s.points, size);
-  if (auto e = fit_irregular(kept, size, BoundaryPoints::Neighbours, moments, s)) {
-    return make_result(EllipseCase::Neighbours, *e, *anchor, n, size);
-  }
-  if (auto e = fit_irregular(kept, size, BoundaryPoints::ConvexHull, moments, s)) {
-    return make_result(EllipseCase::Boundary, *e, *anchor, n, size);
-  }
-  return make_result(EllipseCase::Boundary, canonical(moments), *anchor, n, size);
+  const auto origin = prepare(cells, size, region, first_instant, s);
+  if (!origin) return {};
+  const auto shape = closed_form(s.kept, size);
+  return place(shape ? *shape : irregular(s.kept, size, s), *origin, s.kept.size(), size);
 }
 
 std::optional<ContactEllipse> fit_irregular_ellipse(std::span<const ActiveCell> cells,
@@ -635,13 +669,56 @@ std::optional<ContactEllipse> fit_irregular_ellipse(std::span<const ActiveCell> 
   Scratch& s = scratch();
   const auto anchor = snap_cells(cells, size, s);
   if (!anchor || s.cells.size() < 2) return std::nullopt;
-  cell_centres(s.cells, size, s.points);
-  const Ellipse moments = moment_ellipse(s.points, size);
+  const Anchor origin = normalise(s.cells, *anchor, size);
+  const Ellipse moments = cell_moments(s.cells, size, s);
   const auto e = fit_irregular(s.cells, size, points, moments, s);
   if (!e) return std::nullopt;
-  return make_result(
-      points == BoundaryPoints::Neighbours ? EllipseCase::Neighbours : EllipseCase::Boundary, *e,
-      *anchor, static_cast<int>(s.cells.size()), size);
+  const EllipseCase kase =
+      points == BoundaryPoints::Neighbours ? EllipseCase::Neighbours : EllipseCase::Boundary;
+  return place({kase, *e}, origin, s.cells.size(), size);
+}
+
+std::size_t ContactEllipseCache::KeyHash::operator()(const std::vector<std::int64_t>& key) const {
+  // FNV-1a over the words.
+  std::uint64_t h = 1469598103934665603ULL;
+  for (const std::int64_t w : key) {
+    h ^= static_cast<std::uint64_t>(w);
+    h *= 1099511628211ULL;
+  }
+  return static_cast<std::size_t>(h);
+}
+
+ContactEllipseCache::ContactEllipseCache(std::size_t capacity) : capacity_(capacity) {
+  if (capacity == 0) throw std::invalid_argument("ContactEllipseCache: capacity must be positive");
+}
+
+ContactEllipse ContactEllipseCache::fit(std::span<const ActiveCell> cells, CellSize size,
+                                        Region region, bool first_instant) {
+  Scratch& s = scratch();
+  const auto origin = prepare(cells, size, region, first_instant, s);
+  if (!origin) return {};
+  if (const auto shape = closed_form(s.kept, size)) {
+    return place(*shape, *origin, s.kept.size(), size);
+  }
+  key_.clear();
+  key_.push_back(std::bit_cast<std::int64_t>(size.width_mm));
+  key_.push_back(std::bit_cast<std::int64_t>(size.height_mm));
+  for (const LatticeCell& c : s.kept) {
+    key_.push_back((static_cast<std::int64_t>(c.iy) << 32) | static_cast<std::uint32_t>(c.ix));
+  }
+  if (const auto it = fits_.find(key_); it != fits_.end()) {
+    ++hits_;
+    return place({it->second.kase,
+                  {it->second.cx_mm, it->second.cy_mm, it->second.ra_mm, it->second.rb_mm,
+                   it->second.angle_rad}},
+                 *origin, s.kept.size(), size);
+  }
+  ++misses_;
+  const Shape shape = irregular(s.kept, size, s);
+  if (fits_.size() >= capacity_) fits_.clear();
+  fits_.emplace(key_, Fitted{shape.kase, shape.ellipse.cx, shape.ellipse.cy, shape.ellipse.a,
+                             shape.ellipse.b, shape.ellipse.angle});
+  return place(shape, *origin, s.kept.size(), size);
 }
 
 }  // namespace gaitmon

@@ -128,6 +128,9 @@ bool StepSegmenter::start_up_classify(std::int64_t from) {
   // A weight shift while standing can dip below the running minimum plus the threshold; a swing
   // unloads the foot, so it must fall to half the highest load seen before it.
   const auto is_swing = [&st] { return 2 * st.swing_floor <= st.peak_sum; };
+  const auto long_enough = [&st, this](std::int64_t swing_end) {
+    return swing_end - st.swing_begin >= limits_.min_first_swing_frames;
+  };
   for (std::int64_t i = from; i < next_; ++i) {
     const std::int64_t sum = at(i).sum;
     st.max_sum = i == first_ ? sum : std::max(st.max_sum, sum);
@@ -137,12 +140,13 @@ bool StepSegmenter::start_up_classify(std::int64_t from) {
         st.seen_end = true;
         st.peak_sum = st.max_sum;
         st.swing_floor = sum;
+        st.swing_begin = st.detector.last_above + 1;
         for (std::int64_t j = st.detector.last_above + 1; j < i; ++j) {
           st.swing_floor = std::min(st.swing_floor, at(j).sum);
         }
         break;
       case ContactDetector::Event::Start:
-        if (st.seen_end && is_swing()) return true;
+        if (st.seen_end && is_swing() && long_enough(st.detector.contact_start)) return true;
         break;
       case ContactDetector::Event::None:
         break;

@@ -52,6 +52,28 @@ TEST(Cli, SimulateThenSegmentWritesTheDocumentedFiles) {
   EXPECT_GE(ok, 14) << "a 12 s walk at 1.1 s strides has at least 7 whole steps per foot";
 }
 
+std::string read_all(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+TEST(Cli, TheBundledDemoIsReproducedByTheCommandInReplayReadme) {
+  const auto dir = test::scratch_dir("cli-demo");
+  int status = -1;
+  const std::string out =
+      run("simulate --size 37-38 --duration 60 --seed 1 --subject "
+          "demo-simulated --out " +
+              (dir / "demo.csv").string(),
+          &status);
+  ASSERT_EQ(status, 0) << out;
+  const auto replay = test::source_dir() / "replay";
+  EXPECT_TRUE(read_all(dir / "demo.csv") == read_all(replay / "demo-simulated-37-38.csv"));
+  EXPECT_NE(read_all(replay / "demo-simulated-37-38.csv").find("# note: SIMULATED"),
+            std::string::npos);
+}
+
 TEST(Cli, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("cli-bad");
   std::string text =
@@ -76,11 +98,8 @@ TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
   for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
     std::filesystem::copy_file(test::source_dir() / "config" / name, dir / name);
   }
-  std::ifstream in(dir / "gaitmon.toml");
-  std::stringstream text;
-  text << in.rdbuf();
-  in.close();
-  test::write_text(dir / "gaitmon.toml", text.str() + "\n[surprise]\nvalue = 1\n");
+  test::write_text(dir / "gaitmon.toml",
+                   read_all(dir / "gaitmon.toml") + "\n[surprise]\nvalue = 1\n");
   int status = -1;
   const std::string out = run("--config " + (dir / "gaitmon.toml").string() +
                                   " simulate --duration 1 --out " + (dir / "x.csv").string(),

@@ -1,10 +1,10 @@
-// Tests for step segmentation, zeroing and the adaptive threshold: synthetic bumps and real
-// walking.
+// Tests for step segmentation, zeroing and the adaptive threshold, on synthetic and real walking.
 #include "gaitmon/segmentation.hpp"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -14,6 +14,8 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -385,7 +387,17 @@ TEST(StepSegmenter, AContactLongerThanTheLimitIsIncompleteAndTheNextStepsAreFine
   SegmenterLimits limits;
   limits.max_stance_frames = 100;
   limits.max_swing_half_frames = 20;
-  const std::vector<Step> steps = segment(make_frames(700, bumps, standing), 0.2, limits);
+  StepSegmenter segmenter(Foot::Left, kSensors, seed_settings(), 0.2, kNewtonsPerBit, limits);
+  std::vector<Step> steps;
+  std::size_t most_held = 0;
+  for (const Frame& f : make_frames(700, bumps, standing)) {
+    segmenter.push(f, steps);
+    most_held = std::max(most_held, segmenter.buffered_frames());
+  }
+  segmenter.finish(steps);
+  // At most H frames before a heel strike, the capped stance, 2 H + 1 swing frames and two
+  // debounce runs: 20 + 100 + 41 + 10, well under the 300 frames of standing.
+  EXPECT_LE(most_held, 171U);
   ASSERT_EQ(steps.size(), 4U);
   EXPECT_EQ(steps[0].status, StepStatus::Ok);
   EXPECT_EQ(steps[0].heel_strike_frame, analytic_heel_strike(bumps[0]));
@@ -541,14 +553,39 @@ void check_recording(const std::string& name) {
       EXPECT_EQ(match->status, c.partial ? StepStatus::Incomplete : StepStatus::Ok)
           << "contact " << c.heel_strike;
     }
+    // Zeroing recovers the converter's per-cell dc bias (listed in the sidecar) in a typical
+    // step; loaded swings (shuffles, turns) make some steps' zeros higher, as in the seed.
+    const auto dc = truth["dc_bias_bits"][std::string(foot_name(foot))].get<std::vector<int>>();
+    ASSERT_EQ(dc.size(), reader.header().sensors);
+    const double dc_sum = std::accumulate(dc.begin(), dc.end(), 0.0);
+    std::vector<double> bias_error;
+    std::vector<double> zero_error;
+    for (const Step& s : steps) {
+      if (s.status != StepStatus::Ok) continue;
+      double worst = 0.0;
+      for (std::size_t i = 0; i < dc.size(); ++i) {
+        worst = std::max(worst, std::abs(s.sensor_zero_bits[i] - dc[i]));
+      }
+      zero_error.push_back(worst);
+      bias_error.push_back(std::abs(s.bias_bits - dc_sum));
+    }
+    ASSERT_FALSE(zero_error.empty());
+    std::sort(zero_error.begin(), zero_error.end());
+    std::sort(bias_error.begin(), bias_error.end());
+    const double median_zero_error = zero_error[zero_error.size() / 2];
+    const double median_bias_error = bias_error[bias_error.size() / 2];
+    EXPECT_LE(median_zero_error, 0.5);
+    EXPECT_LE(median_bias_error, 1.0);
+
     const auto ok = std::count_if(steps.begin(), steps.end(),
                                   [](const Step& s) { return s.status == StepStatus::Ok; });
     std::printf(
         "[ gaitpdb  ] %s %s: %zu steps found (%td ok) for %zu contacts; %d/%d typical matched, "
-        "max error heel strike %lld, toe off %lld frames; %d invented\n",
+        "max error heel strike %lld, toe off %lld frames; %d invented; median step: bias - dc "
+        "%.1f bits, worst sensor zero - dc %.2f bits\n",
         name.c_str(), std::string(foot_name(foot)).c_str(), steps.size(), ok, contacts.size(),
         matched, typical, static_cast<long long>(max_hs_error),
-        static_cast<long long>(max_to_error), invented);
+        static_cast<long long>(max_to_error), invented, median_bias_error, median_zero_error);
     EXPECT_EQ(matched, typical);
     EXPECT_GT(typical, 50);
   }

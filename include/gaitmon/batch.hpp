@@ -19,7 +19,8 @@ struct SegmentedSessionInfo {
 };
 
 /// Segmenter memory bounds for a sample rate: contacts longer than 60 s are cut as incomplete,
-/// and a swing midpoint sits at most 1.5 s from its step.
+/// a swing midpoint sits at most 1.5 s from its step, and start-up ends only at a swing of at
+/// least 0.2 s.
 SegmenterLimits segmenter_limits(double sample_rate_hz);
 
 /// Streams the session at `path` through one StepSegmenter per foot and hands every step to

@@ -3,7 +3,8 @@
 // Order of the rules, and where the seed had to be interpreted:
 //  0. Cells are snapped to the lattice of the grid frame (W/2 in x, because rows of different
 //     length are centred and may be offset by half a cell, and H in y), anchored at the first
-//     finite cell. Duplicate cells count once; cells with non-finite coordinates are ignored.
+//     finite cell. Duplicate cells count once; cells with non-finite coordinates, or more than
+//     10^6 cells from the anchor, are ignored.
 //  1. Case 1 (seed 4.1.1): a cell touching no other active cell of the region (rectangles touching,
 //     corners included) is noise and is dropped, except in toe1, toe2 and toes3_5, and except a
 //     heel cell flagged `outermost_heel_row` at the first instant of the stance. Neighbours are
@@ -12,13 +13,14 @@
 //  2. Case 2 (4.1.2): the cells form an exact rectangle of Nr cells per row and Nc consecutive rows
 //     over the same x-interval: rA = Nr W / sqrt(pi) (eq 49), rB = Nc H / sqrt(pi) (eq 48), angle
 //     0, centre = rectangle centre, PI = 1.
-//  3. Case 4 (4.1.4), checked before Case 3 as the seed's text orders the decision: Nr = bounding-
-//     box width / W rounded half away from zero (offset rows can make it x.5), Nc = bounding-box
-//     height / H (the row count for connected shapes), R = Nc / Nr (eq 50). R <= 0.4:
-//     rA = (Nr + Nc - 1) W / sqrt(pi) (eq 51), rB = Nc H / sqrt(pi). R >= 2: rA = Nr W / sqrt(pi),
-//     rB = (Nr + Nc - 1) H / sqrt(pi) (eq 52). Centre = centroid of the cells, angle 0. These
-//     ellipses do not in general have the cells' area (the seed states they do; its equations
-//     do not): PI is reported as computed.
+//  3. Case 4 (4.1.4), checked before Case 3 because Case 3's fit fails on long shapes (Fig. 23):
+//     Nr = bounding-box width / W rounded half away from zero (offset rows can make it x.5),
+//     Nc = bounding-box height / H (the row count for connected shapes), R = Nc / Nr (eq 50).
+//     R <= 0.4: rA = (Nr + Nc - 1) W / sqrt(pi) (eq 51), rB = Nc H / sqrt(pi).
+//     R >= 2: rA = Nr W / sqrt(pi), rB = (Nr + Nc - 1) H / sqrt(pi) (eq 52).
+//     Centre = centroid of the cells, angle 0. The seed says these ellipses have the cells' area;
+//     with eqs 51/52 as printed they do not (an L of 5 + 1 cells gets PI = 2), and PI is
+//     reported as computed.
 //  4. Case 3 (4.1.3), kase Neighbours: for every cell side, the part not shared with an adjacent
 //     active cell is exposed; its two ends and its midpoint become boundary points (Fig. 19: cell
 //     corners and side midpoints, divot corners included), de-duplicated. An algebraic direct
@@ -36,8 +38,8 @@
 //     ellipse is as wrong as an inflated one). Then the same fit runs on the boundary points that
 //     lie on their convex hull, vertices and points on hull edges alike (the seed used MATLAB
 //     boundary(), whose outline skips the divots). With rule 4 this reproduces both areas the seed
-//     gives for Fig. 21 (5.9254 and 6.5377 cm^2) on a 2 x 2 block with one cell on a corner
-//     above it, so we take that to be the figure's shape. If that fails the same checks, the
+//     gives for Fig. 21 (5.9254 and 6.5377 cm^2) on a 2 x 2 block with one more cell above one
+//     of its columns, so we take that to be the figure's shape. If that fails the same checks, the
 //     moment-equivalent ellipse of the cells (the uniform ellipse with the cells' centroid and
 //     second moments, each cell counted as a uniform W x H rectangle) scaled to the sensor area,
 //     still kase Boundary, PI = 1.
@@ -45,9 +47,13 @@
 // pairs with the ellipsoid's lateral-medial A and rb with its anterior-posterior B.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <span>
 #include <string_view>
+#include <unordered_map>
+#include <vector>
 
 #include "gaitmon/types.hpp"
 
@@ -101,5 +107,44 @@ enum class BoundaryPoints { Neighbours, ConvexHull };
 /// Neighbours or Boundary. Throws std::invalid_argument for a bad cell size.
 std::optional<ContactEllipse> fit_irregular_ellipse(std::span<const ActiveCell> cells,
                                                     CellSize size, BoundaryPoints points);
+
+/// fit_contact_ellipse with the Case 3 fits memoised by the pattern left after Case 1, taken
+/// relative to its lowest row and leftmost half-column (a fit does not depend on where the
+/// pattern sits), and by the cell size. Patterns repeat from frame to frame and step to step, and
+/// a Case 3 fit costs tens of microseconds against about one for a lookup. Results are identical
+/// to fit_contact_ellipse's. Holds at most `capacity` fits and forgets them all when full. Not
+/// thread-safe: use one per thread.
+class ContactEllipseCache {
+ public:
+  /// Throws std::invalid_argument if capacity is 0.
+  explicit ContactEllipseCache(std::size_t capacity = 4096);
+
+  ContactEllipse fit(std::span<const ActiveCell> cells, CellSize size, Region region,
+                     bool first_instant);
+
+  std::size_t size() const { return fits_.size(); }
+  std::size_t capacity() const { return capacity_; }
+  std::size_t hits() const { return hits_; }
+  std::size_t misses() const { return misses_; }
+
+ private:
+  struct Fitted {
+    EllipseCase kase = EllipseCase::None;
+    double cx_mm = 0.0;
+    double cy_mm = 0.0;
+    double ra_mm = 0.0;
+    double rb_mm = 0.0;
+    double angle_rad = 0.0;
+  };
+  struct KeyHash {
+    std::size_t operator()(const std::vector<std::int64_t>& key) const;
+  };
+
+  std::size_t capacity_;
+  std::size_t hits_ = 0;
+  std::size_t misses_ = 0;
+  std::vector<std::int64_t> key_;  ///< reused lookup key: cell size bits, then packed cells
+  std::unordered_map<std::vector<std::int64_t>, Fitted, KeyHash> fits_;
+};
 
 }  // namespace gaitmon

@@ -1,50 +1,58 @@
-// Step segmentation per foot (seed 3.3.1) and per-sensor zeroing with the adaptive threshold
-// (3.3.2).
+// Step segmentation per foot, zeroing and the adaptive threshold (seed 3.3.1, 3.3.2).
 //
 // One incremental algorithm serves both the live monitor and batch analysis: batch segmentation
 // feeds every frame of a foot to a StepSegmenter and then calls finish(), so both produce exactly
-// the same steps.
+// the same steps, and a step once emitted never changes.
 //
-// Algorithm, per foot, on the summed bits S(t) of each frame:
-// - Baseline. Until the first swing midpoint is known, the baseline is the minimum of S over the
-//   frames seen so far, applied retroactively to them (the frames are kept and re-classified
-//   whenever the minimum falls), so a recording that starts in stance shows that first contact
-//   from frame 0 rather than from wherever S first rose 142 bits above an in-stance minimum.
-//   This start-up phase ends at the first swing between two contacts, or after
-//   max_stance_frames frames; from then on each frame is classified once, against the bias of the
-//   latest swing midpoint. (A recording that starts while standing with weight shifts larger than
-//   the event threshold can show spurious contacts before the first lift; walking, sitting or a
-//   lift at the start is fine.)
-// - Contacts. A frame is "above" when S - baseline > event_threshold_bits. A contact starts at the
+// Algorithm, per foot, on the summed bits S of each frame (H = max_swing_half_frames):
+// - Contacts. A frame is "above" when S - floor > event_threshold_bits. A contact starts at the
 //   first frame of a run of debounce_frames frames above and ends at the last frame above before
 //   a run of debounce_frames frames at or below: the rule of the real data's ground truth.
-// - Swing midpoints. The swing between a toe off and the next heel strike, frames g0..g1, has its
-//   midpoint at its middle frame g0 + (g1 - g0) / 2, except that it is never placed more than
-//   max_swing_half_frames from the contact it belongs to (so a long pause still bounds memory
-//   and latency: the post-swing midpoint becomes min(middle, g0 + H), the pre-swing one
-//   max(middle, g1 - H)). The seed reads the summed bits at single instants; here the bias is the
-//   mean of S over swing_window_frames frames centred on the midpoint (clipped to the swing), which
-//   averages out the swing noise. A step's bias is the mean of its pre- and post-swing biases, its
-//   per-sensor zero the same average taken per sensor (so the zeros sum to the bias).
-// - Final boundaries. With the step's own bias the contact rule is run again over the frames
-//   between the two midpoints; the heel strike and toe off are the first start and last end of
-//   the contacts found there that overlap the candidate (normally within a frame of it).
+// - Swing midpoints and the seed's bias. The swing between a toe off and the next heel strike,
+//   frames g0..g1, has its midpoint at its middle frame g0 + (g1 - g0) / 2, but never more than H
+//   frames from the contact it belongs to (a long pause still bounds memory and latency: the
+//   post-swing midpoint is min(middle, g0 + H), the pre-swing one max(middle, g1 - H)). The seed
+//   reads S at single instants; here a swing's bias is the mean of S over swing_window_frames
+//   frames centred on the midpoint (clipped to the swing), which averages out the swing noise. A
+//   step's bias_bits is the mean of its pre- and post-swing biases and its per-sensor zero the
+//   same average per sensor (the zeros sum to the bias); zeroing and force use them, as the seed.
+// - The floor used to find contacts. A swing in which the foot is not fully unloaded (shuffling,
+//   turning) has a midpoint bias well above the unloaded insole, and subtracting it moves heel
+//   strike and toe off by up to 10 frames against the 40 N ground truth of the real recordings. So
+//   contacts are found against a floor: each swing side's floor is the lowest mean of as many
+//   consecutive frames as the bias window, between the midpoint window and the step; the floor in
+//   use is the lowest of the last kFloorHistory (20) of them, i.e. of the last ~10 swings: a few
+//   loaded swings in a row do not raise it, and a drifting dc bias is followed within 10 swings.
+//   Heel strike and toe off are final once the swing after the step is known: the contact rule
+//   runs again over the frames between the two midpoints against the floor then in use, and the
+//   step spans the contacts found there that overlap it (on the real recordings this moved one
+//   toe off of 521 steps, by one frame).
+// - Start-up. Until the first swing is known the floor is the minimum of S over the frames seen
+//   so far, applied retroactively: the frames are kept and classified again whenever the minimum
+//   falls, so a recording that starts in stance shows that contact from frame 0 rather than from
+//   wherever S first rose 142 bits above an in-stance minimum. Start-up ends at the first swing
+//   between two contacts (or after a contact followed by more than 2 H + 1 swing frames) whose
+//   lowest S is at most half the highest S before it and that lasts at least
+//   min_first_swing_frames: a weight shift while standing is not a swing, and neither is the
+//   short mid-stance dip of a recording that starts in stance (its running minimum is then the
+//   dip itself). It also ends after max_stance_frames frames. The buffered frames then go through the
+//   online path against the minimum of all of them.
 // - Status. A step is Ok when it has a swing of at least debounce_frames frames on both sides.
 //   Incomplete steps are a contact that starts fewer than debounce_frames frames after the start
-//   of the recording (including at frame 0), a contact still open at the end of the recording, and
-//   a contact that reaches max_stance_frames frames (standing). They are emitted with their frames,
-//   candidate boundaries and a best-effort bias (the swing windows that exist, or else the frame of
-//   lowest S) so they can be reported, but they are not meant to be analysed.
+//   of the recording (including at frame 0), a contact still open at the end of the recording,
+//   and a contact that reaches max_stance_frames frames (standing). They are emitted with their
+//   frames, their first boundaries and a best-effort bias (the swing windows that exist, or else
+//   the frame of lowest S) so they can be reported, but they are not meant to be analysed.
 //
 // Latency: a step is final once its post-swing midpoint is known, i.e. when the next contact of
-// the same foot is confirmed, debounce_frames - 1 frames after that heel strike (about one swing
-// plus 4 frames after toe off in walking: ~0.45 s at 100 Hz), or, after a long pause, 2 H + 1
-// frames after toe off. A contact reaching max_stance_frames is emitted at once as Incomplete and
-// the rest of it is skipped. At finish(), a step followed by at least debounce_frames swing frames
-// is final with its post-swing midpoint at the middle of that remaining swing.
+// the same foot is confirmed, debounce_frames - 1 frames after that heel strike (one swing plus
+// 4 frames after toe off: ~0.45 s in walking at 100 Hz), or, after a long pause, 2 H + 1 frames
+// after toe off. A contact reaching max_stance_frames is emitted at once as Incomplete and the
+// rest of it is skipped. At finish(), a step followed by at least debounce_frames swing frames is
+// final with its post-swing midpoint at the middle of that remaining swing.
 //
-// Memory: the frames from the current step's pre-swing midpoint onwards, i.e. at most
-// max_stance_frames + 2 H + swing_window_frames frames, plus max_stance_frames during start-up.
+// Memory: the frames from the current step's pre-swing midpoint on, at most max_stance_frames +
+// 2 H + swing_window_frames frames; during start-up at most max_stance_frames frames.
 #pragma once
 
 #include <cstddef>
@@ -86,6 +94,7 @@ struct Step {
 struct SegmenterLimits {
   std::int64_t max_stance_frames = 6000;     ///< longer contacts become Incomplete steps
   std::int64_t max_swing_half_frames = 150;  ///< H: farthest a swing midpoint sits from its step
+  std::int64_t min_first_swing_frames = 20;  ///< shortest swing that ends start-up (0.2 s)
 };
 
 /// Segments the frames of one foot into steps. Not thread-safe; frames must come in time order.
@@ -108,6 +117,9 @@ class StepSegmenter {
 
   /// Frames consumed so far.
   std::int64_t frames() const { return next_; }
+
+  /// Frames held in memory now; bounded as described under Memory above.
+  std::size_t buffered_frames() const { return buffer_.size(); }
 
  private:
   struct Entry {
@@ -146,6 +158,7 @@ class StepSegmenter {
     std::int64_t max_sum = 0;      ///< highest S so far
     std::int64_t peak_sum = 0;     ///< highest S before the latest swing
     std::int64_t swing_floor = 0;  ///< lowest S in the latest swing
+    std::int64_t swing_begin = 0;  ///< first frame of the latest swing
   };
 
   /// The contact being tracked, from its confirmed start until it becomes a Step.
@@ -158,6 +171,7 @@ class StepSegmenter {
   };
 
   const Entry& at(std::int64_t index) const;
+  /// The floor contacts are found against: the lowest recent swing floor, or the minimum of S.
   double baseline() const;
   bool above(std::int64_t index, double baseline) const;
   void process(std::int64_t index, std::vector<Step>& out);
@@ -196,7 +210,7 @@ class StepSegmenter {
 
   ContactDetector detector_;
   /// Floors of the latest swings, each seen from the step before and the step after it.
-  static constexpr std::size_t kFloorHistory = 6;
+  static constexpr std::size_t kFloorHistory = 20;
   std::deque<double> recent_floors_;
   std::int64_t swing_start_ = 0;  ///< first frame of the current or next swing
   std::optional<Pending> pending_;
