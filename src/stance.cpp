@@ -6,7 +6,7 @@
 namespace gaitmon {
 
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
-                            const Calibration& calibration) {
+                            const Calibration& calibration, ContactEllipseCache* cache) {
   const std::size_t sensors = layout.sensor_count();
   if (step.sensor_zero_bits.size() != sensors) {
     throw std::invalid_argument("measure_stance: the step's zero has " +
@@ -47,7 +47,8 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
       sample.force_n = bits * newtons_per_bit;
       sample.active_sensors = static_cast<int>(cells.size());
       sample.sensor_area_mm2 = static_cast<double>(cells.size()) * sensor_area_mm2;
-      sample.ellipse = fit_contact_ellipse(cells, cell, region, f == 0);
+      sample.ellipse = cache != nullptr ? cache->fit(cells, cell, region, f == 0)
+                                        : fit_contact_ellipse(cells, cell, region, f == 0);
       total += sample.force_n;
     }
     series.t_s.push_back(frame.t_s);

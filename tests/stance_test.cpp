@@ -82,6 +82,30 @@ TEST_F(StanceTest, IsolatedHeelSensorCountsOnlyAtTheFirstInstantInTheOutermostRo
   EXPECT_NEAR(series.at(1, Region::Heel).force_n, 50 * 0.2823529, 1e-5);
 }
 
+TEST_F(StanceTest, AnEllipseCacheChangesNothing) {
+  // An irregular heel pattern (a 3 x 2 block with one more cell) repeated over three frames.
+  std::vector<std::uint8_t> bits(layout_->sensor_count(), 2);
+  for (int row : {12, 13}) {
+    for (int number : {2, 3, 4}) bits[sensor_at(row, number)] = 90;
+  }
+  bits[sensor_at(14, 3)] = 90;
+  const Step step = make_step({bits, bits, bits});
+  ContactEllipseCache cache;
+  const StanceSeries cached = measure_stance(step, *layout_, config_.calibration, &cache);
+  const StanceSeries direct = measure_stance(step, *layout_, config_.calibration);
+  ASSERT_EQ(cached.size(), 3u);
+  EXPECT_EQ(cached.at(1, Region::Heel).ellipse.kase, EllipseCase::Neighbours);
+  for (std::size_t f = 0; f < 3; ++f) {
+    const ContactEllipse& a = cached.at(f, Region::Heel).ellipse;
+    const ContactEllipse& b = direct.at(f, Region::Heel).ellipse;
+    EXPECT_EQ(a.kase, b.kase);
+    EXPECT_DOUBLE_EQ(a.area_mm2, b.area_mm2);
+    EXPECT_DOUBLE_EQ(a.cx_mm, b.cx_mm);
+    EXPECT_DOUBLE_EQ(a.angle_rad, b.angle_rad);
+  }
+  EXPECT_GE(cache.hits(), 2u);
+}
+
 TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {
   Step step = make_step({std::vector<std::uint8_t>(layout_->sensor_count(), 0)});
   step.sensor_zero_bits.resize(3);

@@ -35,8 +35,8 @@
 //   lowest S is at most half the highest S before it and that lasts at least
 //   min_first_swing_frames: a weight shift while standing is not a swing, and neither is the
 //   short mid-stance dip of a recording that starts in stance (its running minimum is then the
-//   dip itself). It also ends after max_stance_frames frames. The buffered frames then go through the
-//   online path against the minimum of all of them.
+//   dip itself). It also ends after max_stance_frames frames. The buffered frames then go through
+//   the online path against the minimum of all of them.
 // - Status. A step is Ok when it has a swing of at least debounce_frames frames on both sides.
 //   Incomplete steps are a contact that starts fewer than debounce_frames frames after the start
 //   of the recording (including at frame 0), a contact still open at the end of the recording,

@@ -35,7 +35,9 @@ struct StanceSeries {
 
 /// Zeroes each stance frame with the step's per-sensor zero, applies its adaptive threshold, and
 /// measures every region. The first frame of the stance is the "first instant" of Case 1.
+/// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
+/// steps passes one cache for all of them (results are identical with or without it).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
-                            const Calibration& calibration);
+                            const Calibration& calibration, ContactEllipseCache* cache = nullptr);
 
 }  // namespace gaitmon

@@ -112,12 +112,13 @@ void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
   std::size_t frame_rows = 0;
   std::string buffer;
   ProgressBar progress("segment");
+  ContactEllipseCache ellipses;
 
   auto on_step = [&](Step&& step) {
     steps.push_back({step.foot, step.index, step.t_heel_strike_s, step.t_toe_off_s,
                      step.peak_force_n, step.status});
     if (step.status != StepStatus::Ok) return;
-    const StanceSeries series = measure_stance(step, layout, config.calibration);
+    const StanceSeries series = measure_stance(step, layout, config.calibration, &ellipses);
     buffer.clear();
     for (std::size_t f = 0; f < series.size(); ++f) {
       for (Region region : kRegions) {

@@ -6,8 +6,8 @@
 #include <random>
 #include <vector>
 
-#include "test_support.hpp"
 #include "gaitmon/session.hpp"
+#include "test_support.hpp"
 
 namespace {
 
