@@ -399,6 +399,32 @@ void read_insoles(const fs::path& path, const std::string& main_file, Config& co
   root.finish();
 }
 
+// One { lower = ..., upper = ... } pair: both positive (the fit works in log scale for most
+// parameters) and lower < upper.
+Bounds read_bounds(TableReader& fit, std::string_view key) {
+  TableReader table = fit.table(key);
+  Bounds bounds;
+  bounds.lower = number_above(table, "lower", 0.0);
+  bounds.upper = table.number("upper");
+  if (!(bounds.upper > bounds.lower)) {
+    table.fail("upper", fmt::format("must be > lower ({}), got {}", bounds.lower, bounds.upper));
+  }
+  table.finish();
+  return bounds;
+}
+
+void read_fit(TableReader table, FitBounds& fit) {
+  fit.A_mm = read_bounds(table, "A_mm");
+  fit.B_mm = read_bounds(table, "B_mm");
+  fit.C_mm = read_bounds(table, "C_mm");
+  fit.d0_mm = read_bounds(table, "d0_mm");
+  fit.kbar_n_per_mm3 = read_bounds(table, "kbar_n_per_mm3");
+  fit.n = read_bounds(table, "n");
+  fit.cbar_ns_per_mm3 = read_bounds(table, "cbar_ns_per_mm3");
+  fit.m = read_bounds(table, "m");
+  table.finish();
+}
+
 // One { mean = ..., sd = ... } pair; every Appendix I quantity is positive on average.
 std::pair<double, double> read_stat(TableReader& region, std::string_view key) {
   TableReader stat = region.table(key);
@@ -469,6 +495,7 @@ Config load_config(const fs::path& main_file) {
   read_sensor(root.table("sensor"), config.sensor);
   read_calibration(root.table("calibration"), config.calibration);
   read_segmentation(root.table("segmentation"), config.segmentation);
+  read_fit(root.table("fit"), config.fit_bounds);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

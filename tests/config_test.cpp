@@ -343,7 +343,7 @@ const Refusal kRefusals[] = {
     {"UnknownTopLevelKey", kMain, prepend("colour = \"red\"\n"), "colour", "unknown key"},
     {"UnknownKeyInSection", kMain, replace("[sensor]\n", "[sensor]\nwidht_mm = 7.5\n"),
      "sensor.widht_mm", "unknown key"},
-    {"UnknownSection", kMain, append("\n[fit]\nmax_iterations = 50\n"), "fit", "unknown key"},
+    {"UnknownSection", kMain, append("\n[fitting]\nmax_iterations = 50\n"), "fitting", "unknown key"},
     {"MissingKey", kMain, replace("debounce_frames = 5\n", ""), "segmentation.debounce_frames",
      "missing"},
     {"MissingSection", kMain, erase_from_to("[calibration]", "[segmentation]"), "calibration",
@@ -486,6 +486,61 @@ INSTANTIATE_TEST_SUITE_P(Rules, ConfigRefusal, ::testing::ValuesIn(kRefusals),
                          [](const ::testing::TestParamInfo<Refusal>& info) {
                            return info.param.name;
                          });
+
+// The [fit] bounds: min(mean - 3 SD) and max(mean + 3 SD) of Appendix I over all sizes and
+// regions, worked out by hand from seed-data/seed_table_I_results.csv (floors where negative).
+TEST(Config, FitBoundsAreDerivedFromAppendixI) {
+  const FitBounds b = load_config(shipped_config()).fit_bounds;
+  EXPECT_DOUBLE_EQ(b.A_mm.lower, 20.0);              // toe1 35-36: 39.2 - 3 x 6.0
+  EXPECT_DOUBLE_EQ(b.A_mm.upper, 213.5);             // heel 43-44: 140.6 + 3 x 24.3
+  EXPECT_DOUBLE_EQ(b.B_mm.lower, 10.2);              // toe2 35-36: 16.2 - 3 x 2.0
+  EXPECT_DOUBLE_EQ(b.B_mm.upper, 219.7);             // heel 43-44: 142.3 + 3 x 25.8
+  EXPECT_DOUBLE_EQ(b.C_mm.lower, 15.6);              // midfoot_anterior 35-36: 31.8 - 3 x 5.4
+  EXPECT_DOUBLE_EQ(b.C_mm.upper, 186.1);             // met3_5 43-44: 145.0 + 3 x 13.7
+  EXPECT_DOUBLE_EQ(b.d0_mm.lower, 1.0);              // floor (toe1 45-46: 3.5 - 3 x 2.1 < 0)
+  EXPECT_DOUBLE_EQ(b.d0_mm.upper, 22.8);             // heel 39-40: 19.3 + 3 x 1.1
+  EXPECT_DOUBLE_EQ(b.kbar_n_per_mm3.lower, 0.017);   // heel 37-38: 0.117 - 3 x 0.027
+  EXPECT_DOUBLE_EQ(b.kbar_n_per_mm3.upper, 0.354);   // heel 43-44: 0.186 + 3 x 0.056
+  EXPECT_DOUBLE_EQ(b.n.lower, 0.01);                 // floor
+  EXPECT_DOUBLE_EQ(b.n.upper, 0.981);                // met1_2 35-36: 0.567 + 3 x 0.138
+  EXPECT_DOUBLE_EQ(b.cbar_ns_per_mm3.lower, 0.001);  // floor
+  EXPECT_DOUBLE_EQ(b.cbar_ns_per_mm3.upper, 0.052);  // midfoot_posterior 43-44: 0.022 + 0.030
+  EXPECT_DOUBLE_EQ(b.m.lower, 0.82);                 // midfoot_posterior 45-46: 1.09 - 3 x 0.09
+  EXPECT_DOUBLE_EQ(b.m.upper, 1.38);                 // midfoot_posterior 43-44: 1.14 + 3 x 0.08
+}
+
+TEST(Config, FitBoundsAreValidated) {
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"FitUnknownKey", replace("[fit]\n", "[fit]\nP_mm2 = { lower = 1.0, upper = 2.0 }\n"),
+       "fit.P_mm2", "unknown key"},
+      {"FitMissing", replace("m = { lower = 0.82, upper = 1.38 }\n", ""), "fit.m", "missing"},
+      {"FitLowerZero", replace("{ lower = 0.01, upper = 0.981 }", "{ lower = 0.0, upper = 0.981 }"),
+       "fit.n.lower", "must be > 0"},
+      {"FitUpperBelowLower",
+       replace("{ lower = 20.0, upper = 213.5 }", "{ lower = 20.0, upper = 19.0 }"),
+       "fit.A_mm.upper", "must be > lower"},
+      {"FitUnknownBoundKey",
+       replace("{ lower = 1.0, upper = 22.8 }", "{ lower = 1.0, upper = 22.8, mid = 5.0 }"),
+       "fit.d0_mm.mid", "unknown key"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
 
 }  // namespace
 }  // namespace gaitmon

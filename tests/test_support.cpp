@@ -6,8 +6,10 @@
 
 #include <array>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <stdexcept>
+#include <vector>
 
 namespace gaitmon::test {
 
@@ -27,11 +29,27 @@ std::filesystem::path gaitmon_binary() {
 #endif
 }
 
+namespace {
+// Scratch folders are removed when the program ends, unless GAITMON_KEEP_SCRATCH is set (to
+// look at what a failing test wrote).
+struct ScratchFolders {
+  std::vector<std::filesystem::path> dirs;
+  ~ScratchFolders() {
+    const char* keep = std::getenv("GAITMON_KEEP_SCRATCH");
+    if (keep != nullptr && *keep != '\0') return;
+    std::error_code ignored;
+    for (const auto& dir : dirs) std::filesystem::remove_all(dir, ignored);
+  }
+};
+ScratchFolders scratch_folders;
+}  // namespace
+
 std::filesystem::path scratch_dir(const std::string& name) {
   auto dir = std::filesystem::temp_directory_path() /
              ("gaitmon-test-" + std::to_string(::getpid()) + "-" + name);
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
+  scratch_folders.dirs.push_back(dir);
   return dir;
 }
 

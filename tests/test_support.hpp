@@ -12,7 +12,8 @@ std::filesystem::path source_dir();
 std::filesystem::path shared_dir();
 /// The gaitmon executable built with the tests (empty in benchmarks).
 std::filesystem::path gaitmon_binary();
-/// A fresh, empty scratch folder unique to this process and `name`.
+/// A fresh, empty scratch folder unique to this process and `name`, removed at exit unless
+/// GAITMON_KEEP_SCRATCH is set.
 std::filesystem::path scratch_dir(const std::string& name);
 /// Writes `text` to `path`, creating folders; returns path.
 std::filesystem::path write_text(const std::filesystem::path& path, const std::string& text);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "gaitmon/tissue_fit.hpp"
 #include "gaitmon/tissue_model.hpp"
 #include "gaitmon/types.hpp"
 
@@ -82,6 +83,7 @@ struct Config {
   SegmentationSettings segmentation;
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
+  FitBounds fit_bounds;  ///< [fit] of the main file: the tissue fit's parameter bounds
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {

@@ -1,0 +1,110 @@
+// Per-region fits of the ellipsoid tissue model to measured contact area and force (seed 5.2),
+// restricted by default to what the data determine (shared/docs/model-notes.md section 2).
+//
+// Outcomes are values, never exceptions: a fit that fails is returned with its status and
+// reason. Exceptions are only for misuse (inconsistent series lengths, bad settings).
+#pragma once
+
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "gaitmon/tissue_model.hpp"
+
+namespace gaitmon {
+
+/// How the measured series are prepared before fitting.
+/// `None`: the raw series, gdot by central differences. `Seed`: the seed's 5.1.1/5.1.2 smoothing
+/// (3-point moving average then a 5th-order polynomial in normalised time for the area, a
+/// 5th-order polynomial for the force), gdot from the polynomial.
+enum class Smoothing { None, Seed };
+std::string_view smoothing_name(Smoothing smoothing);  ///< "none", "seed"
+std::optional<Smoothing> parse_smoothing(std::string_view text);
+
+/// Which parameters are free.
+/// `Identifiable` (default): kbar, n, cbar, m; A/B from the measured ellipses, P = pi A B, C and
+/// d0 declared (config). `Seed8`: the seed's 8-parameter fit, all of A, B, C, d0, kbar, n, cbar,
+/// m free, started at the midpoint of the bounds.
+enum class FitMode { Identifiable, Seed8 };
+std::string_view fit_mode_name(FitMode mode);  ///< "identifiable", "seed8"
+std::optional<FitMode> parse_fit_mode(std::string_view text);
+
+struct Bounds {
+  double lower = 0.0;
+  double upper = 0.0;
+};
+
+/// Bounds per parameter (from config; derived from the seed's Appendix I).
+struct FitBounds {
+  Bounds A_mm, B_mm, C_mm, d0_mm;
+  Bounds kbar_n_per_mm3, n, cbar_ns_per_mm3, m;
+};
+
+struct FitSettings {
+  ModelVariant model = ModelVariant::Correct;
+  FitMode mode = FitMode::Identifiable;
+  Smoothing smoothing = Smoothing::None;
+  bool free_scale = false;  ///< also free P = pi A B (keeping A/B), Identifiable mode only
+  int starts = 4;           ///< multiple starts around the principled initial guess
+  int max_iterations = 100;
+};
+
+/// One region over one stance (or several stances for a session-level fit): the measured
+/// contact-ellipse area and force per frame. Frames without contact have area 0.
+struct RegionSeries {
+  std::vector<double> t_s;
+  std::vector<double> area_mm2;
+  std::vector<double> force_n;
+};
+
+enum class FitStatus { Ok, NoContact, Failed };
+std::string_view fit_status_name(FitStatus status);  ///< "ok", "no_contact", "fit_failed"
+
+struct Estimate {
+  double value = 0.0;
+  double se = 0.0;        ///< standard error from the Jacobian at the optimum
+  bool at_bound = false;  ///< within a small tolerance of a bound
+  bool free = false;      ///< fitted (false: declared)
+};
+
+struct RegionFit {
+  FitStatus status = FitStatus::NoContact;
+  std::string reason;  ///< why it failed, for fit_failed:<reason>
+  int frames = 0;      ///< frames with contact that were fitted
+  Estimate A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m;
+  std::string solver_message;
+  int iterations = 0;
+  double final_cost = 0.0;
+  double nrmse_pct = 0.0;                 ///< eq 58: RMS error / max measured force x 100
+  std::vector<double> model_force_n;      ///< per input frame (0 where no contact)
+  std::vector<std::string> undetermined;  ///< parameters the data cannot determine (seed8)
+
+  EllipsoidParams params() const {
+    return {A_mm.value,
+            B_mm.value,
+            C_mm.value,
+            d0_mm.value,
+            kbar_n_per_mm3.value,
+            n.value,
+            cbar_ns_per_mm3.value,
+            m.value};
+  }
+};
+
+/// Fits one region. `declared` supplies A, B, C, d0 (A/B is usually the step's median contact
+/// ellipse aspect, P and C, d0 from config) and, in Seed8 mode, nothing (the bounds' midpoints are
+/// used). Deterministic. Throws std::invalid_argument if the series lengths differ.
+RegionFit fit_region(const RegionSeries& series, const EllipsoidParams& declared,
+                     const FitBounds& bounds, const FitSettings& settings);
+
+/// One parameter set shared by several stances of the same region (each series is one stance;
+/// gdot never crosses from one stance to the next).
+RegionFit fit_region_session(std::span<const RegionSeries> stances, const EllipsoidParams& declared,
+                             const FitBounds& bounds, const FitSettings& settings);
+
+/// eq 58 for one series: RMS(measured - model) / max(measured) x 100.
+double nrmse_pct(std::span<const double> measured, std::span<const double> model);
+
+}  // namespace gaitmon

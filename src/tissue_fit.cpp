@@ -1,0 +1,676 @@
+// Per-region fits of the ellipsoid tissue model with Ceres: bounded Levenberg-Marquardt in
+// log-scaled parameters, a log-linear initial guess plus deterministic extra starts, standard
+// errors from the Jacobian at the optimum, and a rank check that names what the data cannot see.
+//
+// Non-negative force: like the seed's eq 57, a penalty, here as one extra residual per frame,
+// kPenaltyWeight x max(0, -F_model), so a model that pulls on the foot costs far more than a
+// misfit of the same size. The reported model force is the raw model (never clipped), so a
+// caller sees any residual negativity.
+#include "gaitmon/tissue_fit.hpp"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <utility>
+
+namespace gaitmon {
+
+std::string_view smoothing_name(Smoothing smoothing) {
+  return smoothing == Smoothing::Seed ? "seed" : "none";
+}
+
+std::optional<Smoothing> parse_smoothing(std::string_view text) {
+  if (text == "none") return Smoothing::None;
+  if (text == "seed") return Smoothing::Seed;
+  return std::nullopt;
+}
+
+std::string_view fit_mode_name(FitMode mode) {
+  return mode == FitMode::Seed8 ? "seed8" : "identifiable";
+}
+
+std::optional<FitMode> parse_fit_mode(std::string_view text) {
+  if (text == "identifiable") return FitMode::Identifiable;
+  if (text == "seed8") return FitMode::Seed8;
+  return std::nullopt;
+}
+
+std::string_view fit_status_name(FitStatus status) {
+  switch (status) {
+    case FitStatus::Ok:
+      return "ok";
+    case FitStatus::NoContact:
+      return "no_contact";
+    case FitStatus::Failed:
+      break;
+  }
+  return "fit_failed";
+}
+
+double nrmse_pct(std::span<const double> measured, std::span<const double> model) {
+  if (measured.size() != model.size()) {
+    throw std::invalid_argument("nrmse_pct: measured and model differ in length");
+  }
+  if (measured.empty()) return 0.0;
+  double sum = 0.0;
+  double peak = 0.0;
+  for (std::size_t i = 0; i < measured.size(); ++i) {
+    sum += (measured[i] - model[i]) * (measured[i] - model[i]);
+    peak = std::max(peak, measured[i]);
+  }
+  if (peak <= 0.0) return 0.0;
+  return std::sqrt(sum / static_cast<double>(measured.size())) / peak * 100.0;
+}
+
+namespace {
+
+constexpr double kPenaltyWeight = 1e3;
+// Keeps g real when a free P is driven below the measured area: the contact plane at the equator.
+constexpr double kMaxAreaFraction = 0.999;
+constexpr double kBoundTolerance = 1e-6;
+// A normalised Jacobian column whose part independent of the columns before it is smaller than
+// this is a combination of them: the data cannot separate that parameter.
+constexpr double kDependentColumn = 1e-6;
+
+// The eight physical parameters in a fixed order, the order of RegionFit's estimates.
+enum Phys { kA, kB, kC, kD0, kKbar, kN, kCbar, kM, kPhysCount };
+constexpr std::array<const char*, kPhysCount> kPhysNames{
+    "A_mm", "B_mm", "C_mm", "d0_mm", "kbar_n_per_mm3", "n", "cbar_ns_per_mm3", "m"};
+
+// One fitted frame. gdot is either a difference of g at two neighbouring areas (raw series) or
+// the chain rule on a smoothed area rate; both are evaluated with the current P.
+struct FitFrame {
+  double area_mm2 = 0.0;
+  double force_n = 0.0;  ///< the target (smoothed under Smoothing::Seed)
+  double area_lo_mm2 = 0.0;
+  double area_hi_mm2 = 0.0;
+  double dt_s = 0.0;  ///< 0: gdot from area_rate
+  double area_rate_mm2_per_s = 0.0;
+  std::size_t input_index = 0;  ///< where the model force goes in RegionFit::model_force_n
+};
+
+// How the free vector theta maps to the physical parameters.
+struct Layout {
+  // Index into theta per physical parameter, or -1 if declared. Log-scaled unless n or m.
+  std::array<int, kPhysCount> index{-1, -1, -1, -1, -1, -1, -1, -1};
+  int log_p = -1;  ///< free_scale: log P in theta, A/B kept
+  std::array<double, kPhysCount> declared{};
+  std::vector<double> lower, upper;  ///< theta bounds
+  std::vector<int> phys;             ///< theta index -> physical parameter, -1 for log P
+  std::vector<std::string> names;    ///< theta names (physical, for `undetermined`)
+  int size() const { return static_cast<int>(lower.size()); }
+};
+
+bool is_log(int phys) {
+  return phys != kN && phys != kM;
+}
+
+template <class T>
+T area_g(const T& area, const T& P) {
+  using std::sqrt;
+  T a = area / P;
+  if (a > T(kMaxAreaFraction)) a = T(kMaxAreaFraction);
+  return T(1.0) - sqrt(T(1.0) - a);
+}
+
+struct ForceModel {
+  const std::vector<FitFrame>* frames;
+  const Layout* layout;
+  ModelVariant variant;
+
+  template <class T>
+  T phys(const T* theta, int p) const {
+    using std::exp;
+    const int i = layout->index[static_cast<std::size_t>(p)];
+    if (i < 0) return T(layout->declared[static_cast<std::size_t>(p)]);
+    return is_log(p) ? exp(theta[i]) : theta[i];
+  }
+
+  template <class T>
+  void forces(const T* theta, T* out) const {
+    using std::exp;
+    using std::log;
+    T P;
+    if (layout->log_p >= 0) {
+      P = exp(theta[layout->log_p]);
+    } else {
+      P = T(std::numbers::pi) * phys(theta, kA) * phys(theta, kB);
+    }
+    const T logC = log(phys(theta, kC));
+    const T logd0 = log(phys(theta, kD0));
+    const T n = phys(theta, kN);
+    const T m = phys(theta, kM);
+    const T K = phys(theta, kKbar) * exp((T(1.0) + n) * logC - n * logd0);
+    const T D = phys(theta, kCbar) * exp((T(1.0) + m) * logC - m * logd0);
+    for (std::size_t i = 0; i < frames->size(); ++i) {
+      const FitFrame& f = (*frames)[i];
+      const T g = area_g(T(f.area_mm2), P);
+      T gdot;
+      if (f.dt_s > 0.0) {
+        gdot = (area_g(T(f.area_hi_mm2), P) - area_g(T(f.area_lo_mm2), P)) / T(f.dt_s);
+      } else {
+        using std::sqrt;
+        T a = T(f.area_mm2) / P;
+        if (a > T(kMaxAreaFraction)) a = T(kMaxAreaFraction);
+        gdot = T(f.area_rate_mm2_per_s) / (P * T(2.0) * sqrt(T(1.0) - a));
+      }
+      out[i] = ellipsoid_force(P, K, n, D, m, g, gdot, variant);
+    }
+  }
+};
+
+struct DataResidual {
+  ForceModel model;
+  template <class T>
+  bool operator()(T const* const* params, T* residuals) const {
+    model.forces(params[0], residuals);
+    for (std::size_t i = 0; i < model.frames->size(); ++i) {
+      residuals[i] = residuals[i] - T((*model.frames)[i].force_n);
+    }
+    return true;
+  }
+};
+
+struct PenaltyResidual {
+  ForceModel model;
+  template <class T>
+  bool operator()(T const* const* params, T* residuals) const {
+    model.forces(params[0], residuals);
+    for (std::size_t i = 0; i < model.frames->size(); ++i) {
+      residuals[i] = residuals[i] < T(0.0) ? T(-kPenaltyWeight) * residuals[i] : T(0.0);
+    }
+    return true;
+  }
+};
+
+using Series = std::vector<std::pair<double, double>>;  // (t, value) of one contact run
+
+// Least-squares polynomial of degree <= 5 in normalised time; returns values and derivatives
+// (per second) at the run's own times.
+void polynomial_fit(const std::vector<double>& t, const std::vector<double>& y,
+                    std::vector<double>& value, std::vector<double>& rate) {
+  const std::size_t n = t.size();
+  value = y;
+  rate.assign(n, 0.0);
+  if (n < 2) return;
+  const int degree = static_cast<int>(std::min<std::size_t>(5, n - 1));
+  const double t0 = t.front();
+  const double span = t.back() - t.front();
+  if (span <= 0.0) return;
+  Eigen::MatrixXd V(static_cast<Eigen::Index>(n), degree + 1);
+  Eigen::VectorXd Y(static_cast<Eigen::Index>(n));
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = 2.0 * (t[i] - t0) / span - 1.0;
+    double power = 1.0;
+    for (int j = 0; j <= degree; ++j) {
+      V(static_cast<Eigen::Index>(i), j) = power;
+      power *= x;
+    }
+    Y(static_cast<Eigen::Index>(i)) = y[i];
+  }
+  const Eigen::VectorXd c = V.colPivHouseholderQr().solve(Y);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = 2.0 * (t[i] - t0) / span - 1.0;
+    double v = 0.0;
+    double dv = 0.0;
+    double power = 1.0;
+    for (int j = 0; j <= degree; ++j) {
+      v += c(j) * power;
+      if (j + 1 <= degree) dv += static_cast<double>(j + 1) * c(j + 1) * power;
+      power *= x;
+    }
+    value[i] = v;
+    rate[i] = dv * 2.0 / span;
+  }
+}
+
+// Appends the contact frames of one stance. Runs of contact are treated separately so that
+// gdot never bridges a gap without contact.
+void append_frames(const RegionSeries& s, Smoothing smoothing, std::size_t offset,
+                   std::vector<FitFrame>& frames) {
+  const std::size_t n = s.t_s.size();
+  std::size_t begin = 0;
+  while (begin < n) {
+    if (!(s.area_mm2[begin] > 0.0)) {
+      ++begin;
+      continue;
+    }
+    std::size_t end = begin;
+    while (end < n && s.area_mm2[end] > 0.0) ++end;
+    const std::size_t len = end - begin;
+    if (smoothing == Smoothing::None) {
+      for (std::size_t i = begin; i < end; ++i) {
+        FitFrame f;
+        f.area_mm2 = s.area_mm2[i];
+        f.force_n = s.force_n[i];
+        const std::size_t lo = i > begin ? i - 1 : i;
+        const std::size_t hi = i + 1 < end ? i + 1 : i;
+        f.area_lo_mm2 = s.area_mm2[lo];
+        f.area_hi_mm2 = s.area_mm2[hi];
+        f.dt_s = hi > lo ? s.t_s[hi] - s.t_s[lo] : 0.0;
+        f.input_index = offset + i;
+        frames.push_back(f);
+      }
+    } else {
+      std::vector<double> t(s.t_s.begin() + static_cast<std::ptrdiff_t>(begin),
+                            s.t_s.begin() + static_cast<std::ptrdiff_t>(end));
+      std::vector<double> area(len);
+      for (std::size_t i = 0; i < len; ++i) {
+        const std::size_t lo = i > 0 ? i - 1 : i;
+        const std::size_t hi = i + 1 < len ? i + 1 : i;
+        double sum = 0.0;
+        for (std::size_t j = lo; j <= hi; ++j) sum += s.area_mm2[begin + j];
+        area[i] = sum / static_cast<double>(hi - lo + 1);
+      }
+      std::vector<double> force(s.force_n.begin() + static_cast<std::ptrdiff_t>(begin),
+                                s.force_n.begin() + static_cast<std::ptrdiff_t>(end));
+      std::vector<double> area_fit, area_rate, force_fit, force_rate;
+      polynomial_fit(t, area, area_fit, area_rate);
+      polynomial_fit(t, force, force_fit, force_rate);
+      const double floor = 1e-3 * *std::max_element(area.begin(), area.end());
+      for (std::size_t i = 0; i < len; ++i) {
+        FitFrame f;
+        f.area_mm2 = std::max(area_fit[i], floor);
+        f.force_n = force_fit[i];
+        f.area_rate_mm2_per_s = area_rate[i];
+        f.input_index = offset + begin + i;
+        frames.push_back(f);
+      }
+    }
+    begin = end;
+  }
+}
+
+void check_bounds(const Bounds& b, const char* name) {
+  if (!(b.lower > 0.0) || !(b.upper > b.lower) || !std::isfinite(b.upper)) {
+    throw std::invalid_argument(std::string("fit bounds for ") + name +
+                                " must satisfy 0 < lower < upper");
+  }
+}
+
+std::array<Bounds, kPhysCount> phys_bounds(const FitBounds& b) {
+  return {b.A_mm, b.B_mm, b.C_mm, b.d0_mm, b.kbar_n_per_mm3, b.n, b.cbar_ns_per_mm3, b.m};
+}
+
+std::array<double, kPhysCount> phys_values(const EllipsoidParams& p) {
+  return {p.A_mm, p.B_mm, p.C_mm, p.d0_mm, p.kbar_n_per_mm3, p.n, p.cbar_ns_per_mm3, p.m};
+}
+
+double to_theta(int p, double value) {
+  return is_log(p) ? std::log(value) : value;
+}
+
+Layout make_layout(const EllipsoidParams& declared, const FitBounds& bounds,
+                   const FitSettings& settings) {
+  Layout layout;
+  layout.declared = phys_values(declared);
+  const auto pb = phys_bounds(bounds);
+  const auto add = [&](int p) {
+    layout.index[static_cast<std::size_t>(p)] = layout.size();
+    const Bounds& b = pb[static_cast<std::size_t>(p)];
+    layout.lower.push_back(to_theta(p, b.lower));
+    layout.upper.push_back(to_theta(p, b.upper));
+    layout.names.emplace_back(kPhysNames[static_cast<std::size_t>(p)]);
+    layout.phys.push_back(p);
+  };
+  // The material parameters come first: the rank check names the later of two parameters that
+  // trade off, and the geometry is what the data cannot see (model-notes section 2).
+  for (int p : {kKbar, kN, kCbar, kM}) add(p);
+  if (settings.mode == FitMode::Seed8) {
+    for (int p : {kA, kB, kC, kD0}) add(p);
+    return layout;
+  }
+  if (settings.free_scale) {
+    layout.log_p = layout.size();
+    layout.lower.push_back(std::log(std::numbers::pi * bounds.A_mm.lower * bounds.B_mm.lower));
+    layout.upper.push_back(std::log(std::numbers::pi * bounds.A_mm.upper * bounds.B_mm.upper));
+    layout.names.emplace_back("P_mm2");
+    layout.phys.push_back(-1);
+  }
+  return layout;
+}
+
+double clamp_into(double v, double lo, double hi) {
+  const double margin = 1e-9 * (hi - lo);
+  return std::clamp(v, lo + margin, hi - margin);
+}
+
+// Starts for the Identifiable mode: log-linear least squares of the elastic part with n free,
+// then with n fixed at the bounds' quartiles; damping small, m mid-range.
+std::vector<std::vector<double>> initial_guesses(const std::vector<FitFrame>& frames,
+                                                 const Layout& layout,
+                                                 const FitSettings& settings) {
+  const int np = layout.size();
+  const auto mid = [&](int i) { return 0.5 * (layout.lower[i] + layout.upper[i]); };
+  std::vector<std::vector<double>> starts;
+  if (settings.mode == FitMode::Seed8) {
+    std::vector<double> s(static_cast<std::size_t>(np));
+    for (int i = 0; i < np; ++i) {
+      const int p = layout.phys[static_cast<std::size_t>(i)];
+      const double lo = is_log(p) ? std::exp(layout.lower[i]) : layout.lower[i];
+      const double hi = is_log(p) ? std::exp(layout.upper[i]) : layout.upper[i];
+      s[static_cast<std::size_t>(i)] = to_theta(p, 0.5 * (lo + hi));
+    }
+    starts.push_back(s);
+    return starts;
+  }
+  const auto& d = layout.declared;
+  const double P = std::numbers::pi * d[kA] * d[kB];
+  const double logC = std::log(d[kC]);
+  const double logd0 = std::log(d[kD0]);
+  double peak = 0.0;
+  for (const FitFrame& f : frames) peak = std::max(peak, f.force_n);
+  std::vector<double> x, y;
+  for (const FitFrame& f : frames) {
+    const double g = area_g(f.area_mm2, P);
+    if (f.force_n > 0.02 * peak && g > 0.0) {
+      x.push_back(std::log(g));
+      y.push_back(std::log(f.force_n / (P * (1.0 - g / 3.0))));
+    }
+  }
+  const int iN = layout.index[kN];
+  const int iK = layout.index[kKbar];
+  const int iC = layout.index[kCbar];
+  const int iM = layout.index[kM];
+  const double n_lo = layout.lower[iN];
+  const double n_hi = layout.upper[iN];
+  std::vector<double> n_values;
+  if (x.size() >= 2) {
+    double mx = 0.0, my = 0.0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      mx += x[i];
+      my += y[i];
+    }
+    mx /= static_cast<double>(x.size());
+    my /= static_cast<double>(x.size());
+    double sxy = 0.0, sxx = 0.0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      sxy += (x[i] - mx) * (y[i] - my);
+      sxx += (x[i] - mx) * (x[i] - mx);
+    }
+    if (sxx > 0.0) n_values.push_back(clamp_into(sxy / sxx - 2.0, n_lo, n_hi));
+  }
+  for (double q : {0.25, 0.75, 0.5}) n_values.push_back(n_lo + q * (n_hi - n_lo));
+  for (double n : n_values) {
+    if (static_cast<int>(starts.size()) >= std::max(1, settings.starts)) break;
+    double logK = 0.0;
+    for (std::size_t i = 0; i < x.size(); ++i) logK += y[i] - (2.0 + n) * x[i];
+    if (!x.empty()) logK /= static_cast<double>(x.size());
+    std::vector<double> s(static_cast<std::size_t>(np));
+    s[static_cast<std::size_t>(iN)] = n;
+    const double log_kbar = logK - (1.0 + n) * logC + n * logd0;
+    s[static_cast<std::size_t>(iK)] =
+        clamp_into(x.empty() ? mid(iK) : log_kbar, layout.lower[iK], layout.upper[iK]);
+    s[static_cast<std::size_t>(iC)] =
+        layout.lower[iC] + 0.1 * (layout.upper[iC] - layout.lower[iC]);
+    s[static_cast<std::size_t>(iM)] = mid(iM);
+    if (layout.log_p >= 0) {
+      s[static_cast<std::size_t>(layout.log_p)] =
+          clamp_into(std::log(P), layout.lower[layout.log_p], layout.upper[layout.log_p]);
+    }
+    starts.push_back(s);
+  }
+  return starts;
+}
+
+// The data Jacobian at theta, dense, from Ceres' own evaluation.
+Eigen::MatrixXd data_jacobian(ceres::Problem& problem, ceres::ResidualBlockId block,
+                              double* theta) {
+  ceres::Problem::EvaluateOptions options;
+  options.residual_blocks = {block};
+  options.parameter_blocks = {theta};
+  options.apply_loss_function = false;
+  ceres::CRSMatrix crs;
+  problem.Evaluate(options, nullptr, nullptr, nullptr, &crs);
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+  for (int r = 0; r < crs.num_rows; ++r) {
+    for (int k = crs.rows[static_cast<std::size_t>(r)];
+         k < crs.rows[static_cast<std::size_t>(r) + 1]; ++k) {
+      J(r, crs.cols[static_cast<std::size_t>(k)]) = crs.values[static_cast<std::size_t>(k)];
+    }
+  }
+  return J;
+}
+
+RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size,
+                     std::span<const double> measured, const EllipsoidParams& declared,
+                     const FitBounds& bounds, const FitSettings& settings) {
+  for (const auto& [b, name] : {std::pair{bounds.kbar_n_per_mm3, "kbar_n_per_mm3"},
+                                {bounds.n, "n"},
+                                {bounds.cbar_ns_per_mm3, "cbar_ns_per_mm3"},
+                                {bounds.m, "m"},
+                                {bounds.A_mm, "A_mm"},
+                                {bounds.B_mm, "B_mm"},
+                                {bounds.C_mm, "C_mm"},
+                                {bounds.d0_mm, "d0_mm"}}) {
+    check_bounds(b, name);
+  }
+  if (settings.max_iterations < 1) throw std::invalid_argument("max_iterations must be >= 1");
+  if (settings.mode == FitMode::Identifiable) {
+    for (double v : {declared.A_mm, declared.B_mm, declared.C_mm, declared.d0_mm}) {
+      if (!(v > 0.0) || !std::isfinite(v)) {
+        throw std::invalid_argument("declared A, B, C and d0 must be positive and finite");
+      }
+    }
+  }
+
+  RegionFit fit;
+  fit.frames = static_cast<int>(frames.size());
+  fit.model_force_n.assign(input_size, 0.0);
+  const Layout layout = make_layout(declared, bounds, settings);
+  const int np = layout.size();
+  {
+    const auto values = phys_values(declared);
+    std::array<Estimate*, kPhysCount> est{&fit.A_mm,
+                                          &fit.B_mm,
+                                          &fit.C_mm,
+                                          &fit.d0_mm,
+                                          &fit.kbar_n_per_mm3,
+                                          &fit.n,
+                                          &fit.cbar_ns_per_mm3,
+                                          &fit.m};
+    for (int p = 0; p < kPhysCount; ++p)
+      est[static_cast<std::size_t>(p)]->value = values[static_cast<std::size_t>(p)];
+  }
+  if (frames.empty()) {
+    fit.status = FitStatus::NoContact;
+    fit.reason = "no_contact";
+    return fit;
+  }
+  if (static_cast<int>(frames.size()) <= np) {
+    fit.status = FitStatus::Failed;
+    fit.reason = "too_few_frames";
+    return fit;
+  }
+
+  const ForceModel model{&frames, &layout, settings.model};
+  std::vector<double> theta(static_cast<std::size_t>(np));
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  const int n_res = static_cast<int>(frames.size());
+  auto* data_cost =
+      new ceres::DynamicAutoDiffCostFunction<DataResidual, 8>(new DataResidual{model});
+  data_cost->AddParameterBlock(np);
+  data_cost->SetNumResiduals(n_res);
+  auto* penalty_cost =
+      new ceres::DynamicAutoDiffCostFunction<PenaltyResidual, 8>(new PenaltyResidual{model});
+  penalty_cost->AddParameterBlock(np);
+  penalty_cost->SetNumResiduals(n_res);
+  const ceres::ResidualBlockId data_block =
+      problem.AddResidualBlock(data_cost, nullptr, theta.data());
+  problem.AddResidualBlock(penalty_cost, nullptr, theta.data());
+  for (int i = 0; i < np; ++i) {
+    problem.SetParameterLowerBound(theta.data(), i, layout.lower[static_cast<std::size_t>(i)]);
+    problem.SetParameterUpperBound(theta.data(), i, layout.upper[static_cast<std::size_t>(i)]);
+  }
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::DENSE_QR;
+  options.num_threads = 1;
+  options.max_num_iterations = settings.max_iterations;
+  options.logging_type = ceres::SILENT;
+  options.minimizer_progress_to_stdout = false;
+
+  double best_cost = std::numeric_limits<double>::infinity();
+  std::vector<double> best_theta;
+  ceres::Solver::Summary best_summary;
+  for (const std::vector<double>& start : initial_guesses(frames, layout, settings)) {
+    theta = start;
+    ceres::Solver::Summary summary;
+    ceres::Solve(options, &problem, &summary);
+    if (std::isfinite(summary.final_cost) && summary.final_cost < best_cost) {
+      best_cost = summary.final_cost;
+      best_theta = theta;
+      best_summary = summary;
+    }
+  }
+  if (best_theta.empty()) {
+    fit.status = FitStatus::Failed;
+    fit.reason = "non_finite";
+    return fit;
+  }
+  theta = best_theta;
+  fit.solver_message = best_summary.message;
+  fit.iterations = best_summary.num_successful_steps + best_summary.num_unsuccessful_steps;
+  fit.final_cost = best_summary.final_cost;
+
+  std::vector<double> model_force(frames.size());
+  model.forces(theta.data(), model_force.data());
+  std::vector<double> fitted_measured(frames.size());
+  double ssr = 0.0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    fit.model_force_n[frames[i].input_index] = model_force[i];
+    fitted_measured[i] = measured[frames[i].input_index];
+    ssr += (model_force[i] - frames[i].force_n) * (model_force[i] - frames[i].force_n);
+  }
+  fit.nrmse_pct = nrmse_pct(fitted_measured, model_force);
+
+  // Standard errors: sigma^2 (J^T J)^-1 over the columns the data determine, taken in order so
+  // that a dependent parameter is named after the ones it trades off against.
+  const Eigen::MatrixXd J = data_jacobian(problem, data_block, theta.data());
+  std::vector<int> kept;
+  Eigen::MatrixXd basis(J.rows(), 0);
+  std::vector<bool> dependent(static_cast<std::size_t>(np), false);
+  for (int c = 0; c < np; ++c) {
+    const double norm = J.col(c).norm();
+    if (!(norm > 0.0)) {
+      dependent[static_cast<std::size_t>(c)] = true;
+      continue;
+    }
+    Eigen::VectorXd v = J.col(c) / norm;
+    for (Eigen::Index k = 0; k < basis.cols(); ++k) v -= basis.col(k).dot(v) * basis.col(k);
+    for (Eigen::Index k = 0; k < basis.cols(); ++k) v -= basis.col(k).dot(v) * basis.col(k);
+    if (v.norm() < kDependentColumn) {
+      dependent[static_cast<std::size_t>(c)] = true;
+      continue;
+    }
+    basis.conservativeResize(Eigen::NoChange, basis.cols() + 1);
+    basis.col(basis.cols() - 1) = v / v.norm();
+    kept.push_back(c);
+  }
+  std::vector<double> se_theta(static_cast<std::size_t>(np),
+                               std::numeric_limits<double>::infinity());
+  const int dof = n_res - static_cast<int>(kept.size());
+  if (dof > 0 && !kept.empty()) {
+    Eigen::MatrixXd Jk(J.rows(), static_cast<Eigen::Index>(kept.size()));
+    for (std::size_t k = 0; k < kept.size(); ++k)
+      Jk.col(static_cast<Eigen::Index>(k)) = J.col(kept[k]);
+    const double sigma2 = ssr / dof;
+    const Eigen::MatrixXd cov =
+        sigma2 *
+        (Jk.transpose() * Jk).ldlt().solve(Eigen::MatrixXd::Identity(Jk.cols(), Jk.cols()));
+    for (std::size_t k = 0; k < kept.size(); ++k) {
+      const double var = cov(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
+      se_theta[static_cast<std::size_t>(kept[k])] =
+          var >= 0.0 ? std::sqrt(var) : std::numeric_limits<double>::infinity();
+    }
+  }
+  for (int c = 0; c < np; ++c) {
+    if (dependent[static_cast<std::size_t>(c)] ||
+        !std::isfinite(se_theta[static_cast<std::size_t>(c)])) {
+      fit.undetermined.push_back(layout.names[static_cast<std::size_t>(c)]);
+    }
+  }
+
+  std::array<Estimate*, kPhysCount> est{&fit.A_mm,
+                                        &fit.B_mm,
+                                        &fit.C_mm,
+                                        &fit.d0_mm,
+                                        &fit.kbar_n_per_mm3,
+                                        &fit.n,
+                                        &fit.cbar_ns_per_mm3,
+                                        &fit.m};
+  const auto at_bound = [](double v, double lo, double hi) {
+    return std::abs(v - lo) <= kBoundTolerance * std::abs(lo) ||
+           std::abs(v - hi) <= kBoundTolerance * std::abs(hi);
+  };
+  const auto pb = phys_bounds(bounds);
+  for (int p = 0; p < kPhysCount; ++p) {
+    const int i = layout.index[static_cast<std::size_t>(p)];
+    if (i < 0) continue;
+    Estimate& e = *est[static_cast<std::size_t>(p)];
+    const double t = theta[static_cast<std::size_t>(i)];
+    e.value = is_log(p) ? std::exp(t) : t;
+    e.se = is_log(p) ? e.value * se_theta[static_cast<std::size_t>(i)]
+                     : se_theta[static_cast<std::size_t>(i)];
+    e.free = true;
+    e.at_bound = at_bound(e.value, pb[static_cast<std::size_t>(p)].lower,
+                          pb[static_cast<std::size_t>(p)].upper);
+  }
+  if (layout.log_p >= 0) {
+    // P = pi A B with A/B kept: A and B each scale as sqrt(P).
+    const double P = std::exp(theta[static_cast<std::size_t>(layout.log_p)]);
+    const double ratio = declared.A_mm / declared.B_mm;
+    const double se_half = 0.5 * se_theta[static_cast<std::size_t>(layout.log_p)];
+    const bool bound = at_bound(P, std::exp(layout.lower[static_cast<std::size_t>(layout.log_p)]),
+                                std::exp(layout.upper[static_cast<std::size_t>(layout.log_p)]));
+    fit.A_mm = {std::sqrt(P * ratio / std::numbers::pi), 0.0, bound, true};
+    fit.B_mm = {std::sqrt(P / (ratio * std::numbers::pi)), 0.0, bound, true};
+    fit.A_mm.se = fit.A_mm.value * se_half;
+    fit.B_mm.se = fit.B_mm.value * se_half;
+  }
+
+  const bool converged = best_summary.termination_type == ceres::CONVERGENCE ||
+                         best_summary.termination_type == ceres::USER_SUCCESS;
+  if (converged) {
+    fit.status = FitStatus::Ok;
+  } else {
+    fit.status = FitStatus::Failed;
+    fit.reason = best_summary.termination_type == ceres::NO_CONVERGENCE ? "no_convergence"
+                                                                        : "solver_failure";
+  }
+  return fit;
+}
+
+void check_series(const RegionSeries& s) {
+  if (s.area_mm2.size() != s.t_s.size() || s.force_n.size() != s.t_s.size()) {
+    throw std::invalid_argument("RegionSeries: t_s, area_mm2 and force_n differ in length");
+  }
+}
+
+}  // namespace
+
+RegionFit fit_region(const RegionSeries& series, const EllipsoidParams& declared,
+                     const FitBounds& bounds, const FitSettings& settings) {
+  return fit_region_session(std::span<const RegionSeries>(&series, 1), declared, bounds, settings);
+}
+
+RegionFit fit_region_session(std::span<const RegionSeries> stances, const EllipsoidParams& declared,
+                             const FitBounds& bounds, const FitSettings& settings) {
+  std::vector<FitFrame> frames;
+  std::vector<double> measured;
+  for (const RegionSeries& s : stances) {
+    check_series(s);
+    append_frames(s, settings.smoothing, measured.size(), frames);
+    measured.insert(measured.end(), s.force_n.begin(), s.force_n.end());
+  }
+  return fit_frames(frames, measured.size(), measured, declared, bounds, settings);
+}
+
+}  // namespace gaitmon
