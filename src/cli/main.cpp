@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
   add_simulate_command(app, global);
   add_segment_command(app, global);
+  add_analyze_command(app, global);
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,96 @@
+// The per-step analysis pipeline: one stance -> per-region series -> tissue fits, and the
+// session-level summary over many steps. Free of I/O so the live monitor can call it per step.
+#pragma once
+
+#include <array>
+#include <span>
+#include <vector>
+
+#include "gaitmon/config.hpp"
+#include "gaitmon/contact_ellipse.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/segmentation.hpp"
+#include "gaitmon/tissue_fit.hpp"
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+/// The fit's bounds come from Config::fit_bounds.
+struct AnalysisSettings {
+  FitSettings fit;
+};
+
+/// One region of one step: what was measured, what was declared and what was fitted.
+struct RegionAnalysis {
+  Region region = Region::Heel;
+  RegionSeries series;       ///< per stance frame: time, contact-ellipse area, force
+  EllipsoidParams declared;  ///< A, B from P and the step's aspect; C, d0 from Appendix I
+  double aspect = 0.0;       ///< A/B used: median ra/rb over contact frames, else Appendix I's
+  RegionFit fit;
+  double peak_force_n = 0.0;
+  double peak_area_mm2 = 0.0;
+  int frames = 0;  ///< stance frames in which the region has a contact ellipse
+};
+
+struct StepAnalysis {
+  Foot foot = Foot::Left;
+  int step = 0;
+  double t_heel_strike_s = 0.0;
+  double t_toe_off_s = 0.0;
+  std::array<RegionAnalysis, kRegionCount> regions;
+  std::vector<double> t_s;
+  std::vector<double> measured_total_force_n;  ///< per frame, the sum of the regions' forces
+  std::vector<double> model_total_force_n;     ///< per frame, the sum of the regions' model forces
+  double nrmse_total_pct = 0.0;                ///< eq 58 on the totals above
+
+  const RegionAnalysis& at(Region region) const { return regions[index_of(region)]; }
+};
+
+/// The declared parameters of one region: C and d0 are Appendix I's means, P = pi A B with
+/// Appendix I's mean A and B, split by `aspect` = A/B (A = sqrt(P aspect / pi)); kbar, n, cbar,
+/// m are Appendix I's means (the fit's starting point in Identifiable mode). Throws
+/// std::invalid_argument unless aspect is positive and finite.
+EllipsoidParams declared_params(const SeedTissueStats& seed, double aspect);
+
+/// Measures the stance (measure_stance) and fits every region. Regions without contact come
+/// back with status NoContact; a region whose fit fails or has no model force contributes zero
+/// model force to the total. Deterministic; no I/O. Pass one cache for many steps.
+StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Config& config,
+                          const AnalysisSettings& settings, ContactEllipseCache* cache = nullptr);
+
+/// Median and interquartile range of one parameter across steps (linear interpolation between
+/// order statistics, as numpy's default). All zero when there are no values.
+struct Spread {
+  int count = 0;
+  double median = 0.0;
+  double q1 = 0.0;
+  double q3 = 0.0;
+  double iqr() const { return q3 - q1; }
+};
+
+Spread spread_of(std::vector<double> values);
+
+/// One region over a whole session.
+struct RegionSessionAnalysis {
+  Region region = Region::Heel;
+  int steps_with_contact = 0;
+  int steps_fitted = 0;  ///< per-step fits with status Ok
+  double aspect = 0.0;   ///< median of the steps' aspects (Appendix I's if none)
+  EllipsoidParams declared;
+  RegionFit session_fit;  ///< one parameter set for every stance with contact
+  /// Across the steps fitted Ok.
+  Spread A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m, nrmse_pct;
+};
+
+struct SessionAnalysis {
+  std::array<RegionSessionAnalysis, kRegionCount> regions;
+  Spread nrmse_total_pct;
+};
+
+/// The session-level fit per region (fit_region_session over the series of every step with
+/// contact in that region) and the spread of the per-step fits. `steps` are analysed Ok steps.
+/// The regions are fitted in parallel on every core; the result does not depend on it.
+SessionAnalysis analyse_session(std::span<const StepAnalysis> steps, const Config& config,
+                                InsoleSize size, const AnalysisSettings& settings);
+
+}  // namespace gaitmon

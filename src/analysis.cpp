@@ -1,0 +1,176 @@
+// The per-step analysis pipeline and the session-level summary.
+#include "gaitmon/analysis.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <exception>
+#include <mutex>
+#include <numbers>
+#include <stdexcept>
+#include <thread>
+
+#include "gaitmon/stance.hpp"
+
+namespace gaitmon {
+namespace {
+
+double median_of(std::vector<double> values) {
+  return spread_of(std::move(values)).median;
+}
+
+}  // namespace
+
+Spread spread_of(std::vector<double> values) {
+  Spread s;
+  if (values.empty()) return s;
+  std::sort(values.begin(), values.end());
+  s.count = static_cast<int>(values.size());
+  const auto quantile = [&](double q) {
+    const double pos = q * static_cast<double>(values.size() - 1);
+    const auto lo = static_cast<std::size_t>(std::floor(pos));
+    const std::size_t hi = std::min(lo + 1, values.size() - 1);
+    return values[lo] + (pos - static_cast<double>(lo)) * (values[hi] - values[lo]);
+  };
+  s.median = quantile(0.5);
+  s.q1 = quantile(0.25);
+  s.q3 = quantile(0.75);
+  return s;
+}
+
+EllipsoidParams declared_params(const SeedTissueStats& seed, double aspect) {
+  if (!(aspect > 0.0) || !std::isfinite(aspect)) {
+    throw std::invalid_argument("declared_params: aspect A/B must be positive and finite");
+  }
+  EllipsoidParams p = seed.mean;
+  const double P = std::numbers::pi * seed.mean.A_mm * seed.mean.B_mm;
+  p.A_mm = std::sqrt(P * aspect / std::numbers::pi);
+  p.B_mm = std::sqrt(P / (std::numbers::pi * aspect));
+  return p;
+}
+
+StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Config& config,
+                          const AnalysisSettings& settings, ContactEllipseCache* cache) {
+  const StanceSeries stance = measure_stance(step, layout, config.calibration, cache);
+  const std::size_t frames = stance.size();
+  StepAnalysis out;
+  out.foot = step.foot;
+  out.step = step.index;
+  out.t_heel_strike_s = step.t_heel_strike_s;
+  out.t_toe_off_s = step.t_toe_off_s;
+  out.t_s = stance.t_s;
+  out.measured_total_force_n.assign(frames, 0.0);
+  out.model_total_force_n.assign(frames, 0.0);
+
+  std::vector<double> aspects;
+  for (Region region : kRegions) {
+    RegionAnalysis& r = out.regions[index_of(region)];
+    r.region = region;
+    r.series.t_s = stance.t_s;
+    r.series.area_mm2.resize(frames);
+    r.series.force_n.resize(frames);
+    aspects.clear();
+    for (std::size_t f = 0; f < frames; ++f) {
+      const RegionSample& s = stance.at(f, region);
+      r.series.area_mm2[f] = s.ellipse.area_mm2;
+      r.series.force_n[f] = s.force_n;
+      r.peak_force_n = std::max(r.peak_force_n, s.force_n);
+      r.peak_area_mm2 = std::max(r.peak_area_mm2, s.ellipse.area_mm2);
+      out.measured_total_force_n[f] += s.force_n;
+      if (s.ellipse.kase != EllipseCase::None && s.ellipse.rb_mm > 0.0) {
+        ++r.frames;
+        aspects.push_back(s.ellipse.ra_mm / s.ellipse.rb_mm);
+      }
+    }
+    const SeedTissueStats& seed = config.tissue(layout.size(), region);
+    r.aspect = aspects.empty() ? seed.mean.A_mm / seed.mean.B_mm : median_of(aspects);
+    r.declared = declared_params(seed, r.aspect);
+    r.fit = fit_region(r.series, r.declared, config.fit_bounds, settings.fit);
+    if (r.fit.status == FitStatus::Ok && r.fit.model_force_n.size() == frames) {
+      for (std::size_t f = 0; f < frames; ++f) out.model_total_force_n[f] += r.fit.model_force_n[f];
+    }
+  }
+  out.nrmse_total_pct =
+      frames == 0 ? 0.0 : nrmse_pct(out.measured_total_force_n, out.model_total_force_n);
+  return out;
+}
+
+namespace {
+
+RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region region,
+                                     const Config& config, InsoleSize size,
+                                     const AnalysisSettings& settings) {
+  RegionSessionAnalysis r;
+  r.region = region;
+  std::vector<RegionSeries> stances;
+  std::vector<double> aspects;
+  std::array<std::vector<double>, 9> values;
+  for (const StepAnalysis& s : steps) {
+    const RegionAnalysis& ra = s.at(region);
+    if (ra.frames == 0) continue;
+    ++r.steps_with_contact;
+    stances.push_back(ra.series);
+    aspects.push_back(ra.aspect);
+    if (ra.fit.status != FitStatus::Ok) continue;
+    ++r.steps_fitted;
+    const RegionFit& f = ra.fit;
+    const std::array<double, 9> v{f.A_mm.value,
+                                  f.B_mm.value,
+                                  f.C_mm.value,
+                                  f.d0_mm.value,
+                                  f.kbar_n_per_mm3.value,
+                                  f.n.value,
+                                  f.cbar_ns_per_mm3.value,
+                                  f.m.value,
+                                  f.nrmse_pct};
+    for (std::size_t i = 0; i < v.size(); ++i) values[i].push_back(v[i]);
+  }
+  const SeedTissueStats& seed = config.tissue(size, region);
+  r.aspect = aspects.empty() ? seed.mean.A_mm / seed.mean.B_mm : median_of(aspects);
+  r.declared = declared_params(seed, r.aspect);
+  if (!stances.empty()) {
+    r.session_fit = fit_region_session(stances, r.declared, config.fit_bounds, settings.fit);
+  }
+  Spread* targets[] = {
+      &r.A_mm, &r.B_mm,     &r.C_mm, &r.d0_mm, &r.kbar_n_per_mm3, &r.n, &r.cbar_ns_per_mm3,
+      &r.m,    &r.nrmse_pct};
+  for (std::size_t i = 0; i < values.size(); ++i) *targets[i] = spread_of(std::move(values[i]));
+  return r;
+}
+
+}  // namespace
+
+SessionAnalysis analyse_session(std::span<const StepAnalysis> steps, const Config& config,
+                                InsoleSize size, const AnalysisSettings& settings) {
+  SessionAnalysis out;
+  std::vector<double> totals;
+  for (const StepAnalysis& s : steps) totals.push_back(s.nrmse_total_pct);
+  out.nrmse_total_pct = spread_of(std::move(totals));
+
+  // The regions' session fits are independent and each takes seconds on a long session.
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr failure;
+  std::mutex failure_mutex;
+  const auto work = [&] {
+    try {
+      for (std::size_t i = next++; i < kRegionCount; i = next++) {
+        out.regions[i] = analyse_region(steps, kRegions[i], config, size, settings);
+      }
+    } catch (...) {
+      const std::lock_guard lock(failure_mutex);
+      if (!failure) failure = std::current_exception();
+      next = kRegionCount;
+    }
+  };
+  const unsigned threads =
+      std::clamp(std::thread::hardware_concurrency(), 1u, static_cast<unsigned>(kRegionCount));
+  {
+    std::vector<std::jthread> workers;
+    for (unsigned i = 1; i < threads; ++i) workers.emplace_back(work);
+    work();
+  }
+  if (failure) std::rethrow_exception(failure);
+  return out;
+}
+
+}  // namespace gaitmon

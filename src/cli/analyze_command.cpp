@@ -1,0 +1,413 @@
+// `gaitmon analyze`: per step and region tissue fits, a session-level fit, and a report.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "commands.hpp"
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/batch.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/session.hpp"
+#include "output_file.hpp"
+#include "progress.hpp"
+#include "report_html.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+struct AnalyzeArgs {
+  std::filesystem::path session;
+  std::filesystem::path out_dir;
+  bool report = false;
+  std::string model = "correct";
+  std::string fit = "identifiable";
+  std::string smoothing = "none";
+  bool free_scale = false;
+};
+
+std::string declared_note(const FitSettings& fit) {
+  if (fit.mode == FitMode::Seed8) {
+    return "--fit seed8: all eight parameters are free, as in the seed, started at the middle of "
+           "the bounds. Force and contact area cannot determine C_mm and d0_mm (model-notes "
+           "section 2; see each fit's undetermined list): their values are wherever the "
+           "optimiser stopped.";
+  }
+  return std::string(
+             "C_mm and d0_mm are declared, not fitted: force and contact area cannot determine "
+             "them (model-notes section 2). They are the seed's Appendix I means for the insole "
+             "size and region; A_mm/B_mm is the median measured contact-ellipse aspect, ") +
+         (fit.free_scale ? "pi A B fitted (--free-scale). " : "pi A B from Appendix I. ") +
+         "kbar and cbar are derived from the identifiable combinations K = kbar C^(1+n) "
+         "d0^(-n) and D = cbar C^(1+m) d0^(-m) under those declared values.";
+}
+
+AnalysisSettings settings_from(const AnalyzeArgs& args) {
+  AnalysisSettings s;
+  // CLI11 has checked membership, so the parses cannot fail.
+  s.fit.model = *parse_model_variant(args.model);
+  s.fit.mode = *parse_fit_mode(args.fit);
+  s.fit.smoothing = *parse_smoothing(args.smoothing);
+  s.fit.free_scale = args.free_scale;
+  if (s.fit.free_scale && s.fit.mode != FitMode::Identifiable) {
+    throw CLI::ValidationError("--free-scale", "applies to --fit identifiable only");
+  }
+  return s;
+}
+
+/// Keeps a free-text reason inside one CSV field.
+std::string csv_safe(std::string text) {
+  std::replace_if(
+      text.begin(), text.end(), [](char c) { return c == ',' || c == '\n'; }, ';');
+  return text;
+}
+
+std::string status_text(const RegionFit& fit) {
+  if (fit.status != FitStatus::Failed) return std::string(fit_status_name(fit.status));
+  return std::string(fit_status_name(fit.status)) + ":" + csv_safe(fit.reason);
+}
+
+struct NamedEstimate {
+  const char* name;
+  const Estimate* estimate;
+};
+
+std::array<NamedEstimate, 8> estimates(const RegionFit& f) {
+  return {{{"A_mm", &f.A_mm},
+           {"B_mm", &f.B_mm},
+           {"C_mm", &f.C_mm},
+           {"d0_mm", &f.d0_mm},
+           {"kbar_n_per_mm3", &f.kbar_n_per_mm3},
+           {"n", &f.n},
+           {"cbar_ns_per_mm3", &f.cbar_ns_per_mm3},
+           {"m", &f.m}}};
+}
+
+std::string at_bound_list(const RegionFit& fit) {
+  std::string out;
+  for (const auto& [name, e] : estimates(fit)) {
+    if (!e->at_bound) continue;
+    if (!out.empty()) out += ';';
+    out += name;
+  }
+  return out;
+}
+
+std::string steps_csv(const std::vector<StepRow>& steps) {
+  std::string out =
+      "foot,step,t_heel_strike_s,t_toe_off_s,stance_s,peak_force_n,status,"
+      "nrmse_total_pct\n";
+  for (const auto& s : steps) {
+    fmt::format_to(std::back_inserter(out), "{},{},{},{},{:.4f},{:.2f},{},{}\n", foot_name(s.foot),
+                   s.index, s.t_heel_strike_s, s.t_toe_off_s, s.t_toe_off_s - s.t_heel_strike_s,
+                   s.peak_force_n, step_status_name(s.status),
+                   s.nrmse_total_pct ? fmt::format("{:.3f}", *s.nrmse_total_pct) : "");
+  }
+  return out;
+}
+
+std::string regions_csv(const std::vector<StepAnalysis>& analyses) {
+  std::string out =
+      "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
+      "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct,aspect_a_over_b,"
+      "at_bound,iterations,final_cost\n";
+  for (const StepAnalysis& s : analyses) {
+    for (const RegionAnalysis& r : s.regions) {
+      const RegionFit& f = r.fit;
+      fmt::format_to(std::back_inserter(out), "{},{},{},{},{},{:.3f},{:.2f},", foot_name(s.foot),
+                     s.step, region_name(r.region), status_text(f), r.frames, r.peak_force_n,
+                     r.peak_area_mm2);
+      if (f.status == FitStatus::Ok) {
+        fmt::format_to(std::back_inserter(out),
+                       "{:.4g},{:.4g},{:.4g},{:.4g},{:.6g},{:.6g},{:.6g},{:.6g},{:.3g},{:.3g},"
+                       "{:.3g},{:.3g},{:.3f},{:.4f},{},{},{:.6g}\n",
+                       f.A_mm.value, f.B_mm.value, f.C_mm.value, f.d0_mm.value,
+                       f.kbar_n_per_mm3.value, f.n.value, f.cbar_ns_per_mm3.value, f.m.value,
+                       f.kbar_n_per_mm3.se, f.n.se, f.cbar_ns_per_mm3.se, f.m.se, f.nrmse_pct,
+                       r.aspect, at_bound_list(f), f.iterations, f.final_cost);
+      } else {
+        fmt::format_to(std::back_inserter(out), ",,,,,,,,,,,,,{:.4f},,{},\n", r.aspect,
+                       f.iterations);
+      }
+    }
+  }
+  return out;
+}
+
+nlohmann::json params_json(const EllipsoidParams& p) {
+  return {{"A_mm", p.A_mm},
+          {"B_mm", p.B_mm},
+          {"C_mm", p.C_mm},
+          {"d0_mm", p.d0_mm},
+          {"kbar_n_per_mm3", p.kbar_n_per_mm3},
+          {"n", p.n},
+          {"cbar_ns_per_mm3", p.cbar_ns_per_mm3},
+          {"m", p.m}};
+}
+
+nlohmann::json spread_json(const Spread& s) {
+  return {{"count", s.count}, {"median", s.median}, {"q1", s.q1}, {"q3", s.q3}, {"iqr", s.iqr()}};
+}
+
+nlohmann::json fit_json(const RegionFit& f) {
+  nlohmann::json params = nlohmann::json::object();
+  for (const auto& [name, e] : estimates(f)) {
+    params[name] = {
+        {"value", e->value}, {"se", e->se}, {"at_bound", e->at_bound}, {"free", e->free}};
+  }
+  return {{"status", fit_status_name(f.status)},
+          {"reason", f.reason},
+          {"frames", f.frames},
+          {"parameters", params},
+          {"nrmse_pct", f.nrmse_pct},
+          {"iterations", f.iterations},
+          {"final_cost", f.final_cost},
+          {"solver_message", f.solver_message},
+          {"undetermined", f.undetermined}};
+}
+
+nlohmann::json bounds_json(const FitBounds& b) {
+  const auto one = [](const Bounds& x) {
+    return nlohmann::json{{"lower", x.lower}, {"upper", x.upper}};
+  };
+  return {{"A_mm", one(b.A_mm)},
+          {"B_mm", one(b.B_mm)},
+          {"C_mm", one(b.C_mm)},
+          {"d0_mm", one(b.d0_mm)},
+          {"kbar_n_per_mm3", one(b.kbar_n_per_mm3)},
+          {"n", one(b.n)},
+          {"cbar_ns_per_mm3", one(b.cbar_ns_per_mm3)},
+          {"m", one(b.m)}};
+}
+
+std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, const Config& config,
+                         const AnalysisSettings& settings, const std::vector<StepRow>& steps,
+                         const std::vector<StepAnalysis>& analyses,
+                         const SessionAnalysis& session) {
+  nlohmann::json j;
+  j["session"] = args.session.string();
+  j["insole_size"] = insole_size_name(header.insole_size);
+  j["sample_rate_hz"] = header.sample_rate_hz;
+  j["steps"] = {{"total", steps.size()}, {"analysed", analyses.size()}};
+  j["settings"] = {{"model", model_variant_name(settings.fit.model)},
+                   {"fit", fit_mode_name(settings.fit.mode)},
+                   {"smoothing", smoothing_name(settings.fit.smoothing)},
+                   {"free_scale", settings.fit.free_scale},
+                   {"starts", settings.fit.starts},
+                   {"max_iterations", settings.fit.max_iterations},
+                   {"bounds", bounds_json(config.fit_bounds)}};
+  j["note"] = declared_note(settings.fit);
+  j["nrmse_total_pct_across_steps"] = spread_json(session.nrmse_total_pct);
+  nlohmann::json regions = nlohmann::json::object();
+  for (const RegionSessionAnalysis& r : session.regions) {
+    const SeedTissueStats& seed = config.tissue(header.insole_size, r.region);
+    regions[std::string(region_name(r.region))] = {
+        {"steps_with_contact", r.steps_with_contact},
+        {"steps_fitted", r.steps_fitted},
+        {"aspect_a_over_b", r.aspect},
+        {"declared", params_json(r.declared)},
+        {"session_fit", fit_json(r.session_fit)},
+        {"across_steps",
+         {{"A_mm", spread_json(r.A_mm)},
+          {"B_mm", spread_json(r.B_mm)},
+          {"C_mm", spread_json(r.C_mm)},
+          {"d0_mm", spread_json(r.d0_mm)},
+          {"kbar_n_per_mm3", spread_json(r.kbar_n_per_mm3)},
+          {"n", spread_json(r.n)},
+          {"cbar_ns_per_mm3", spread_json(r.cbar_ns_per_mm3)},
+          {"m", spread_json(r.m)},
+          {"nrmse_pct", spread_json(r.nrmse_pct)}}},
+        {"appendix_i",
+         {{"mean", params_json(seed.mean)},
+          {"sd", params_json(seed.sd)},
+          {"nrmse_pct_mean", seed.nrmse_pct_mean},
+          {"nrmse_pct_sd", seed.nrmse_pct_sd}}}};
+  }
+  j["regions"] = regions;
+  return j.dump(2) + "\n";
+}
+
+void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
+                   const AnalysisSettings& settings, const std::vector<StepRow>& steps,
+                   const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
+                   const std::vector<std::filesystem::path>& written) {
+  fmt::print("{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}{})\n",
+             args.session.string(), insole_size_name(header.insole_size), steps.size(),
+             analyses.size(), model_variant_name(settings.fit.model),
+             fit_mode_name(settings.fit.mode), smoothing_name(settings.fit.smoothing),
+             settings.fit.free_scale ? ", free scale" : "");
+  fmt::print("{:<19}{:>8}{:>10}{:>12}{:>10}{:>13}{:>10}{:>12}{:>12}\n", "region", "fitted",
+             "contact", "kbar N/mm3", "n", "cbar Ns/mm3", "m", "NRMSE %", "session %");
+  for (const RegionSessionAnalysis& r : session.regions) {
+    fmt::print("{:<19}{:>8}{:>10}{:>12.4f}{:>10.3f}{:>13.5f}{:>10.3f}{:>12.1f}{:>12}\n",
+               region_name(r.region), r.steps_fitted, r.steps_with_contact, r.kbar_n_per_mm3.median,
+               r.n.median, r.cbar_ns_per_mm3.median, r.m.median, r.nrmse_pct.median,
+               r.session_fit.status == FitStatus::Ok
+                   ? fmt::format("{:.1f}", r.session_fit.nrmse_pct)
+                   : std::string(fit_status_name(r.session_fit.status)));
+  }
+  fmt::print("medians across steps; total-force NRMSE median {:.1f} % (IQR {:.1f} %)\n",
+             session.nrmse_total_pct.median, session.nrmse_total_pct.iqr());
+  if (settings.fit.mode == FitMode::Identifiable) {
+    fmt::print("note: C and d0 are declared (Appendix I means), kbar and cbar derived from them\n");
+  } else {
+    std::set<std::string> undetermined;
+    for (const StepAnalysis& s : analyses) {
+      for (const RegionAnalysis& r : s.regions) {
+        undetermined.insert(r.fit.undetermined.begin(), r.fit.undetermined.end());
+      }
+    }
+    if (!undetermined.empty()) {
+      fmt::print(
+          "warning: --fit seed8 frees parameters the data cannot determine: {}; their values are "
+          "wherever the optimiser stopped (model-notes section 2)\n",
+          fmt::join(undetermined, ", "));
+    }
+  }
+  for (const auto& path : written) fmt::print("wrote {}\n", path.string());
+}
+
+/// Analyses the steps on every core (fits dominate; steps are independent), each worker with
+/// its own ellipse cache. `on_progress` is called from the calling thread only.
+std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const InsoleLayout& layout,
+                                        const Config& config, const AnalysisSettings& settings,
+                                        const std::function<void(double)>& on_progress) {
+  std::vector<StepAnalysis> out(steps.size());
+  std::atomic<std::size_t> next{0};
+  std::atomic<std::size_t> done{0};
+  std::exception_ptr failure;
+  std::mutex failure_mutex;
+  const auto work = [&](bool report) {
+    ContactEllipseCache ellipses;
+    try {
+      for (std::size_t i = next++; i < steps.size(); i = next++) {
+        out[i] = analyse_step(steps[i], layout, config, settings, &ellipses);
+        const std::size_t finished = ++done;
+        if (report) on_progress(static_cast<double>(finished) / static_cast<double>(steps.size()));
+      }
+    } catch (...) {
+      const std::lock_guard lock(failure_mutex);
+      if (!failure) failure = std::current_exception();
+      next = steps.size();
+    }
+  };
+  const unsigned extra = std::max(1u, std::thread::hardware_concurrency()) - 1;
+  std::vector<std::jthread> workers;
+  for (unsigned i = 0; i < extra; ++i) workers.emplace_back(work, false);
+  work(true);
+  workers.clear();
+  if (failure) std::rethrow_exception(failure);
+  return out;
+}
+
+void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
+  const Config config = load_global_config(global);
+  const AnalysisSettings settings = settings_from(args);
+  const SessionHeader header = SessionReader(args.session).header();
+  const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+
+  std::vector<StepRow> steps;
+  std::vector<Step> ok_steps;
+  std::vector<StepAnalysis> analyses;
+  {
+    ProgressBar progress("analyze");
+    auto on_step = [&](Step&& step) {
+      steps.push_back({step.foot, step.index, step.t_heel_strike_s, step.t_toe_off_s,
+                       step.peak_force_n, step.status, std::nullopt});
+      if (step.status == StepStatus::Ok) ok_steps.push_back(std::move(step));
+    };
+    segment_session(args.session, config, on_step,
+                    [&](double fraction) { progress.update(0.1 * fraction); });
+    const auto start = std::chrono::steady_clock::now();
+    analyses = analyse_steps(ok_steps, layout, config, settings,
+                             [&](double fraction) { progress.update(0.1 + 0.85 * fraction); });
+    spdlog::debug("analysed {} steps in {:.2f} s", analyses.size(),
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  }
+  const auto key = [](const StepAnalysis& a) { return std::pair(a.foot, a.step); };
+  std::sort(analyses.begin(), analyses.end(),
+            [&](const StepAnalysis& a, const StepAnalysis& b) { return key(a) < key(b); });
+  for (StepRow& row : steps) {
+    const auto it = std::lower_bound(
+        analyses.begin(), analyses.end(), std::pair(row.foot, row.index),
+        [&](const StepAnalysis& a, const std::pair<Foot, int>& k) { return key(a) < k; });
+    if (it != analyses.end() && key(*it) == std::pair(row.foot, row.index)) {
+      row.nrmse_total_pct = it->nrmse_total_pct;
+    }
+  }
+  std::sort(steps.begin(), steps.end(), [](const StepRow& a, const StepRow& b) {
+    return std::pair(a.foot, a.index) < std::pair(b.foot, b.index);
+  });
+  const auto session_start = std::chrono::steady_clock::now();
+  const SessionAnalysis session = analyse_session(analyses, config, header.insole_size, settings);
+  spdlog::debug(
+      "session-level fits in {:.2f} s",
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - session_start).count());
+
+  std::filesystem::create_directories(args.out_dir);
+  std::vector<std::unique_ptr<OutputFile>> files;
+  const auto add = [&](const char* name, const std::string& text) {
+    files.push_back(std::make_unique<OutputFile>(args.out_dir / name));
+    files.back()->write(text);
+  };
+  add("steps.csv", steps_csv(steps));
+  add("regions.csv", regions_csv(analyses));
+  add("session.json", session_json(args, header, config, settings, steps, analyses, session));
+  if (args.report) {
+    ReportInput input;
+    input.session_name = args.session.filename().string();
+    input.size = header.insole_size;
+    input.sample_rate_hz = header.sample_rate_hz;
+    input.config = &config;
+    input.settings = &settings;
+    input.steps = steps;
+    input.analyses = analyses;
+    input.session = &session;
+    add("report.html", render_report_html(input));
+  }
+  std::vector<std::filesystem::path> written;
+  for (auto& file : files) {
+    file->commit();
+    written.push_back(file->path());
+  }
+  print_summary(args, header, settings, steps, analyses, session, written);
+}
+
+}  // namespace
+
+void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
+  auto args = std::make_shared<AnalyzeArgs>();
+  CLI::App* sub = app.add_subcommand(
+      "analyze",
+      "Fit the ellipsoid tissue model per step and region (seed 5.2) and once per region over "
+      "the session: writes DIR/steps.csv, DIR/regions.csv, DIR/session.json and, with "
+      "--report, DIR/report.html");
+  sub->add_option("session", args->session, "Session CSV v1")->required()->check(CLI::ExistingFile);
+  sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
+  sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
+  sub->add_option("--model", args->model, "Damping sign: correct (default) or seed_eq25")
+      ->check(CLI::IsMember({"correct", "seed_eq25"}));
+  sub->add_option("--fit", args->fit,
+                  "identifiable (default: kbar, n, cbar, m free; C, d0 declared) or seed8 (all "
+                  "eight free, as the seed)")
+      ->check(CLI::IsMember({"identifiable", "seed8"}));
+  sub->add_option("--smoothing", args->smoothing,
+                  "none (default) or seed (the seed's moving average and polynomials)")
+      ->check(CLI::IsMember({"none", "seed"}));
+  sub->add_flag("--free-scale", args->free_scale,
+                "Also fit P = pi A B (keeping A/B); identifiable mode only");
+  sub->callback([&global, args] { run_analyze(global, *args); });
+}
+
+}  // namespace gaitmon::cli

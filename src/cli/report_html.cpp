@@ -1,0 +1,492 @@
+// The HTML report of `gaitmon analyze`, drawn as inline SVG.
+#include "report_html.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string_view>
+#include <vector>
+
+namespace gaitmon::cli {
+namespace {
+
+std::string escape(std::string_view text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+/// A tick spacing of 1, 2 or 5 x 10^k giving about `count` ticks over the range.
+double nice_step(double range, int count) {
+  const double raw = range / count;
+  const double mag = std::pow(10.0, std::floor(std::log10(raw)));
+  const double f = raw / mag;
+  return (f < 1.5 ? 1.0 : f < 3.5 ? 2.0 : f < 7.5 ? 5.0 : 10.0) * mag;
+}
+
+struct Range {
+  double lo = std::numeric_limits<double>::infinity();
+  double hi = -std::numeric_limits<double>::infinity();
+  void add(double v) {
+    if (!std::isfinite(v)) return;
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  /// Finite and non-empty, padded by `pad` of its span (or by 1 when it is a point).
+  Range padded(double pad) const {
+    Range r = *this;
+    if (!std::isfinite(r.lo)) return {0.0, 1.0};
+    const double span = r.hi - r.lo;
+    const double p = span > 0.0 ? pad * span : (r.lo != 0.0 ? 0.1 * std::abs(r.lo) : 1.0);
+    r.lo -= p;
+    r.hi += p;
+    return r;
+  }
+};
+
+/// One chart: a plot area with ticked axes and labels, into which series are drawn.
+class Chart {
+ public:
+  Chart(int width, int height, Range x, Range y, std::string title, std::string x_label,
+        std::string y_label)
+      : w_(width), h_(height), x_(x), y_(y) {
+    fmt::format_to(std::back_inserter(svg_),
+                   "<svg width=\"{0}\" height=\"{1}\" "
+                   "viewBox=\"0 0 {0} {1}\" role=\"img\">"
+                   "<text x=\"{2}\" y=\"16\" class=\"title\" text-anchor=\"middle\">{3}</text>",
+                   w_, h_, w_ / 2, escape(title));
+    axes(x_label, y_label);
+  }
+
+  double px(double x) const { return kLeft + (x - x_.lo) / (x_.hi - x_.lo) * plot_w(); }
+  double py(double y) const { return kTop + (1.0 - (y - y_.lo) / (y_.hi - y_.lo)) * plot_h(); }
+
+  void line(std::span<const double> xs, std::span<const double> ys, std::string_view colour,
+            double width, double opacity = 1.0) {
+    svg_ += "<polyline fill=\"none\" stroke=\"";
+    svg_ += colour;
+    fmt::format_to(std::back_inserter(svg_),
+                   "\" stroke-width=\"{}\" stroke-opacity=\"{}\" points=\"", width, opacity);
+    for (std::size_t i = 0; i < xs.size() && i < ys.size(); ++i) {
+      fmt::format_to(std::back_inserter(svg_), "{:.1f},{:.1f} ", px(xs[i]), py(ys[i]));
+    }
+    svg_ += "\"/>";
+  }
+
+  void dot(double x, double y, std::string_view colour, double r, double opacity = 1.0) {
+    fmt::format_to(std::back_inserter(svg_),
+                   "<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"{}\" fill=\"{}\" fill-opacity=\"{}\"/>",
+                   px(x), py(y), r, colour, opacity);
+  }
+
+  /// A box from q1 to q3 with the median, centred at x, half-width in pixels.
+  void box(double x, const Spread& s, double half_px, std::string_view colour) {
+    const double cx = px(x);
+    fmt::format_to(std::back_inserter(svg_),
+                   "<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"{:.1f}\" height=\"{:.1f}\" "
+                   "fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\"/>"
+                   "<line x1=\"{:.1f}\" x2=\"{:.1f}\" y1=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"{}\" "
+                   "stroke-width=\"2.5\"/>",
+                   cx - half_px, py(s.q3), 2 * half_px, std::max(0.5, py(s.q1) - py(s.q3)), colour,
+                   cx - half_px, cx + half_px, py(s.median), py(s.median), colour);
+  }
+
+  /// A mean with a +/- SD bar at x.
+  void mean_sd(double x, double mean, double sd, std::string_view colour) {
+    const double cx = px(x);
+    fmt::format_to(std::back_inserter(svg_),
+                   "<line x1=\"{0:.1f}\" x2=\"{0:.1f}\" y1=\"{1:.1f}\" y2=\"{2:.1f}\" "
+                   "stroke=\"{3}\" stroke-width=\"2\"/>"
+                   "<rect x=\"{4:.1f}\" y=\"{5:.1f}\" width=\"8\" height=\"8\" fill=\"{3}\"/>",
+                   cx, py(mean - sd), py(mean + sd), colour, cx - 4, py(mean) - 4);
+  }
+
+  void x_category(double x, std::string_view label) {
+    fmt::format_to(std::back_inserter(svg_),
+                   "<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{}</text>", px(x),
+                   kTop + plot_h() + 16, escape(label));
+  }
+
+  void legend(std::span<const std::pair<std::string_view, std::string_view>> entries) {
+    int y = kTop + 6;
+    fmt::format_to(std::back_inserter(svg_),
+                   "<rect x=\"{}\" y=\"{}\" width=\"112\" height=\"{}\" fill=\"#fff\" "
+                   "fill-opacity=\"0.85\"/>",
+                   w_ - kRight - 124, kTop + 1, 14 * entries.size() + 4);
+    for (const auto& [colour, label] : entries) {
+      fmt::format_to(std::back_inserter(svg_),
+                     "<rect x=\"{}\" y=\"{}\" width=\"14\" height=\"4\" fill=\"{}\"/>"
+                     "<text x=\"{}\" y=\"{}\" class=\"legend\">{}</text>",
+                     w_ - kRight - 120, y, colour, w_ - kRight - 102, y + 5, escape(label));
+      y += 14;
+    }
+  }
+
+  std::string finish() { return svg_ + "</svg>"; }
+
+ private:
+  static constexpr int kLeft = 64;
+  static constexpr int kRight = 12;
+  static constexpr int kTop = 26;
+  static constexpr int kBottom = 42;
+
+  double plot_w() const { return w_ - kLeft - kRight; }
+  double plot_h() const { return h_ - kTop - kBottom; }
+
+  void axes(const std::string& x_label, const std::string& y_label) {
+    fmt::format_to(std::back_inserter(svg_),
+                   "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" class=\"frame\"/>", kLeft,
+                   kTop, plot_w(), plot_h());
+    if (!x_label.empty()) {
+      const double step = nice_step(x_.hi - x_.lo, 6);
+      for (double t = std::ceil(x_.lo / step) * step; t <= x_.hi + 1e-9 * step; t += step) {
+        fmt::format_to(std::back_inserter(svg_),
+                       "<line x1=\"{0:.1f}\" x2=\"{0:.1f}\" y1=\"{1}\" y2=\"{2}\" class=\"grid\"/>"
+                       "<text x=\"{0:.1f}\" y=\"{3}\" text-anchor=\"middle\">{4:g}</text>",
+                       px(t), kTop, kTop + plot_h(), kTop + plot_h() + 14,
+                       std::abs(t) < 1e-12 * step ? 0.0 : t);
+      }
+    }
+    const double step = nice_step(y_.hi - y_.lo, 5);
+    for (double t = std::ceil(y_.lo / step) * step; t <= y_.hi + 1e-9 * step; t += step) {
+      fmt::format_to(std::back_inserter(svg_),
+                     "<line x1=\"{0}\" x2=\"{1}\" y1=\"{2:.1f}\" y2=\"{2:.1f}\" class=\"grid\"/>"
+                     "<text x=\"{3}\" y=\"{4:.1f}\" text-anchor=\"end\">{5:.4g}</text>",
+                     kLeft, kLeft + plot_w(), py(t), kLeft - 4, py(t) + 4,
+                     std::abs(t) < 1e-12 * step ? 0.0 : t);
+    }
+    fmt::format_to(std::back_inserter(svg_),
+                   "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\" class=\"axis\">{}</text>"
+                   "<text transform=\"translate(14,{}) rotate(-90)\" text-anchor=\"middle\" "
+                   "class=\"axis\">{}</text>",
+                   kLeft + plot_w() / 2, h_ - 6, escape(x_label), kTop + plot_h() / 2,
+                   escape(y_label));
+  }
+
+  int w_;
+  int h_;
+  Range x_;
+  Range y_;
+  std::string svg_;
+};
+
+constexpr std::string_view kMeasured = "#222222";
+constexpr std::string_view kModel = "#d62728";
+constexpr std::string_view kArea = "#1f77b4";
+constexpr std::string_view kSeed = "#ff7f0e";
+constexpr std::size_t kMaxOverlaid = 60;
+
+std::vector<double> since_heel_strike(const StepAnalysis& s) {
+  std::vector<double> t = s.t_s;
+  for (double& v : t) v -= s.t_heel_strike_s;
+  return t;
+}
+
+/// Up to kMaxOverlaid steps with contact in the region, evenly spaced through the session.
+std::vector<const StepAnalysis*> overlaid(std::span<const StepAnalysis> analyses, Region region) {
+  std::vector<const StepAnalysis*> with;
+  for (const auto& s : analyses) {
+    if (s.at(region).fit.status == FitStatus::Ok) with.push_back(&s);
+  }
+  if (with.size() <= kMaxOverlaid) return with;
+  std::vector<const StepAnalysis*> out;
+  for (std::size_t i = 0; i < kMaxOverlaid; ++i)
+    out.push_back(with[i * with.size() / kMaxOverlaid]);
+  return out;
+}
+
+/// The step whose region fit has the median NRMSE among the Ok fits.
+const StepAnalysis* typical_step(std::span<const StepAnalysis> analyses, Region region) {
+  std::vector<const StepAnalysis*> ok;
+  for (const auto& s : analyses) {
+    if (s.at(region).fit.status == FitStatus::Ok) ok.push_back(&s);
+  }
+  if (ok.empty()) return nullptr;
+  std::sort(ok.begin(), ok.end(), [region](const StepAnalysis* a, const StepAnalysis* b) {
+    return a->at(region).fit.nrmse_pct < b->at(region).fit.nrmse_pct;
+  });
+  return ok[(ok.size() - 1) / 2];
+}
+
+std::string typical_chart(const StepAnalysis& s, Region region) {
+  const RegionAnalysis& r = s.at(region);
+  const std::vector<double> t = since_heel_strike(s);
+  Range x, y;
+  for (double v : t) x.add(v);
+  for (double v : r.series.force_n) y.add(v);
+  for (double v : r.fit.model_force_n) y.add(v);
+  y.add(0.0);
+  Chart c(420, 260, x.padded(0.02), y.padded(0.05),
+          fmt::format("typical step ({} {}, NRMSE {:.1f} %)", foot_name(s.foot), s.step,
+                      r.fit.nrmse_pct),
+          "time since heel strike (s)", "force (N)");
+  c.line(t, r.series.force_n, kMeasured, 2.0);
+  c.line(t, r.fit.model_force_n, kModel, 2.0);
+  const std::pair<std::string_view, std::string_view> legend[] = {{kMeasured, "measured"},
+                                                                  {kModel, "model"}};
+  c.legend(legend);
+  return c.finish();
+}
+
+std::string overlay_chart(const std::vector<const StepAnalysis*>& steps, Region region,
+                          std::size_t total) {
+  Range x, y;
+  for (const StepAnalysis* s : steps) {
+    for (double v : since_heel_strike(*s)) x.add(v);
+    for (double v : s->at(region).series.force_n) y.add(v);
+    for (double v : s->at(region).fit.model_force_n) y.add(v);
+  }
+  y.add(0.0);
+  Chart c(420, 260, x.padded(0.02), y.padded(0.05),
+          fmt::format("all steps ({} of {} shown)", steps.size(), total),
+          "time since heel strike (s)", "force (N)");
+  for (const StepAnalysis* s : steps) {
+    c.line(since_heel_strike(*s), s->at(region).series.force_n, kMeasured, 1.0, 0.35);
+  }
+  for (const StepAnalysis* s : steps) {
+    c.line(since_heel_strike(*s), s->at(region).fit.model_force_n, kModel, 1.0, 0.35);
+  }
+  const std::pair<std::string_view, std::string_view> legend[] = {{kMeasured, "measured"},
+                                                                  {kModel, "model"}};
+  c.legend(legend);
+  return c.finish();
+}
+
+std::string area_chart(const std::vector<const StepAnalysis*>& steps, const StepAnalysis* typical,
+                       Region region) {
+  Range x, y;
+  for (const StepAnalysis* s : steps) {
+    for (double v : since_heel_strike(*s)) x.add(v);
+    for (double v : s->at(region).series.area_mm2) y.add(v);
+  }
+  y.add(0.0);
+  Chart c(420, 260, x.padded(0.02), y.padded(0.05), "contact-ellipse area over the stance",
+          "time since heel strike (s)", "area (mm\u00b2)");
+  for (const StepAnalysis* s : steps) {
+    c.line(since_heel_strike(*s), s->at(region).series.area_mm2, "#888888", 1.0, 0.35);
+  }
+  c.line(since_heel_strike(*typical), typical->at(region).series.area_mm2, kArea, 2.0);
+  const std::pair<std::string_view, std::string_view> legend[] = {{kArea, "typical step"},
+                                                                  {"#888888", "other steps"}};
+  c.legend(legend);
+  return c.finish();
+}
+
+struct ParamView {
+  const char* label;
+  const char* unit;
+  double EllipsoidParams::*field;
+  const Estimate RegionFit::*estimate;
+  const Spread RegionSessionAnalysis::*spread;
+};
+
+constexpr ParamView kFitted[] = {
+    {"kbar", "N/mm\u00b3", &EllipsoidParams::kbar_n_per_mm3, &RegionFit::kbar_n_per_mm3,
+     &RegionSessionAnalysis::kbar_n_per_mm3},
+    {"n", "", &EllipsoidParams::n, &RegionFit::n, &RegionSessionAnalysis::n},
+    {"cbar", "N s/mm\u00b3", &EllipsoidParams::cbar_ns_per_mm3, &RegionFit::cbar_ns_per_mm3,
+     &RegionSessionAnalysis::cbar_ns_per_mm3},
+    {"m", "", &EllipsoidParams::m, &RegionFit::m, &RegionSessionAnalysis::m},
+};
+
+constexpr ParamView kAll[] = {
+    {"A", "mm", &EllipsoidParams::A_mm, &RegionFit::A_mm, &RegionSessionAnalysis::A_mm},
+    {"B", "mm", &EllipsoidParams::B_mm, &RegionFit::B_mm, &RegionSessionAnalysis::B_mm},
+    {"C", "mm", &EllipsoidParams::C_mm, &RegionFit::C_mm, &RegionSessionAnalysis::C_mm},
+    {"d0", "mm", &EllipsoidParams::d0_mm, &RegionFit::d0_mm, &RegionSessionAnalysis::d0_mm},
+    kFitted[0],
+    kFitted[1],
+    kFitted[2],
+    kFitted[3],
+};
+
+/// Per step values (jittered strip), their box, and Appendix I's mean +/- SD beside them.
+std::string strip_chart(std::span<const StepAnalysis> analyses, Region region, const ParamView& p,
+                        const Spread& spread, const SeedTissueStats& seed) {
+  std::vector<double> values;
+  for (const auto& s : analyses) {
+    const RegionFit& f = s.at(region).fit;
+    if (f.status == FitStatus::Ok) values.push_back((f.*p.estimate).value);
+  }
+  Range y;
+  for (double v : values) y.add(v);
+  const double mean = seed.mean.*p.field;
+  const double sd = seed.sd.*p.field;
+  y.add(mean - sd);
+  y.add(mean + sd);
+  const std::string y_label =
+      *p.unit ? fmt::format("{} ({})", p.label, p.unit) : std::string(p.label);
+  Chart c(200, 260, {0.0, 2.0}, y.padded(0.08), p.label, "", y_label);
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    // A golden-ratio sequence spreads the points evenly without randomness.
+    const double jitter = std::fmod(static_cast<double>(i) * 0.618034, 1.0) - 0.5;
+    c.dot(0.6 + 0.45 * jitter, values[i], kArea, 2.0, 0.45);
+  }
+  if (spread.count > 0) c.box(0.6, spread, 18, kMeasured);
+  c.mean_sd(1.5, mean, sd, kSeed);
+  c.x_category(0.6, "this session");
+  c.x_category(1.5, "App. I");
+  return c.finish();
+}
+
+std::string num(double v) {
+  return fmt::format("{:.4g}", v);
+}
+
+std::string param_table(const RegionSessionAnalysis& r, const SeedTissueStats& seed) {
+  std::string out =
+      "<table><tr><th>parameter</th><th>session fit (SE)</th><th>median across steps "
+      "(IQR)</th><th>Appendix I mean (SD)</th></tr>";
+  for (const ParamView& p : kAll) {
+    const Estimate& e = r.session_fit.*p.estimate;
+    const Spread& s = r.*p.spread;
+    std::string session = "&ndash;";
+    if (r.session_fit.status == FitStatus::Ok) {
+      session = e.free ? fmt::format("{} ({})", num(e.value), num(e.se))
+                       : fmt::format("{} <i>declared</i>", num(e.value));
+      if (e.at_bound) session += " <b>at bound</b>";
+    }
+    const std::string unit = *p.unit ? fmt::format(" ({})", p.unit) : "";
+    fmt::format_to(std::back_inserter(out),
+                   "<tr><td>{}{}</td><td>{}</td><td>{}</td><td>{} ({})</td></tr>", p.label, unit,
+                   session,
+                   s.count > 0 ? fmt::format("{} ({})", num(s.median), num(s.iqr())) : "&ndash;",
+                   num(seed.mean.*p.field), num(seed.sd.*p.field));
+  }
+  fmt::format_to(
+      std::back_inserter(out),
+      "<tr><td>NRMSE (%)</td><td>{}</td><td>{}</td><td>{} ({})</td></tr></table>",
+      r.session_fit.status == FitStatus::Ok ? fmt::format("{:.1f}", r.session_fit.nrmse_pct)
+                                            : "&ndash;",
+      r.nrmse_pct.count > 0 ? fmt::format("{:.1f} ({:.1f})", r.nrmse_pct.median, r.nrmse_pct.iqr())
+                            : "&ndash;",
+      num(seed.nrmse_pct_mean), num(seed.nrmse_pct_sd));
+  return out;
+}
+
+std::string region_section(const ReportInput& in, const RegionSessionAnalysis& r) {
+  const SeedTissueStats& seed = in.config->tissue(in.size, r.region);
+  std::string out;
+  fmt::format_to(
+      std::back_inserter(out),
+      "<section id=\"{0}\"><h2>{0}</h2><p>{1} steps with contact, {2} fitted; session-level fit: "
+      "{3}{4}. A/B = {5:.3f} (median measured contact-ellipse aspect).</p>",
+      region_name(r.region), r.steps_with_contact, r.steps_fitted,
+      fit_status_name(r.session_fit.status),
+      r.session_fit.reason.empty() ? "" : " (" + escape(r.session_fit.reason) + ")", r.aspect);
+  const StepAnalysis* typical = typical_step(in.analyses, r.region);
+  if (typical != nullptr) {
+    const auto shown = overlaid(in.analyses, r.region);
+    out += "<div class=\"row\">";
+    out += typical_chart(*typical, r.region);
+    out += overlay_chart(shown, r.region, static_cast<std::size_t>(r.steps_fitted));
+    out += area_chart(shown, typical, r.region);
+    out += "</div><div class=\"row\">";
+    for (const ParamView& p : kFitted) {
+      out += strip_chart(in.analyses, r.region, p, r.*p.spread, seed);
+    }
+    out += "</div>";
+  } else {
+    out += "<p>No step of this region was fitted.</p>";
+  }
+  out += param_table(r, seed);
+  out += "</section>";
+  return out;
+}
+
+std::string step_table(std::span<const StepRow> steps) {
+  std::string out =
+      "<section id=\"steps\"><h2>Steps</h2><table><tr><th>foot</th><th>step</th><th>heel strike "
+      "(s)</th>"
+      "<th>toe off (s)</th><th>stance (s)</th><th>peak force (N)</th><th>status</th>"
+      "<th>total-force NRMSE (%)</th></tr>";
+  for (const StepRow& s : steps) {
+    fmt::format_to(std::back_inserter(out),
+                   "<tr><td>{}</td><td>{}</td><td>{:.3f}</td><td>{:.3f}</td><td>{:.3f}</td>"
+                   "<td>{:.1f}</td><td>{}</td><td>{}</td></tr>",
+                   foot_name(s.foot), s.index, s.t_heel_strike_s, s.t_toe_off_s,
+                   s.t_toe_off_s - s.t_heel_strike_s, s.peak_force_n, step_status_name(s.status),
+                   s.nrmse_total_pct ? fmt::format("{:.1f}", *s.nrmse_total_pct) : "");
+  }
+  out += "</table></section>";
+  return out;
+}
+
+constexpr std::string_view kStyle =
+    "body{font-family:sans-serif;margin:24px;color:#222;max-width:1320px}"
+    "h1{font-size:22px}h2{font-size:18px;margin-top:28px;border-bottom:1px solid #ccc}"
+    "table{border-collapse:collapse;font-size:13px;margin:8px 0}"
+    "td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+    "th{background:#f2f2f2}.row{display:flex;flex-wrap:wrap;gap:8px}"
+    "svg{font-size:11px;background:#fff}svg .title{font-size:13px;font-weight:bold}"
+    "svg .axis{font-size:12px}svg .legend{font-size:11px}"
+    "svg .frame{fill:none;stroke:#555}svg .grid{stroke:#e4e4e4}"
+    ".note{background:#fff8e6;border:1px solid #f0d080;padding:8px;font-size:13px}";
+
+}  // namespace
+
+std::string render_report_html(const ReportInput& in) {
+  std::string out = "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>";
+  out += "gaitmon analyze: " + escape(in.session_name);
+  out += "</title><style>";
+  out += kStyle;
+  out += "</style></head><body>";
+  const auto& fit = in.settings->fit;
+  std::size_t ok = 0;
+  for (const auto& s : in.steps) ok += s.status == StepStatus::Ok ? 1 : 0;
+  fmt::format_to(std::back_inserter(out),
+                 "<h1>gaitmon analyze: {}</h1><p>Insole {}, {} Hz; {} steps, {} complete and "
+                 "analysed. Model {}, fit {}, smoothing {}{}. Median total-force NRMSE {:.1f} % "
+                 "(IQR {:.1f} %).</p>",
+                 escape(in.session_name), insole_size_name(in.size), in.sample_rate_hz,
+                 in.steps.size(), ok, model_variant_name(fit.model), fit_mode_name(fit.mode),
+                 smoothing_name(fit.smoothing), fit.free_scale ? ", P free" : "",
+                 in.session->nrmse_total_pct.median, in.session->nrmse_total_pct.iqr());
+  if (fit.mode == FitMode::Seed8) {
+    out +=
+        "<p class=\"note\"><b>--fit seed8</b>: all eight parameters are free, as in the seed. "
+        "Force and contact area cannot determine C and d0 (nor, fully, A and B): their values "
+        "are wherever the optimiser stopped. Boxes span the interquartile range with the "
+        "median; orange marks Appendix I's mean &plusmn; SD.</p>";
+  } else {
+    fmt::format_to(std::back_inserter(out),
+                   "<p class=\"note\">C and d0 are <b>declared</b>, not fitted: force and contact "
+                   "area cannot determine them. They are the seed's Appendix I means for insole "
+                   "{}; A/B is the median measured contact-ellipse aspect with P = &pi;AB from "
+                   "Appendix I. kbar and cbar are derived under those declared values, so compare "
+                   "them with Appendix I only with that in mind. Per region: the typical step is "
+                   "the one with the median NRMSE; boxes span the interquartile range with the "
+                   "median; orange marks Appendix I's mean &plusmn; SD.</p>",
+                   insole_size_name(in.size));
+  }
+  out += "<p>Regions:";
+  for (Region region : kRegions) {
+    fmt::format_to(std::back_inserter(out), " <a href=\"#{0}\">{0}</a>", region_name(region));
+  }
+  out += " &middot; <a href=\"#steps\">steps</a></p>";
+  for (const RegionSessionAnalysis& r : in.session->regions) out += region_section(in, r);
+  out += step_table(in.steps);
+  out += "</body></html>\n";
+  return out;
+}
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,39 @@
+// The self-contained HTML report of `gaitmon analyze`: inline SVG and CSS, no script, no network.
+#pragma once
+
+#include <optional>
+#include <span>
+#include <string>
+
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/config.hpp"
+#include "gaitmon/segmentation.hpp"
+
+namespace gaitmon::cli {
+
+/// One line of steps.csv.
+struct StepRow {
+  Foot foot = Foot::Left;
+  int index = 0;
+  double t_heel_strike_s = 0.0;
+  double t_toe_off_s = 0.0;
+  double peak_force_n = 0.0;
+  StepStatus status = StepStatus::Ok;
+  std::optional<double> nrmse_total_pct;  ///< analysed steps only
+};
+
+struct ReportInput {
+  std::string session_name;
+  InsoleSize size = InsoleSize::S37_38;
+  double sample_rate_hz = 100.0;
+  const Config* config = nullptr;
+  const AnalysisSettings* settings = nullptr;
+  std::span<const StepRow> steps;
+  std::span<const StepAnalysis> analyses;  ///< Ok steps, by foot then step
+  const SessionAnalysis* session = nullptr;
+};
+
+/// The whole report as one HTML document.
+std::string render_report_html(const ReportInput& input);
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,213 @@
+// `gaitmon analyze` end to end: its files, their headers, the report, and its errors.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <vector>
+
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string run(const std::string& args, int* status) {
+  std::string output;
+  *status = test::run_command(test::gaitmon_binary().string() + " " + args, &output);
+  return output;
+}
+
+std::vector<std::string> lines_of(const fs::path& path) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+std::vector<std::string> fields(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  for (std::string f; std::getline(ss, f, ',');) out.push_back(f);
+  if (!line.empty() && line.back() == ',') out.emplace_back();
+  return out;
+}
+
+std::string read_all(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+/// A 6 s simulated walk, analysed once with --report.
+struct Analysed {
+  fs::path dir;
+  std::string output;
+  int status = -1;
+};
+
+const Analysed& analysed() {
+  static const Analysed a = [] {
+    Analysed r;
+    r.dir = test::scratch_dir("analyze-cmd");
+    std::string out =
+        run("simulate --size 37-38 --duration 6 --seed 2 --out " + (r.dir / "s.csv").string(),
+            &r.status);
+    if (r.status != 0) {
+      r.output = out;
+      return r;
+    }
+    r.output = run("analyze " + (r.dir / "s.csv").string() + " --out " + (r.dir / "out").string() +
+                       " --report",
+                   &r.status);
+    return r;
+  }();
+  return a;
+}
+
+TEST(AnalyzeCommand, WritesStepsWithTheTotalNrmse) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto lines = lines_of(a.dir / "out" / "steps.csv");
+  ASSERT_GE(lines.size(), 5u);
+  EXPECT_EQ(lines[0],
+            "foot,step,t_heel_strike_s,t_toe_off_s,stance_s,peak_force_n,status,nrmse_total_pct");
+  int ok = 0;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const auto f = fields(lines[i]);
+    ASSERT_EQ(f.size(), 8u) << lines[i];
+    if (f[6] == "ok") {
+      ++ok;
+      EXPECT_FALSE(f[7].empty()) << lines[i];
+      EXPECT_GT(std::stod(f[7]), 0.0);
+    } else {
+      EXPECT_EQ(f[6], "incomplete");
+      EXPECT_TRUE(f[7].empty()) << lines[i];
+    }
+  }
+  EXPECT_GE(ok, 6) << "6 s at 1.1 s strides: at least 3 whole steps per foot";
+}
+
+TEST(AnalyzeCommand, WritesARowPerOkStepAndRegion) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  std::vector<std::string> ok_steps;
+  for (const auto& line : lines_of(a.dir / "out" / "steps.csv")) {
+    const auto f = fields(line);
+    if (f.size() > 6 && f[6] == "ok") ok_steps.push_back(f[0] + "," + f[1]);
+  }
+  const auto lines = lines_of(a.dir / "out" / "regions.csv");
+  ASSERT_FALSE(lines.empty());
+  const std::string fixed =
+      "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
+      "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct";
+  EXPECT_EQ(lines[0].substr(0, fixed.size()), fixed);
+  const std::size_t columns = fields(lines[0]).size();
+  ASSERT_EQ(lines.size(), 1 + 8 * ok_steps.size());
+  std::map<std::string, int> per_step;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const auto f = fields(lines[i]);
+    ASSERT_EQ(f.size(), columns) << lines[i];
+    ++per_step[f[0] + "," + f[1]];
+    EXPECT_TRUE(f[3] == "ok" || f[3] == "no_contact" || f[3].starts_with("fit_failed:"))
+        << lines[i];
+    if (f[3] == "ok" && f[2] == "heel") {
+      EXPECT_EQ(f[9], "69.9") << "heel C of size 37-38, Appendix I";
+      EXPECT_EQ(f[10], "16.4") << "heel d0 of size 37-38, Appendix I";
+    }
+  }
+  for (const auto& s : ok_steps) EXPECT_EQ(per_step[s], 8) << s;
+}
+
+TEST(AnalyzeCommand, WritesTheSessionLevelFitsAsJson) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto j = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
+  EXPECT_EQ(j.at("settings").at("model"), "correct");
+  EXPECT_EQ(j.at("settings").at("fit"), "identifiable");
+  EXPECT_NE(j.at("note").get<std::string>().find("declared"), std::string::npos);
+  for (const char* region : {"heel", "midfoot_posterior", "midfoot_anterior", "met1_2", "met3_5",
+                             "toe1", "toe2", "toes3_5"}) {
+    SCOPED_TRACE(region);
+    const auto& r = j.at("regions").at(region);
+    const auto& fit = r.at("session_fit");
+    EXPECT_EQ(fit.at("status"), "ok");
+    for (const char* p :
+         {"A_mm", "B_mm", "C_mm", "d0_mm", "kbar_n_per_mm3", "n", "cbar_ns_per_mm3", "m"}) {
+      EXPECT_TRUE(fit.at("parameters").at(p).at("value").is_number());
+      EXPECT_TRUE(r.at("across_steps").at(p).at("median").is_number());
+      EXPECT_TRUE(r.at("across_steps").at(p).at("iqr").is_number());
+    }
+    EXPECT_FALSE(fit.at("parameters").at("C_mm").at("free").get<bool>());
+    EXPECT_TRUE(fit.at("parameters").at("kbar_n_per_mm3").at("free").get<bool>());
+    EXPECT_GT(fit.at("nrmse_pct").get<double>(), 0.0);
+  }
+  EXPECT_DOUBLE_EQ(j.at("regions").at("heel").at("appendix_i").at("mean").at("d0_mm"), 16.4);
+}
+
+TEST(AnalyzeCommand, ReportIsSelfContained) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const std::string html = read_all(a.dir / "out" / "report.html");
+  EXPECT_NE(html.find("<svg"), std::string::npos);
+  EXPECT_EQ(html.find("http://"), std::string::npos);
+  EXPECT_EQ(html.find("https://"), std::string::npos);
+  EXPECT_EQ(html.find("<script"), std::string::npos);
+  EXPECT_NE(html.find("force (N)"), std::string::npos) << "axes carry units";
+  EXPECT_NE(html.find("Appendix I"), std::string::npos);
+  EXPECT_NE(html.find("</html>"), std::string::npos);
+}
+
+TEST(AnalyzeCommand, PrintsASummaryPerRegion) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  for (const char* region : {"heel", "met3_5", "toes3_5"}) {
+    EXPECT_NE(a.output.find(region), std::string::npos) << a.output;
+  }
+  EXPECT_NE(a.output.find("NRMSE"), std::string::npos) << a.output;
+  EXPECT_EQ(a.output.find("warning"), std::string::npos) << a.output;
+}
+
+TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  int status = -1;
+  const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                  (a.dir / "seed8").string() + " --fit seed8",
+                              &status);
+  ASSERT_EQ(status, 0) << out;
+  const auto warning = out.find("warning");
+  ASSERT_NE(warning, std::string::npos) << out;
+  const std::string line = out.substr(warning, out.find('\n', warning) - warning);
+  EXPECT_NE(line.find("C_mm"), std::string::npos) << line;
+  EXPECT_NE(line.find("d0_mm"), std::string::npos) << line;
+}
+
+TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
+  const auto dir = test::scratch_dir("analyze-bad");
+  std::string text =
+      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
+  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
+  text += "\n0.0,L";
+  for (int i = 1; i <= 93; ++i) text += ",0";
+  text += "\n0.01,L";
+  for (int i = 1; i <= 92; ++i) text += ",0";
+  text += "\n";
+  test::write_text(dir / "bad.csv", text);
+  int status = -1;
+  const std::string out =
+      run("analyze " + (dir / "bad.csv").string() + " --out " + (dir / "o").string() + " --report",
+          &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("bad.csv:7"), std::string::npos) << out;
+  for (const char* name : {"steps.csv", "regions.csv", "session.json", "report.html",
+                           "steps.csv.partial", "regions.csv.partial"}) {
+    EXPECT_FALSE(fs::exists(dir / "o" / name)) << name;
+  }
+}
+
+}  // namespace
+}  // namespace gaitmon

@@ -1,0 +1,96 @@
+// The per-step analysis of one foot-step (warm ellipse cache, 8 region fits; target 2 ms) and
+// `gaitmon analyze` on a 10-minute two-foot simulated session (target 3 s).
+#include <benchmark/benchmark.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/batch.hpp"
+#include "gaitmon/simulator.hpp"
+#include "test_support.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path& bench_dir() {
+  static const fs::path dir = gaitmon::test::scratch_dir("analysis_bench");
+  return dir;
+}
+
+const gaitmon::Config& config() {
+  static const gaitmon::Config c = gaitmon::load_config(gaitmon::default_config_path());
+  return c;
+}
+
+fs::path simulated(double duration_s) {
+  const fs::path csv =
+      bench_dir() / ("walk-" + std::to_string(static_cast<int>(duration_s)) + ".csv");
+  if (!fs::exists(csv)) {
+    gaitmon::SimulationOptions options;
+    options.size = gaitmon::InsoleSize::S37_38;
+    options.duration_s = duration_s;
+    options.seed = 7;
+    gaitmon::simulate_session(config(), options, csv, fs::path(csv).replace_extension(".json"));
+  }
+  return csv;
+}
+
+void BM_AnalyseStep(benchmark::State& state) {
+  std::vector<gaitmon::Step> steps;
+  gaitmon::segment_session(simulated(30.0), config(), [&](gaitmon::Step&& step) {
+    if (step.status == gaitmon::StepStatus::Ok) steps.push_back(std::move(step));
+  });
+  const gaitmon::InsoleLayout layout(config().insole(gaitmon::InsoleSize::S37_38), config().sensor);
+  const gaitmon::AnalysisSettings settings;
+  gaitmon::ContactEllipseCache cache;
+  for (const auto& step : steps) gaitmon::analyse_step(step, layout, config(), settings, &cache);
+  std::size_t i = 0;
+  for (auto _ : state) {
+    auto a = gaitmon::analyse_step(steps[i], layout, config(), settings, &cache);
+    benchmark::DoNotOptimize(a.nrmse_total_pct);
+    i = (i + 1) % steps.size();
+  }
+  state.counters["steps_cycled"] = static_cast<double>(steps.size());
+}
+BENCHMARK(BM_AnalyseStep)->Unit(benchmark::kMillisecond)->Repetitions(5);
+
+/// The gaitmon executable of the same build: tests/ sits beside it.
+fs::path gaitmon_executable() {
+  return fs::read_symlink("/proc/self/exe").parent_path().parent_path() / "gaitmon";
+}
+
+void BM_AnalyzeCommandTenMinutes(benchmark::State& state) {
+  const fs::path exe = gaitmon_executable();
+  if (!fs::exists(exe)) {
+    state.SkipWithError("the gaitmon executable is not built beside tests/");
+    return;
+  }
+  const std::string command = exe.string() + " analyze " + simulated(600.0).string() + " --out " +
+                              (bench_dir() / "out").string() + " > /dev/null";
+  for (auto _ : state) {
+    if (std::system(command.c_str()) != 0) {
+      state.SkipWithError("gaitmon analyze failed");
+      return;
+    }
+  }
+}
+BENCHMARK(BM_AnalyzeCommandTenMinutes)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1)
+    ->Repetitions(3)
+    ->UseRealTime();
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  fs::remove_all(bench_dir());
+  return 0;
+}
