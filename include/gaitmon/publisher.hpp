@@ -1,0 +1,110 @@
+// What the live monitor tells the outside world, as plain structs, and the interface that sends
+// them. The monitor knows only this interface; the LCM implementation (src/lcm/) maps each struct
+// onto its generated message type, and tests record them in memory.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+/// Microseconds since the Unix epoch, as LCM's utime.
+std::int64_t now_utime();
+
+struct RegionFrameReport {
+  double force_n = 0.0;           ///< eq 42, bias removed
+  double active_area_mm2 = 0.0;   ///< sensors above zero x sensor area
+  std::uint8_t ellipse_case = 0;  ///< ContactEllipse kase as its integer value; 0 = none
+  double centre_x_mm = 0.0, centre_y_mm = 0.0;
+  double ra_mm = 0.0, rb_mm = 0.0;  ///< semi-axes (ra nearer the lateral-medial axis)
+  double angle_rad = 0.0;
+  double ellipse_area_mm2 = 0.0;
+};
+
+/// Per foot and frame (GAITMON_FRAME).
+struct FrameReport {
+  std::int64_t utime = 0;
+  Foot foot = Foot::Left;
+  std::int64_t frame = 0;  ///< 0-based index among this foot's frames
+  double t_s = 0.0;        ///< session time of the frame
+  std::array<RegionFrameReport, kRegionCount> regions{};
+};
+
+/// Heel strike and toe off events (GAITMON_STEP).
+struct StepEvent {
+  enum class Kind : std::uint8_t { HeelStrike, ToeOff };
+  std::int64_t utime = 0;
+  Foot foot = Foot::Left;
+  int step = 0;
+  Kind kind = Kind::HeelStrike;
+  std::int64_t frame = 0;
+  double t_s = 0.0;
+};
+
+struct RegionFitReport {
+  Region region = Region::Heel;
+  std::string status;  ///< ok, no_contact, fit_failed:<reason>
+  double kbar_n_per_mm3 = 0.0, n = 0.0, cbar_ns_per_mm3 = 0.0, m = 0.0;
+  double se_kbar = 0.0, se_n = 0.0, se_cbar = 0.0, se_m = 0.0;
+  double A_mm = 0.0, B_mm = 0.0, C_mm = 0.0, d0_mm = 0.0;
+  double nrmse_pct = 0.0;
+};
+
+/// Per foot-step fit results (GAITMON_FIT).
+struct FitReport {
+  std::int64_t utime = 0;
+  Foot foot = Foot::Left;
+  int step = 0;
+  double t_heel_strike_s = 0.0;
+  double t_toe_off_s = 0.0;
+  double nrmse_total_pct = 0.0;
+  double latency_ms = 0.0;  ///< from the step's finalisation (end of step known) to publication
+  std::array<RegionFitReport, kRegionCount> regions{};
+};
+
+/// 1 Hz health of the pipeline (GAITMON_STATUS). Counters are totals since start.
+struct StatusReport {
+  std::int64_t utime = 0;
+  std::string connection;  ///< connecting, connected, disconnected, finished
+  std::uint64_t bytes_received = 0;
+  std::uint64_t frames_decoded = 0;
+  std::uint64_t crc_errors = 0;
+  std::uint64_t resyncs = 0;
+  std::uint64_t frames_lost_sequence = 0;  ///< gaps in the device counter
+  std::uint64_t reconnects = 0;
+  std::uint64_t ring_depth = 0;
+  std::uint64_t ring_drops = 0;
+  std::uint64_t steps_detected = 0;
+  std::uint64_t step_backlog = 0;
+  std::uint64_t step_drops = 0;
+  std::uint64_t fits_published = 0;
+  std::uint64_t fits_failed = 0;
+  double fit_latency_p50_ms = 0.0;
+  double fit_latency_p99_ms = 0.0;
+};
+
+/// Raw frames (GAITMON_RAW, off by default).
+struct RawFrameReport {
+  std::int64_t utime = 0;
+  Foot foot = Foot::Left;
+  std::uint32_t sequence = 0;
+  std::uint32_t device_time_us = 0;
+  std::vector<std::uint8_t> bits;
+};
+
+/// Implementations must be safe to call from several threads at once.
+class Publisher {
+ public:
+  virtual ~Publisher() = default;
+  virtual void publish(const FrameReport& report) = 0;
+  virtual void publish(const StepEvent& event) = 0;
+  virtual void publish(const FitReport& report) = 0;
+  virtual void publish(const StatusReport& report) = 0;
+  virtual void publish(const RawFrameReport& report) = 0;
+};
+
+}  // namespace gaitmon
