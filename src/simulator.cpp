@@ -111,7 +111,19 @@ struct RegionCells {
   double centre_y_mm = 0.0;
   double width_mm = 0.0;
   double height_mm = 0.0;
+  double box_width_mm = 0.0;  ///< the cells' bounding box, cell edges included
+  double box_height_mm = 0.0;
   std::size_t nearest_to_centre = 0;  ///< position in `sensors`
+
+  /// The area-preserving stretch of x (y shrinks by the same factor) that gives a contact
+  /// ellipse of aspect A/B the aspect of the region's box, so it grows into the region's cells
+  /// instead of spilling out of one side while the other stays empty. It keeps every area and
+  /// the integral of the pressure, so force against contact area is the model's own.
+  double stretch(const EllipsoidParams& params) const {
+    return std::sqrt((box_width_mm / box_height_mm) / (params.A_mm / params.B_mm));
+  }
+  /// The largest ellipse of the box's aspect that stays inside it, as an area.
+  double inscribed_area_mm2() const { return kPi / 4.0 * box_width_mm * box_height_mm; }
 };
 
 RegionCells gather_cells(const InsoleLayout& layout, Region region) {
@@ -123,12 +135,13 @@ RegionCells gather_cells(const InsoleLayout& layout, Region region) {
     cells.sensors.push_back(index);
     cells.x_mm.push_back(s.grid_x_mm);
     cells.y_mm.push_back(s.grid_y_mm);
-    cells.centre_x_mm += s.grid_x_mm;
-    cells.centre_y_mm += s.grid_y_mm;
   }
-  const auto count = static_cast<double>(cells.sensors.size());
-  cells.centre_x_mm /= count;
-  cells.centre_y_mm /= count;
+  const auto [x_lo, x_hi] = std::minmax_element(cells.x_mm.begin(), cells.x_mm.end());
+  const auto [y_lo, y_hi] = std::minmax_element(cells.y_mm.begin(), cells.y_mm.end());
+  cells.box_width_mm = *x_hi - *x_lo + cells.width_mm;
+  cells.box_height_mm = *y_hi - *y_lo + cells.height_mm;
+  cells.centre_x_mm = 0.5 * (*x_lo + *x_hi);
+  cells.centre_y_mm = 0.5 * (*y_lo + *y_hi);
   double best = std::numeric_limits<double>::infinity();
   for (std::size_t i = 0; i < cells.sensors.size(); ++i) {
     const double dx = cells.x_mm[i] - cells.centre_x_mm;
@@ -148,8 +161,9 @@ void rasterise_into(const RegionCells& cells, const EllipsoidParams& params, dou
   std::fill(out.begin(), out.end(), 0.0);
   if (!(force_n > 0.0) || !(d_mm > 0.0)) return;
   const PressureField field(params, d_mm, ddot_mm_per_s, variant);
-  const double rA = field.radii().rA_mm;
-  const double rB = field.radii().rB_mm;
+  const double stretch = cells.stretch(params);
+  const double rA = field.radii().rA_mm * stretch;
+  const double rB = field.radii().rB_mm / stretch;
   const double w = cells.width_mm;
   const double h = cells.height_mm;
   const auto rho2_at = [&](double x, double y) {
@@ -332,6 +346,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
   j["clipped_high_samples"] = truth.clipped_high_samples;
   j["clipped_low_samples"] = truth.clipped_low_samples;
   j["contact_area_cap_fraction_of_sensor_area"] = kMaxContactFractionOfSensorArea;
+  j["contact_area_cap_fraction_of_inscribed_ellipse"] = kMaxContactFractionOfInscribedEllipse;
   nlohmann::json regions = nlohmann::json::object();
   for (Region r : kRegions) {
     const SimulatedRegion& sr = truth.regions[index_of(r)];
@@ -458,8 +473,9 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
     const IdentifiableParams id = identifiable(sr.params);  // validates the geometry
     cells[ri] = gather_cells(layout, r);
     sr.sensor_area_mm2 = static_cast<double>(cells[ri].sensors.size()) * config.sensor.area_mm2();
-    const double max_area =
-        std::min(kMaxContactFractionOfSensorArea * sr.sensor_area_mm2, 0.99 * id.P_mm2);
+    const double max_area = std::min(
+        {kMaxContactFractionOfSensorArea * sr.sensor_area_mm2,
+         kMaxContactFractionOfInscribedEllipse * cells[ri].inscribed_area_mm2(), 0.99 * id.P_mm2});
     sr.target_elastic_force_n = kPeakElasticForceShare[ri] * body_weight_n;
     sr.peak_area_mm2 =
         contact_area_for_elastic_force(sr.params, sr.target_elastic_force_n, max_area);

@@ -1,6 +1,8 @@
-// Per-region fits of the ellipsoid tissue model with Ceres: bounded Levenberg-Marquardt in
-// log-scaled parameters, a log-linear initial guess plus deterministic extra starts, standard
-// errors from the Jacobian at the optimum, and a rank check that names what the data cannot see.
+// Per-region fits of the ellipsoid tissue model. The default (P, C, d0 declared) is separable:
+// an exact inner solve for K and D on a grid over the exponents (n, m), then a bounded
+// Levenberg-Marquardt with analytic derivatives. Free P and seed8 use Ceres with automatic
+// derivatives and a log-linear initial guess plus deterministic extra starts. Both give standard
+// errors from the Jacobian at the optimum and a rank check that names what the data cannot see.
 //
 // Non-negative force: like the seed's eq 57, a penalty, here as one extra residual per frame,
 // kPenaltyWeight x max(0, -F_model), so a model that pulls on the foot costs far more than a
@@ -419,6 +421,335 @@ std::vector<std::vector<double>> initial_guesses(const std::vector<FitFrame>& fr
   return starts;
 }
 
+// What a solver hands back: the optimum in theta, the data residuals' Jacobian there (for the
+// standard errors and the rank check) and the outcome.
+struct Solution {
+  std::vector<double> theta;
+  Eigen::MatrixXd jacobian;
+  std::string message;
+  int iterations = 0;
+  double cost = 0.0;  ///< 1/2 the sum of squared residuals, penalty included (Ceres' convention)
+  bool converged = false;
+  std::string failure;  ///< why not converged: no_convergence, solver_failure or non_finite
+};
+
+// ---- The default fit: separable in (K, D) given (n, m) ----
+//
+// With P, C and d0 declared, g and gdot are fixed by the data, and the model is linear in the
+// combinations K and D for given exponents:
+//   F_i = K e_i(n) + D v_i(m),  e_i = P g^(2+n) (1 - g/3),  v_i = s P g^(1+m) gdot h(g).
+// For each (n, m) on a grid the best (K, D) inside their bounds, with the non-negativity penalty,
+// is a small convex problem solved exactly; that profile is searched on the whole (n, m) box, so
+// the global minimum is found without relying on starting points. The best grid point then
+// starts a bounded Levenberg-Marquardt on (log kbar, n, log cbar, m) with analytic derivatives.
+// Everything is a few passes over the frames: no allocation per iteration beyond the frame
+// vectors, and no solver set-up.
+
+constexpr int kGridN = 33;
+constexpr int kGridM = 15;
+constexpr int kMaxActiveSetRounds = 8;
+constexpr double kFunctionTolerance = 1e-8;
+constexpr double kParameterTolerance = 1e-8;
+constexpr double kGradientTolerance = 1e-10;
+
+struct SeparableData {
+  std::vector<double> log_g;   ///< log g per frame
+  std::vector<double> e_base;  ///< P g^2 (1 - g/3): e_i(n) = e_base exp(n log g)
+  std::vector<double> v_base;  ///< s P g gdot h(g): v_i(m) = v_base exp(m log g)
+  std::vector<double> force;
+  double log_c = 0.0;      ///< log C
+  double log_ratio = 0.0;  ///< log C - log d0: K = kbar exp(log_c + n log_ratio)
+};
+
+SeparableData separable_data(const std::vector<FitFrame>& frames, const Layout& layout,
+                             ModelVariant variant) {
+  const auto& d = layout.declared;
+  const double P = std::numbers::pi * d[kA] * d[kB];
+  const double sign = variant == ModelVariant::Correct ? 1.0 : -1.0;
+  SeparableData s;
+  s.log_c = std::log(d[kC]);
+  s.log_ratio = s.log_c - std::log(d[kD0]);
+  for (const FitFrame& f : frames) {
+    const double g = area_g(f.area_mm2, P);
+    double gdot = 0.0;
+    if (f.dt_s > 0.0) {
+      gdot = (area_g(f.area_hi_mm2, P) - area_g(f.area_lo_mm2, P)) / f.dt_s;
+    } else {
+      const double a = std::min(f.area_mm2 / P, kMaxAreaFraction);
+      gdot = f.area_rate_mm2_per_s / (P * 2.0 * std::sqrt(1.0 - a));
+    }
+    // ellipsoid_force at K = D = 1 and n = m = 0, split into its elastic and damping parts.
+    const double elastic = ellipsoid_force(P, 1.0, 0.0, 0.0, 0.0, g, gdot, ModelVariant::Correct);
+    const double total = ellipsoid_force(P, 1.0, 0.0, 1.0, 0.0, g, gdot, ModelVariant::Correct);
+    s.log_g.push_back(g > 0.0 ? std::log(g) : -745.0);
+    s.e_base.push_back(elastic);
+    s.v_base.push_back(sign * (total - elastic));
+    s.force.push_back(f.force_n);
+  }
+  return s;
+}
+
+struct Coefficients {
+  double K = 0.0;
+  double D = 0.0;
+  double cost = 0.0;  ///< sum of squared residuals, penalty included
+};
+
+// Sums over the frames for one (n, m): sum e^2, e F, v^2, v F, e v and F^2.
+struct Moments {
+  double ee = 0.0, eF = 0.0, vv = 0.0, vF = 0.0, ev = 0.0, FF = 0.0;
+};
+
+// The best (K, D) in [K_lo, K_hi] x [D_lo, D_hi] for fixed basis vectors e and v. The objective
+// sum (K e + D v - F)^2 + w^2 sum_{K e + D v < 0} (K e + D v)^2 is convex: each round solves the
+// box-constrained quadratic with the current negative set (interior solution, else the best of
+// the four edges, where the 1-D minimiser is a clamp), until the negative set stops changing.
+// With K, D > 0 and e >= 0 only frames with v < 0 (unloading) can go negative: `unloading` lists
+// them, and `negative` is scratch of the same length.
+Coefficients best_coefficients(const Moments& mo, std::span<const double> e,
+                               std::span<const double> v, std::span<const std::size_t> unloading,
+                               std::span<char> negative, double K_lo, double K_hi, double D_lo,
+                               double D_hi) {
+  const double w2 = kPenaltyWeight * kPenaltyWeight;
+  double pee = 0.0, pev = 0.0, pvv = 0.0;  // the penalty's extra weight on negative frames
+  std::fill(negative.begin(), negative.end(), 0);
+  Coefficients best;
+  for (int round = 0; round < kMaxActiveSetRounds; ++round) {
+    double a = mo.ee + pee, b = mo.ev + pev, c = mo.vv + pvv;
+    double K = 0.0, D = 0.0;
+    const double det = a * c - b * b;
+    bool interior = false;
+    if (det > 1e-300 * a * c && a > 0.0) {
+      K = (c * mo.eF - b * mo.vF) / det;
+      D = (a * mo.vF - b * mo.eF) / det;
+      interior = K >= K_lo && K <= K_hi && D >= D_lo && D <= D_hi;
+    }
+    const auto q = [&](double k, double d) {
+      return a * k * k + 2.0 * b * k * d + c * d * d - 2.0 * (mo.eF * k + mo.vF * d);
+    };
+    if (!interior) {
+      double best_q = std::numeric_limits<double>::infinity();
+      const auto consider = [&](double k, double d) {
+        const double value = q(k, d);
+        if (value < best_q) {
+          best_q = value;
+          K = k;
+          D = d;
+        }
+      };
+      for (double k : {K_lo, K_hi}) {
+        consider(k, c > 0.0 ? std::clamp((mo.vF - b * k) / c, D_lo, D_hi) : D_lo);
+      }
+      for (double d : {D_lo, D_hi}) {
+        consider(a > 0.0 ? std::clamp((mo.eF - b * d) / a, K_lo, K_hi) : K_lo, d);
+      }
+    }
+    bool changed = false;
+    pee = pev = pvv = 0.0;
+    for (std::size_t j = 0; j < unloading.size(); ++j) {
+      const std::size_t i = unloading[j];
+      const char neg = K * e[i] + D * v[i] < 0.0 ? 1 : 0;
+      changed = changed || neg != negative[j];
+      negative[j] = neg;
+      if (neg) {
+        pee += w2 * e[i] * e[i];
+        pev += w2 * e[i] * v[i];
+        pvv += w2 * v[i] * v[i];
+      }
+    }
+    // The cost with the negative set the solution actually has.
+    a = mo.ee + pee;
+    b = mo.ev + pev;
+    c = mo.vv + pvv;
+    best = {K, D, mo.FF + q(K, D)};
+    if (!changed) break;
+  }
+  return best;
+}
+
+// The data and penalty residuals and their Jacobian in theta = (log kbar, n, log cbar, m).
+struct Residuals {
+  Eigen::VectorXd r;  ///< data residuals, then penalty residuals
+  Eigen::MatrixXd J;
+};
+
+void evaluate(const SeparableData& s, const Eigen::Vector4d& theta, Residuals& out) {
+  const std::size_t n = s.force.size();
+  const Eigen::Index N = static_cast<Eigen::Index>(n);
+  out.r.resize(2 * N);
+  out.J.resize(2 * N, 4);
+  const double K = std::exp(theta(0) + s.log_c + theta(1) * s.log_ratio);
+  const double D = std::exp(theta(2) + s.log_c + theta(3) * s.log_ratio);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Index row = static_cast<Eigen::Index>(i);
+    const double elastic = K * s.e_base[i] * std::exp(theta(1) * s.log_g[i]);
+    const double damping = D * s.v_base[i] * std::exp(theta(3) * s.log_g[i]);
+    const double f = elastic + damping;
+    const Eigen::RowVector4d grad(elastic, elastic * (s.log_ratio + s.log_g[i]), damping,
+                                  damping * (s.log_ratio + s.log_g[i]));
+    out.r(row) = f - s.force[i];
+    out.J.row(row) = grad;
+    if (f < 0.0) {
+      out.r(N + row) = -kPenaltyWeight * f;
+      out.J.row(N + row) = -kPenaltyWeight * grad;
+    } else {
+      out.r(N + row) = 0.0;
+      out.J.row(N + row).setZero();
+    }
+  }
+}
+
+Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layout,
+                         const FitSettings& settings) {
+  const SeparableData s = separable_data(frames, layout, settings.model);
+  const int iK = layout.index[kKbar], iN = layout.index[kN], iC = layout.index[kCbar],
+            iM = layout.index[kM];
+  const Eigen::Vector4d lower(layout.lower[iK], layout.lower[iN], layout.lower[iC],
+                              layout.lower[iM]);
+  const Eigen::Vector4d upper(layout.upper[iK], layout.upper[iN], layout.upper[iC],
+                              layout.upper[iM]);
+  const std::size_t count = frames.size();
+
+  // The profile over the (n, m) grid: the elastic and damping bases per grid value, once.
+  std::vector<double> e_grid(kGridN * count), v_grid(kGridM * count);
+  const auto grid_value = [](int i, int size, double lo, double hi) {
+    return lo + (hi - lo) * static_cast<double>(i) / static_cast<double>(size - 1);
+  };
+  for (int a = 0; a < kGridN; ++a) {
+    const double n = grid_value(a, kGridN, lower(1), upper(1));
+    for (std::size_t i = 0; i < count; ++i)
+      e_grid[a * count + i] = s.e_base[i] * std::exp(n * s.log_g[i]);
+  }
+  for (int b = 0; b < kGridM; ++b) {
+    const double m = grid_value(b, kGridM, lower(3), upper(3));
+    for (std::size_t i = 0; i < count; ++i)
+      v_grid[b * count + i] = s.v_base[i] * std::exp(m * s.log_g[i]);
+  }
+  std::vector<double> ee(kGridN), eF(kGridN), vv(kGridM), vF(kGridM);
+  double FF = 0.0;
+  std::vector<std::size_t> unloading;
+  for (std::size_t i = 0; i < count; ++i) {
+    FF += s.force[i] * s.force[i];
+    if (s.v_base[i] < 0.0) unloading.push_back(i);
+  }
+  for (int a = 0; a < kGridN; ++a) {
+    for (std::size_t i = 0; i < count; ++i) {
+      const double e = e_grid[a * count + i];
+      ee[a] += e * e;
+      eF[a] += e * s.force[i];
+    }
+  }
+  for (int b = 0; b < kGridM; ++b) {
+    for (std::size_t i = 0; i < count; ++i) {
+      const double v = v_grid[b * count + i];
+      vv[b] += v * v;
+      vF[b] += v * s.force[i];
+    }
+  }
+  std::vector<char> negative(unloading.size());
+  Eigen::Vector4d theta = 0.5 * (lower + upper);
+  double best_cost = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < kGridN; ++a) {
+    const double n = grid_value(a, kGridN, lower(1), upper(1));
+    const double k_scale = std::exp(s.log_c + n * s.log_ratio);
+    const std::span<const double> e(&e_grid[a * count], count);
+    for (int b = 0; b < kGridM; ++b) {
+      const double m = grid_value(b, kGridM, lower(3), upper(3));
+      const double d_scale = std::exp(s.log_c + m * s.log_ratio);
+      const std::span<const double> v(&v_grid[b * count], count);
+      Moments mo{ee[a], eF[a], vv[b], vF[b], 0.0, FF};
+      for (std::size_t i = 0; i < count; ++i) mo.ev += e[i] * v[i];
+      const Coefficients c = best_coefficients(
+          mo, e, v, unloading, negative, std::exp(lower(0)) * k_scale, std::exp(upper(0)) * k_scale,
+          std::exp(lower(2)) * d_scale, std::exp(upper(2)) * d_scale);
+      if (c.cost < best_cost && c.K > 0.0 && c.D > 0.0) {
+        best_cost = c.cost;
+        theta << std::log(c.K / k_scale), n, std::log(c.D / d_scale), m;
+      }
+    }
+  }
+  theta = theta.cwiseMax(lower).cwiseMin(upper);
+
+  // Bounded Levenberg-Marquardt from the best grid point; a step that leaves the box is
+  // projected back onto it.
+  Solution out;
+  Residuals res, trial;
+  evaluate(s, theta, res);
+  double cost = 0.5 * res.r.squaredNorm();
+  double lambda = 1e-3;
+  int iterations = 0;
+  bool converged = false;
+  for (; iterations < settings.max_iterations && !converged; ++iterations) {
+    const Eigen::Matrix4d JtJ = res.J.transpose() * res.J;
+    const Eigen::Vector4d g = res.J.transpose() * res.r;
+    // A parameter at a bound that the gradient pushes outwards is held there (projected
+    // Newton): its gradient component does not count, and the step leaves it alone.
+    std::array<bool, 4> held{};
+    Eigen::Vector4d pg = g;
+    for (int k = 0; k < 4; ++k) {
+      held[k] = (theta(k) <= lower(k) && g(k) > 0.0) || (theta(k) >= upper(k) && g(k) < 0.0);
+      if (held[k]) pg(k) = 0.0;
+    }
+    if (pg.lpNorm<Eigen::Infinity>() <= kGradientTolerance * std::max(1.0, cost)) {
+      converged = true;
+      break;
+    }
+    bool accepted = false;
+    for (int attempt = 0; attempt < 30 && !accepted; ++attempt) {
+      Eigen::Matrix4d H = JtJ;
+      for (int k = 0; k < 4; ++k) H(k, k) += lambda * std::max(JtJ(k, k), 1e-12);
+      for (int k = 0; k < 4; ++k) {
+        if (!held[k]) continue;
+        H.row(k).setZero();
+        H.col(k).setZero();
+        H(k, k) = 1.0;
+      }
+      const Eigen::Vector4d step = H.ldlt().solve(-pg);
+      const Eigen::Vector4d next = (theta + step).cwiseMax(lower).cwiseMin(upper);
+      evaluate(s, next, trial);
+      const double trial_cost = 0.5 * trial.r.squaredNorm();
+      if (std::isfinite(trial_cost) && trial_cost <= cost) {
+        const double decrease = cost - trial_cost;
+        const double moved = (next - theta).norm();
+        theta = next;
+        std::swap(res, trial);
+        converged = decrease <= kFunctionTolerance * cost ||
+                    moved <= kParameterTolerance * (theta.norm() + kParameterTolerance);
+        cost = trial_cost;
+        lambda = std::max(lambda / 3.0, 1e-12);
+        accepted = true;
+      } else {
+        lambda *= 4.0;
+      }
+    }
+    if (!accepted) {
+      converged = true;  // no step in any direction lowers the cost: a (bounded) minimum
+      break;
+    }
+  }
+  out.theta.assign(static_cast<std::size_t>(layout.size()), 0.0);
+  out.theta[static_cast<std::size_t>(iK)] = theta(0);
+  out.theta[static_cast<std::size_t>(iN)] = theta(1);
+  out.theta[static_cast<std::size_t>(iC)] = theta(2);
+  out.theta[static_cast<std::size_t>(iM)] = theta(3);
+  out.jacobian = Eigen::MatrixXd(res.J.topRows(static_cast<Eigen::Index>(count)));
+  out.iterations = iterations;
+  out.cost = cost;
+  if (!std::isfinite(cost) || !theta.allFinite()) {
+    out.failure = "non_finite";
+    out.message = "non-finite cost or parameters";
+  } else if (converged) {
+    out.converged = true;
+    out.message = "grid over (n, m) then Levenberg-Marquardt: converged";
+  } else {
+    out.failure = "no_convergence";
+    out.message = "grid over (n, m) then Levenberg-Marquardt: iteration limit reached";
+  }
+  return out;
+}
+
+// ---- The general fit (free P, seed8): Ceres with automatic derivatives and several starts ----
+
 // The data Jacobian at theta, dense, from Ceres' own evaluation.
 Eigen::MatrixXd data_jacobian(ceres::Problem& problem, ceres::ResidualBlockId block,
                               double* theta) {
@@ -436,6 +767,69 @@ Eigen::MatrixXd data_jacobian(ceres::Problem& problem, ceres::ResidualBlockId bl
     }
   }
   return J;
+}
+
+Solution solve_ceres(const std::vector<FitFrame>& frames, const Layout& layout,
+                     const FitSettings& settings) {
+  const int np = layout.size();
+  const ForceModel model{&frames, &layout, settings.model};
+  std::vector<double> theta(static_cast<std::size_t>(np));
+  ceres::Problem::Options problem_options;
+  problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  const int n_res = static_cast<int>(frames.size());
+  auto* data_cost =
+      new ceres::DynamicAutoDiffCostFunction<DataResidual, 8>(new DataResidual{model});
+  data_cost->AddParameterBlock(np);
+  data_cost->SetNumResiduals(n_res);
+  auto* penalty_cost =
+      new ceres::DynamicAutoDiffCostFunction<PenaltyResidual, 8>(new PenaltyResidual{model});
+  penalty_cost->AddParameterBlock(np);
+  penalty_cost->SetNumResiduals(n_res);
+  const ceres::ResidualBlockId data_block =
+      problem.AddResidualBlock(data_cost, nullptr, theta.data());
+  problem.AddResidualBlock(penalty_cost, nullptr, theta.data());
+  for (int i = 0; i < np; ++i) {
+    problem.SetParameterLowerBound(theta.data(), i, layout.lower[static_cast<std::size_t>(i)]);
+    problem.SetParameterUpperBound(theta.data(), i, layout.upper[static_cast<std::size_t>(i)]);
+  }
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::DENSE_QR;
+  options.num_threads = 1;
+  options.max_num_iterations = settings.max_iterations;
+  options.logging_type = ceres::SILENT;
+  options.minimizer_progress_to_stdout = false;
+
+  Solution out;
+  double best_cost = std::numeric_limits<double>::infinity();
+  ceres::Solver::Summary best_summary;
+  for (const std::vector<double>& start : initial_guesses(frames, layout, settings)) {
+    theta = start;
+    ceres::Solver::Summary summary;
+    ceres::Solve(options, &problem, &summary);
+    if (std::isfinite(summary.final_cost) && summary.final_cost < best_cost) {
+      best_cost = summary.final_cost;
+      out.theta = theta;
+      best_summary = summary;
+    }
+  }
+  if (out.theta.empty()) {
+    out.failure = "non_finite";
+    out.message = "every start gave a non-finite cost";
+    return out;
+  }
+  theta = out.theta;
+  out.jacobian = data_jacobian(problem, data_block, theta.data());
+  out.message = best_summary.message;
+  out.iterations = best_summary.num_successful_steps + best_summary.num_unsuccessful_steps;
+  out.cost = best_summary.final_cost;
+  out.converged = best_summary.termination_type == ceres::CONVERGENCE ||
+                  best_summary.termination_type == ceres::USER_SUCCESS;
+  if (!out.converged) {
+    out.failure = best_summary.termination_type == ceres::NO_CONVERGENCE ? "no_convergence"
+                                                                         : "solver_failure";
+  }
+  return out;
 }
 
 RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size,
@@ -465,16 +859,16 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
   fit.model_force_n.assign(input_size, 0.0);
   const Layout layout = make_layout(declared, bounds, settings);
   const int np = layout.size();
+  std::array<Estimate*, kPhysCount> est{&fit.A_mm,
+                                        &fit.B_mm,
+                                        &fit.C_mm,
+                                        &fit.d0_mm,
+                                        &fit.kbar_n_per_mm3,
+                                        &fit.n,
+                                        &fit.cbar_ns_per_mm3,
+                                        &fit.m};
   {
     const auto values = phys_values(declared);
-    std::array<Estimate*, kPhysCount> est{&fit.A_mm,
-                                          &fit.B_mm,
-                                          &fit.C_mm,
-                                          &fit.d0_mm,
-                                          &fit.kbar_n_per_mm3,
-                                          &fit.n,
-                                          &fit.cbar_ns_per_mm3,
-                                          &fit.m};
     for (int p = 0; p < kPhysCount; ++p)
       est[static_cast<std::size_t>(p)]->value = values[static_cast<std::size_t>(p)];
   }
@@ -489,57 +883,21 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     return fit;
   }
 
-  const ForceModel model{&frames, &layout, settings.model};
-  std::vector<double> theta(static_cast<std::size_t>(np));
-  ceres::Problem::Options problem_options;
-  problem_options.cost_function_ownership = ceres::TAKE_OWNERSHIP;
-  ceres::Problem problem(problem_options);
-  const int n_res = static_cast<int>(frames.size());
-  auto* data_cost =
-      new ceres::DynamicAutoDiffCostFunction<DataResidual, 8>(new DataResidual{model});
-  data_cost->AddParameterBlock(np);
-  data_cost->SetNumResiduals(n_res);
-  auto* penalty_cost =
-      new ceres::DynamicAutoDiffCostFunction<PenaltyResidual, 8>(new PenaltyResidual{model});
-  penalty_cost->AddParameterBlock(np);
-  penalty_cost->SetNumResiduals(n_res);
-  const ceres::ResidualBlockId data_block =
-      problem.AddResidualBlock(data_cost, nullptr, theta.data());
-  problem.AddResidualBlock(penalty_cost, nullptr, theta.data());
-  for (int i = 0; i < np; ++i) {
-    problem.SetParameterLowerBound(theta.data(), i, layout.lower[static_cast<std::size_t>(i)]);
-    problem.SetParameterUpperBound(theta.data(), i, layout.upper[static_cast<std::size_t>(i)]);
-  }
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.num_threads = 1;
-  options.max_num_iterations = settings.max_iterations;
-  options.logging_type = ceres::SILENT;
-  options.minimizer_progress_to_stdout = false;
-
-  double best_cost = std::numeric_limits<double>::infinity();
-  std::vector<double> best_theta;
-  ceres::Solver::Summary best_summary;
-  for (const std::vector<double>& start : initial_guesses(frames, layout, settings)) {
-    theta = start;
-    ceres::Solver::Summary summary;
-    ceres::Solve(options, &problem, &summary);
-    if (std::isfinite(summary.final_cost) && summary.final_cost < best_cost) {
-      best_cost = summary.final_cost;
-      best_theta = theta;
-      best_summary = summary;
-    }
-  }
-  if (best_theta.empty()) {
+  const bool separable = settings.mode == FitMode::Identifiable && !settings.free_scale;
+  const Solution solution =
+      separable ? solve_separable(frames, layout, settings) : solve_ceres(frames, layout, settings);
+  if (solution.theta.empty()) {
     fit.status = FitStatus::Failed;
-    fit.reason = "non_finite";
+    fit.reason = solution.failure;
+    fit.solver_message = solution.message;
     return fit;
   }
-  theta = best_theta;
-  fit.solver_message = best_summary.message;
-  fit.iterations = best_summary.num_successful_steps + best_summary.num_unsuccessful_steps;
-  fit.final_cost = best_summary.final_cost;
+  const std::vector<double>& theta = solution.theta;
+  fit.solver_message = solution.message;
+  fit.iterations = solution.iterations;
+  fit.final_cost = solution.cost;
 
+  const ForceModel model{&frames, &layout, settings.model};
   std::vector<double> model_force(frames.size());
   model.forces(theta.data(), model_force.data());
   std::vector<double> fitted_measured(frames.size());
@@ -553,7 +911,8 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
 
   // Standard errors: sigma^2 (J^T J)^-1 over the columns the data determine, taken in order so
   // that a dependent parameter is named after the ones it trades off against.
-  const Eigen::MatrixXd J = data_jacobian(problem, data_block, theta.data());
+  const Eigen::MatrixXd& J = solution.jacobian;
+  const int n_res = static_cast<int>(frames.size());
   std::vector<int> kept;
   Eigen::MatrixXd basis(J.rows(), 0);
   std::vector<bool> dependent(static_cast<std::size_t>(np), false);
@@ -598,14 +957,6 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     }
   }
 
-  std::array<Estimate*, kPhysCount> est{&fit.A_mm,
-                                        &fit.B_mm,
-                                        &fit.C_mm,
-                                        &fit.d0_mm,
-                                        &fit.kbar_n_per_mm3,
-                                        &fit.n,
-                                        &fit.cbar_ns_per_mm3,
-                                        &fit.m};
   const auto at_bound = [](double v, double lo, double hi) {
     return std::abs(v - lo) <= kBoundTolerance * std::abs(lo) ||
            std::abs(v - hi) <= kBoundTolerance * std::abs(hi);
@@ -636,14 +987,11 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     fit.B_mm.se = fit.B_mm.value * se_half;
   }
 
-  const bool converged = best_summary.termination_type == ceres::CONVERGENCE ||
-                         best_summary.termination_type == ceres::USER_SUCCESS;
-  if (converged) {
+  if (solution.converged) {
     fit.status = FitStatus::Ok;
   } else {
     fit.status = FitStatus::Failed;
-    fit.reason = best_summary.termination_type == ceres::NO_CONVERGENCE ? "no_convergence"
-                                                                        : "solver_failure";
+    fit.reason = solution.failure;
   }
   return fit;
 }

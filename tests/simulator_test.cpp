@@ -75,6 +75,7 @@ struct Cells {
   std::vector<double> y;
   double cx = 0.0;
   double cy = 0.0;
+  double box_aspect = 1.0;  ///< width / height of the cells' bounding box, cell edges included
 };
 
 Cells region_cells(Region region) {
@@ -83,11 +84,22 @@ Cells region_cells(Region region) {
     cells.x.push_back(layout_37_38().sensor(index).grid_x_mm);
     cells.y.push_back(layout_37_38().sensor(index).grid_y_mm);
   }
-  for (std::size_t i = 0; i < cells.x.size(); ++i) {
-    cells.cx += cells.x[i] / static_cast<double>(cells.x.size());
-    cells.cy += cells.y[i] / static_cast<double>(cells.y.size());
-  }
+  // The footprint is centred on the cells' bounding box and stretched, area kept, to its aspect.
+  const auto [x_lo, x_hi] = std::minmax_element(cells.x.begin(), cells.x.end());
+  const auto [y_lo, y_hi] = std::minmax_element(cells.y.begin(), cells.y.end());
+  cells.cx = 0.5 * (*x_lo + *x_hi);
+  cells.cy = 0.5 * (*y_lo + *y_hi);
+  cells.box_aspect = (*x_hi - *x_lo + 7.5) / (*y_hi - *y_lo + 15.0);
   return cells;
+}
+
+// The footprint's semi-axes: eqs 5-6 with x stretched and y shrunk by sqrt(box aspect / (A/B)).
+double footprint_ra(const Cells& cells, const EllipsoidParams& p, double d) {
+  return radius_a(p, d) * std::sqrt(cells.box_aspect / (p.A_mm / p.B_mm));
+}
+
+double footprint_rb(const Cells& cells, const EllipsoidParams& p, double d) {
+  return radius_b(p, d) / std::sqrt(cells.box_aspect / (p.A_mm / p.B_mm));
 }
 
 struct RasterCase {
@@ -137,8 +149,8 @@ TEST(Simulator, CellCentreLoadsFollowThePressureAtCellCentres) {
     const double ddot = rc.ddot_mm_per_s;
     const double force = closed_form_force(p, d, ddot);
     const Cells cells = region_cells(rc.region);
-    const double ra = radius_a(p, d);
-    const double rb = radius_b(p, d);
+    const double ra = footprint_ra(cells, p, d);
+    const double rb = footprint_rb(cells, p, d);
     std::vector<double> expected(cells.x.size(), 0.0);
     double total = 0.0;
     for (std::size_t i = 0; i < cells.x.size(); ++i) {
@@ -177,7 +189,8 @@ TEST(Simulator, CellCentreGivesATinyContactToTheNearestCell) {
   double best = 1e300;
   for (std::size_t i = 0; i < cells.x.size(); ++i) {
     const double dist = std::hypot(cells.x[i] - cells.cx, cells.y[i] - cells.cy);
-    if (dist > 1e-9 && dist < radius_a(p, d)) FAIL() << "a centre is inside the tiny ellipse";
+    if (dist > 1e-9 && dist < std::max(footprint_ra(cells, p, d), footprint_rb(cells, p, d)))
+      FAIL() << "a centre is inside the tiny ellipse";
     if (dist < best) {
       best = dist;
       nearest = i;
@@ -198,8 +211,8 @@ TEST(Simulator, CoverageLoadsFullCellsWithTheirMeanPressureAndEmptyCellsWithNoth
   const double ddot = 30.0;
   const double force = closed_form_force(p, d, ddot);
   const Cells cells = region_cells(region);
-  const double ra = radius_a(p, d);
-  const double rb = radius_b(p, d);
+  const double ra = footprint_ra(cells, p, d);
+  const double rb = footprint_rb(cells, p, d);
   const double w = 7.5;
   const double h = 15.0;
   const std::vector<double> loads = rasterise_region(

@@ -145,19 +145,36 @@ TEST(TissueFitRecovery, DataCoverThreeSizesWithEnoughRegionSteps) {
   EXPECT_GE(recovery_data().size(), 60u);
 }
 
-// The issue's recovery targets through the simulated measurement chain (median relative error
-// <= 10 %, median NRMSE < 5 %, 99 % converged) are not met yet: the contact area measured from
-// the cells scatters about one cell per frame against the force. Issue 3 stays open on that;
-// these runs print the figures.
-TEST(TissueFitRecovery, SeedSmoothingFiguresAreReported) {
-  const Recovery& r = recovery(Smoothing::Seed);
-  EXPECT_GE(r.ok_fraction, 0.9);
+// Convergence, one of the issue's recovery targets, is met: at least 99 % of region-steps.
+TEST(TissueFitRecovery, AtLeast99PercentOfRegionStepsConverge) {
+  EXPECT_GE(recovery(Smoothing::Seed).ok_fraction, 0.99);
+  EXPECT_GE(recovery(Smoothing::None).ok_fraction, 0.99);
 }
+
+// The default smoothing is the one that recovers the truth better: the seed's polynomials give a
+// lower median NRMSE and lower median errors for kbar and cbar than the raw series.
+TEST(TissueFitRecovery, SeedSmoothingIsTheDefaultBecauseItRecoversBetter) {
+  EXPECT_EQ(FitSettings{}.smoothing, Smoothing::Seed);
+  const Recovery& seed = recovery(Smoothing::Seed);
+  const Recovery& none = recovery(Smoothing::None);
+  EXPECT_LT(seed.nrmse, none.nrmse);
+  EXPECT_LT(seed.kbar, none.kbar);
+  EXPECT_LT(seed.cbar, none.cbar);
+}
+
+// The other recovery targets (median relative error <= 10 % for kbar, n, cbar, m and median
+// NRMSE < 5 %) are not met through the simulated measurement chain; issue 3 stays open on them.
+// The measured contact area is biased and quantised against the true footprint: a cell counts
+// only at or above the adaptive threshold, so the low-pressure rim of the footprint is missed,
+// most at low loads, which flattens force against area and biases n low; and the area moves in
+// steps of one 112.5 mm^2 cell. A noise-free model series is recovered to within a few per cent
+// (RecoversANoiseFreeModelSeries). These runs print the figures.
 
 // The penalty keeps every fitted model essentially non-negative on its own inputs: no model
 // force below -0.1 % of the fit's peak measured force.
 TEST(TissueFit, FittedModelsAreNotNegative) {
   EXPECT_GE(recovery(Smoothing::None).min_force_share, -1e-3);
+  EXPECT_GE(recovery(Smoothing::Seed).min_force_share, -1e-3);
   EXPECT_GE(recovery(Smoothing::Seed).min_force_share, -1e-3);
 }
 
@@ -184,9 +201,17 @@ RegionSeries model_series(const EllipsoidParams& p, ModelVariant variant, int fr
 
 const EllipsoidParams kHeel{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
 
+// Exact model series are fitted raw: a polynomial would only distort them.
+FitSettings raw(ModelVariant model = ModelVariant::Correct) {
+  FitSettings settings;
+  settings.smoothing = Smoothing::None;
+  settings.model = model;
+  return settings;
+}
+
 TEST(TissueFit, RecoversANoiseFreeModelSeries) {
   const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
-  const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, FitSettings{});
+  const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, raw());
   ASSERT_EQ(fit.status, FitStatus::Ok) << fit.reason << " " << fit.solver_message;
   EXPECT_NEAR(fit.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
   EXPECT_NEAR(fit.n.value, 0.294, 0.294 * 0.03);
@@ -212,8 +237,8 @@ TEST(TissueFit, DeclaredCAndD0OnlyRescaleKbarAndCbar) {
   FitBounds wide = config().fit_bounds;
   wide.kbar_n_per_mm3 = {1e-4, 10.0};
   wide.cbar_ns_per_mm3 = {1e-5, 1.0};
-  const RegionFit a = fit_region(s, kHeel, wide, FitSettings{});
-  const RegionFit b = fit_region(s, other, wide, FitSettings{});
+  const RegionFit a = fit_region(s, kHeel, wide, raw());
+  const RegionFit b = fit_region(s, other, wide, raw());
   ASSERT_EQ(a.status, FitStatus::Ok);
   ASSERT_EQ(b.status, FitStatus::Ok);
   EXPECT_NEAR(b.n.value, a.n.value, 1e-4);
@@ -292,10 +317,8 @@ TEST(TissueFit, SeedEq25SessionNeedsTheSeedEq25Model) {
 
 TEST(TissueFit, SeedEq25FitRecoversANoiseFreeSeedEq25Series) {
   const RegionSeries s = model_series(kHeel, ModelVariant::SeedEq25, 60);
-  FitSettings seed;
-  seed.model = ModelVariant::SeedEq25;
-  const RegionFit a = fit_region(s, kHeel, config().fit_bounds, seed);
-  const RegionFit b = fit_region(s, kHeel, config().fit_bounds, FitSettings{});
+  const RegionFit a = fit_region(s, kHeel, config().fit_bounds, raw(ModelVariant::SeedEq25));
+  const RegionFit b = fit_region(s, kHeel, config().fit_bounds, raw());
   ASSERT_EQ(a.status, FitStatus::Ok);
   EXPECT_NEAR(a.kbar_n_per_mm3.value, 0.117, 0.117 * 0.05);
   EXPECT_NEAR(a.n.value, 0.294, 0.294 * 0.05);
@@ -334,7 +357,7 @@ TEST(TissueFit, LengthMismatchThrows) {
 TEST(TissueFit, SessionFitSharesOneParameterSet) {
   const std::vector<RegionSeries> stances{model_series(kHeel, ModelVariant::Correct, 50),
                                           model_series(kHeel, ModelVariant::Correct, 60)};
-  const RegionFit fit = fit_region_session(stances, kHeel, config().fit_bounds, FitSettings{});
+  const RegionFit fit = fit_region_session(stances, kHeel, config().fit_bounds, raw());
   ASSERT_EQ(fit.status, FitStatus::Ok);
   EXPECT_EQ(fit.frames, 110);
   EXPECT_EQ(fit.model_force_n.size(), 110u);

@@ -17,9 +17,14 @@
 // metatarsals, toes; met1_2 and toe1 last to leave) and zero outside it. Each region's peak
 // area is chosen, by bisection on the model, so that its peak ELASTIC force is
 // kPeakElasticForceShare x body weight, capped so that the contact ellipse is at most 0.9 x the
-// region's sensor area (the truth says where the cap bound). The force grows about as
-// area^(2+n), so the 40 N events span about 85 % of the contact: with the defaults a stance
-// from heel strike to toe off lasts about 0.50-0.66 s, like the seed's 52-60 frames.
+// region's sensor area and 0.95 x the largest ellipse inside the region's bounding box (the truth
+// says where the cap bound). The footprint is centred on that box and stretched, keeping its
+// area, from the ellipsoid's aspect A/B to the box's aspect: the insole only sees a region's own
+// cells, and an ellipse spilling out of one side would make the measured area stop growing while
+// the force still grows. Force against area, all the fit sees, is unchanged by the stretch. The
+// force grows about as area^(2+n), so the 40 N events span about 85 % of the contact: with the
+// defaults a stance from heel strike to toe off lasts about 0.50-0.66 s, like the seed's 52-60
+// frames.
 //
 // Determinism: one std::mt19937_64 seeded with the seed drives every draw in a fixed order
 // (phase, gait durations, dc biases of L then R sensors, then noise per frame, L then R, in
@@ -69,8 +74,10 @@ inline constexpr std::array<double, kRegionCount> kPeakElasticForceShare{0.75, 0
                                                                          0.50, 0.12, 0.03, 0.06};
 
 /// Largest contact ellipse the simulator lets a region reach, as a fraction of the region's
-/// sensor area.
+/// sensor area, and as a fraction of the largest ellipse inside the region's bounding box (so
+/// the footprint stays on the region's own cells, which is all the insole can measure).
 inline constexpr double kMaxContactFractionOfSensorArea = 0.9;
+inline constexpr double kMaxContactFractionOfInscribedEllipse = 0.95;
 
 struct GaitTiming {
   double stride_s = 1.10;         ///< heel strike to the same foot's next heel strike, (0.5, 3]

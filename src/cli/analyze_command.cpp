@@ -33,7 +33,7 @@ struct AnalyzeArgs {
   bool report = false;
   std::string model = "correct";
   std::string fit = "identifiable";
-  std::string smoothing = "none";
+  std::string smoothing = "seed";
   bool free_scale = false;
 };
 
@@ -403,7 +403,7 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "eight free, as the seed)")
       ->check(CLI::IsMember({"identifiable", "seed8"}));
   sub->add_option("--smoothing", args->smoothing,
-                  "none (default) or seed (the seed's moving average and polynomials)")
+                  "seed (default: the seed's moving average and polynomials) or none (raw series)")
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_flag("--free-scale", args->free_scale,
                 "Also fit P = pi A B (keeping A/B); identifiable mode only");
