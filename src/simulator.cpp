@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "gaitmon/json.hpp"
 #include "gaitmon/session.hpp"
 #include "gaitmon/units.hpp"
 
@@ -307,17 +308,6 @@ struct StanceTally {
   double peak_total_force_n = 0.0;
 };
 
-nlohmann::json params_json(const EllipsoidParams& p) {
-  return {{"A_mm", p.A_mm},
-          {"B_mm", p.B_mm},
-          {"C_mm", p.C_mm},
-          {"d0_mm", p.d0_mm},
-          {"kbar_n_per_mm3", p.kbar_n_per_mm3},
-          {"n", p.n},
-          {"cbar_ns_per_mm3", p.cbar_ns_per_mm3},
-          {"m", p.m}};
-}
-
 void write_truth(const SimulationTruth& truth, const std::filesystem::path& path) {
   const SimulationOptions& o = truth.options;
   nlohmann::json j;
@@ -350,7 +340,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
   nlohmann::json regions = nlohmann::json::object();
   for (Region r : kRegions) {
     const SimulatedRegion& sr = truth.regions[index_of(r)];
-    nlohmann::json entry = params_json(sr.params);
+    nlohmann::json entry = nlohmann::json(sr.params);
     entry["sensor_area_mm2"] = sr.sensor_area_mm2;
     entry["peak_area_mm2"] = sr.peak_area_mm2;
     entry["target_elastic_force_n"] = sr.target_elastic_force_n;

@@ -209,5 +209,21 @@ TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   }
 }
 
+// The outputs appear together or not at all: when one cannot take its final name (here a
+// directory already sits there), the ones renamed before it are removed again.
+TEST(AnalyzeCommand, AFailedRenameLeavesNoOutputAtAll) {
+  const auto dir = test::scratch_dir("analyze-rename");
+  fs::create_directories(dir / "o" / "session.json" / "occupied");
+  int status = -1;
+  const std::string out = run(
+      "analyze " + (analysed().dir / "s.csv").string() + " --out " + (dir / "o").string(), &status);
+  EXPECT_NE(status, 0) << out;
+  EXPECT_NE(out.find("session.json: cannot rename"), std::string::npos) << out;
+  for (const char* name : {"steps.csv", "regions.csv", "steps.csv.partial", "regions.csv.partial",
+                           "session.json.partial"}) {
+    EXPECT_FALSE(fs::exists(dir / "o" / name)) << name;
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon

@@ -19,6 +19,7 @@
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/insole.hpp"
+#include "gaitmon/json.hpp"
 #include "gaitmon/session.hpp"
 #include "output_file.hpp"
 #include "progress.hpp"
@@ -145,17 +146,6 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses) {
   return out;
 }
 
-nlohmann::json params_json(const EllipsoidParams& p) {
-  return {{"A_mm", p.A_mm},
-          {"B_mm", p.B_mm},
-          {"C_mm", p.C_mm},
-          {"d0_mm", p.d0_mm},
-          {"kbar_n_per_mm3", p.kbar_n_per_mm3},
-          {"n", p.n},
-          {"cbar_ns_per_mm3", p.cbar_ns_per_mm3},
-          {"m", p.m}};
-}
-
 nlohmann::json spread_json(const Spread& s) {
   return {{"count", s.count}, {"median", s.median}, {"q1", s.q1}, {"q3", s.q3}, {"iqr", s.iqr()}};
 }
@@ -216,7 +206,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
         {"steps_with_contact", r.steps_with_contact},
         {"steps_fitted", r.steps_fitted},
         {"aspect_a_over_b", r.aspect},
-        {"declared", params_json(r.declared)},
+        {"declared", nlohmann::json(r.declared)},
         {"session_fit", fit_json(r.session_fit)},
         {"across_steps",
          {{"A_mm", spread_json(r.A_mm)},
@@ -229,8 +219,8 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
           {"m", spread_json(r.m)},
           {"nrmse_pct", spread_json(r.nrmse_pct)}}},
         {"appendix_i",
-         {{"mean", params_json(seed.mean)},
-          {"sd", params_json(seed.sd)},
+         {{"mean", nlohmann::json(seed.mean)},
+          {"sd", nlohmann::json(seed.sd)},
           {"nrmse_pct_mean", seed.nrmse_pct_mean},
           {"nrmse_pct_sd", seed.nrmse_pct_sd}}}};
   }
@@ -376,11 +366,13 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     input.session = &session;
     add("report.html", render_report_html(input));
   }
+  std::vector<OutputFile*> to_commit;
   std::vector<std::filesystem::path> written;
   for (auto& file : files) {
-    file->commit();
+    to_commit.push_back(file.get());
     written.push_back(file->path());
   }
+  OutputFile::commit_all(to_commit);
   print_summary(args, header, settings, steps, analyses, session, written);
 }
 

@@ -20,8 +20,8 @@ OutputFile::OutputFile(std::filesystem::path path)
 }
 
 OutputFile::~OutputFile() {
-  if (file_ != nullptr) {
-    std::fclose(file_);
+  if (file_ != nullptr) std::fclose(file_);
+  if (!published_) {
     std::error_code ignored;
     std::filesystem::remove(partial_, ignored);
   }
@@ -31,12 +31,31 @@ void OutputFile::write(std::string_view text) {
   if (std::fwrite(text.data(), 1, text.size(), file_) != text.size()) fail(partial_, "write");
 }
 
-void OutputFile::commit() {
+void OutputFile::close() {
   std::FILE* file = std::exchange(file_, nullptr);
   if (std::fclose(file) != 0) fail(partial_, "close");
+}
+
+void OutputFile::rename() {
   std::error_code ec;
   std::filesystem::rename(partial_, path_, ec);
   if (ec) throw std::runtime_error(path_.string() + ": cannot rename: " + ec.message());
+  published_ = true;
+}
+
+void OutputFile::commit_all(std::span<OutputFile* const> files) {
+  for (OutputFile* file : files) file->close();
+  std::size_t renamed = 0;
+  try {
+    for (; renamed < files.size(); ++renamed) files[renamed]->rename();
+  } catch (...) {
+    std::error_code ignored;
+    for (std::size_t i = 0; i < renamed; ++i) {
+      std::filesystem::remove(files[i]->path_, ignored);
+      files[i]->published_ = false;
+    }
+    throw;
+  }
 }
 
 }  // namespace gaitmon::cli

@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <span>
 #include <string_view>
 
 namespace gaitmon::cli {
@@ -12,20 +13,27 @@ class OutputFile {
  public:
   /// Opens `path` + ".partial" for writing; throws std::runtime_error naming the file.
   explicit OutputFile(std::filesystem::path path);
-  /// Removes the partial file if commit() was not reached.
+  /// Removes the partial file if commit_all() did not publish it.
   ~OutputFile();
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
 
   void write(std::string_view text);
-  /// Flushes, closes and renames to the final name; throws std::runtime_error on failure.
-  void commit();
   const std::filesystem::path& path() const { return path_; }
 
+  /// Commits several files as one: all are flushed and closed first (where a full disk shows),
+  /// then renamed; if a rename fails, the files already renamed are removed again, so a run
+  /// leaves either every output or none. Throws std::runtime_error naming the file.
+  static void commit_all(std::span<OutputFile* const> files);
+
  private:
+  void close();
+  void rename();
+
   std::filesystem::path path_;
   std::filesystem::path partial_;
   std::FILE* file_ = nullptr;
+  bool published_ = false;
 };
 
 }  // namespace gaitmon::cli

@@ -150,8 +150,8 @@ void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
                    s.peak_force_n, step_status_name(s.status));
   }
   steps_csv.write(buffer);
-  frames_csv.commit();
-  steps_csv.commit();
+  OutputFile* const outputs[] = {&frames_csv, &steps_csv};
+  OutputFile::commit_all(outputs);
   print_summary(args, info, steps, cases, frame_rows);
 }
 

@@ -1,0 +1,17 @@
+// JSON forms of the model's value types.
+#include "gaitmon/json.hpp"
+
+namespace gaitmon {
+
+void to_json(nlohmann::json& j, const EllipsoidParams& p) {
+  j = {{"A_mm", p.A_mm},
+       {"B_mm", p.B_mm},
+       {"C_mm", p.C_mm},
+       {"d0_mm", p.d0_mm},
+       {"kbar_n_per_mm3", p.kbar_n_per_mm3},
+       {"n", p.n},
+       {"cbar_ns_per_mm3", p.cbar_ns_per_mm3},
+       {"m", p.m}};
+}
+
+}  // namespace gaitmon

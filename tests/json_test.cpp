@@ -1,0 +1,23 @@
+// JSON forms of the model's value types.
+#include "gaitmon/json.hpp"
+
+#include <gtest/gtest.h>
+
+namespace gaitmon {
+namespace {
+
+TEST(Json, EllipsoidParamsCarryEveryParameterWithItsUnit) {
+  const nlohmann::json j = EllipsoidParams{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
+  EXPECT_EQ(j.size(), 8u);
+  EXPECT_EQ(j.at("A_mm"), 80.2);
+  EXPECT_EQ(j.at("B_mm"), 80.7);
+  EXPECT_EQ(j.at("C_mm"), 69.9);
+  EXPECT_EQ(j.at("d0_mm"), 16.4);
+  EXPECT_EQ(j.at("kbar_n_per_mm3"), 0.117);
+  EXPECT_EQ(j.at("n"), 0.294);
+  EXPECT_EQ(j.at("cbar_ns_per_mm3"), 0.011);
+  EXPECT_EQ(j.at("m"), 1.18);
+}
+
+}  // namespace
+}  // namespace gaitmon
