@@ -1009,30 +1009,43 @@ void check_discrepancy_effect(std::string_view name) {
 DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,
                                            const Config& config,
                                            const AnalysisSettings& settings) {
-  std::vector<const Step*> ok;
+  std::vector<Step> ok;
   for (const Step& s : steps) {
-    if (s.status == StepStatus::Ok && !s.stance.empty()) ok.push_back(&s);
+    if (s.status == StepStatus::Ok && !s.stance.empty()) ok.push_back(s);
+  }
+  std::vector<StepAnalysis> analyses(ok.size());
+  parallel_for(ok.size(), [&](std::size_t i) {
+    // One cache per step keeps the threads apart; the ellipses do not depend on it.
+    ContactEllipseCache cache;
+    analyses[i] = analyse_step(ok[i], layout, config, settings, &cache);
+  });
+  return make_discrepancy_input(ok, std::move(analyses), layout, config);
+}
+
+DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
+                                        std::vector<StepAnalysis> analyses,
+                                        const InsoleLayout& layout, const Config& config) {
+  if (steps.size() != analyses.size()) {
+    throw std::invalid_argument("make_discrepancy_input: one analysis per step expected");
   }
   DiscrepancyInput input;
   input.sample_rate_hz = config.sample_rate_hz;
   input.cell_area_mm2 = config.sensor.area_mm2();
   input.newtons_per_bit = config.calibration.newtons_per_bit(config.sensor.area_mm2());
-  input.steps.resize(ok.size());
-  parallel_for(ok.size(), [&](std::size_t i) {
-    // One cache per step keeps the threads apart; the ellipses do not depend on it.
-    ContactEllipseCache cache;
-    input.steps[i].analysis = analyse_step(*ok[i], layout, config, settings, &cache);
-  });
+  input.steps.resize(steps.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    input.steps[i].analysis = std::move(analyses[i]);
+  }
   double highest = 0.0;
-  for (const Step* s : ok) {
-    for (const Frame& f : s->stance) {
-      for (std::size_t c = 0; c < f.bits.size() && c < s->sensor_zero_bits.size(); ++c) {
-        highest = std::max(highest, f.bits[c] - s->sensor_zero_bits[c]);
+  for (const Step& s : steps) {
+    for (const Frame& f : s.stance) {
+      for (std::size_t c = 0; c < f.bits.size() && c < s.sensor_zero_bits.size(); ++c) {
+        highest = std::max(highest, f.bits[c] - s.sensor_zero_bits[c]);
       }
     }
   }
-  for (std::size_t i = 0; i < ok.size(); ++i) {
-    const Step& s = *ok[i];
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const Step& s = steps[i];
     for (Region region : kRegions) {
       auto& counts = input.steps[i].saturated_cells[index_of(region)];
       for (const Frame& f : s.stance) {

@@ -79,6 +79,12 @@ struct DiscrepancyInput {
 DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,
                                            const Config& config, const AnalysisSettings& settings);
 
+/// The same from steps already analysed: analyses[i] is analyse_step of steps[i]. Throws
+/// std::invalid_argument if the counts differ.
+DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
+                                        std::vector<StepAnalysis> analyses,
+                                        const InsoleLayout& layout, const Config& config);
+
 struct DiscrepancySettings {
   int folds = 5;                 ///< k of the k-fold over steps, >= 2
   int phase_bins = 10;           ///< bins of normalised stance time, >= 10
