@@ -264,34 +264,36 @@ std::vector<double> linspace(double lo, double hi, int n) {
 }
 
 std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_per_bit) {
-  const std::vector<double> fast_tau{0.02, 0.035, 0.06, 0.1, 0.15, 0.25, 0.4, 0.65, 1.0, 1.6, 2.5};
-  const std::vector<double> slow_tau{0.1, 0.2, 0.35, 0.6, 1.0, 1.6, 2.5, 4.0, 6.5, 10.0};
+  // Coarse grids (the local refinement takes the parameters between the points): time
+  // constants log-spaced over the physically plausible ranges.
+  const std::vector<double> fast_tau{0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.0};
+  const std::vector<double> slow_tau{0.1, 0.25, 0.5, 1.0, 2.0, 4.0, 10.0};
   std::vector<CandidateSpec> specs;
   specs.push_back({"stress_relaxation",
                    0,
-                   {{"strength", 0.0, 0.95, linspace(0.05, 0.7, 14)},
+                   {{"strength", 0.0, 0.95, linspace(0.07, 0.7, 10)},
                     {"tau_s", 0.005, 10.0, fast_tau}},
                    [](const std::vector<Unit>& units, std::span<const double> th) {
                      return std::make_unique<LagEffect>(units, -th[0], th[1]);
                    }});
   specs.push_back({"hysteresis",
                    0,
-                   {{"strength", 0.0, 0.9, linspace(0.02, 0.4, 20)},
-                    {"transition_mm", 0.005, 10.0, {0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0}}},
+                   {{"strength", 0.0, 0.9, linspace(0.04, 0.4, 10)},
+                    {"transition_mm", 0.005, 10.0, {0.05, 0.12, 0.3, 0.7, 2.0}}},
                    [](const std::vector<Unit>&, std::span<const double> th) {
                      return std::make_unique<HysteresisEffect>(th[0], th[1]);
                    }});
   specs.push_back({"impact_transient",
                    0,
-                   {{"amplitude_n", 0.0, 1000.0, linspace(10.0, 250.0, 13)},
-                    {"duration_s", 0.005, 0.2, linspace(0.02, 0.1, 9)},
+                   {{"amplitude_n", 0.0, 1000.0, linspace(10.0, 250.0, 9)},
+                    {"duration_s", 0.005, 0.2, linspace(0.02, 0.1, 5)},
                     {"onset_frames", 0.0, 2.0, {0.0, 0.5, 1.0}}},
                    [](const std::vector<Unit>&, std::span<const double> th) {
                      return std::make_unique<ImpactEffect>(th[0], th[1], th[2]);
                    }});
   specs.push_back({"sensor_saturation",
                    1,
-                   {{"ceiling_bits", 5.0, 1000.0, linspace(40.0, 260.0, 23)}},
+                   {{"ceiling_bits", 5.0, 1000.0, linspace(40.0, 260.0, 12)}},
                    [cell_area_mm2, newtons_per_bit](const std::vector<Unit>&,
                                                     std::span<const double> th) {
                      return std::make_unique<SaturationEffect>(th[0], cell_area_mm2,
@@ -299,7 +301,7 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
                    }});
   specs.push_back({"sensor_creep",
                    1,
-                   {{"gain", 0.0, 2.0, linspace(0.03, 0.5, 14)}, {"tau_s", 0.02, 60.0, slow_tau}},
+                   {{"gain", 0.0, 2.0, linspace(0.05, 0.5, 10)}, {"tau_s", 0.02, 60.0, slow_tau}},
                    [](const std::vector<Unit>& units, std::span<const double> th) {
                      return std::make_unique<LagEffect>(units, th[0], th[1]);
                    }});

@@ -88,7 +88,7 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
 struct DiscrepancySettings {
   int folds = 5;                 ///< k of the k-fold over steps, >= 2
   int phase_bins = 10;           ///< bins of normalised stance time, >= 10
-  double min_shrink_pct = 12.0;  ///< held-out NRMSE must fall at least this much, %
+  double min_shrink_pct = 15.0;  ///< held-out NRMSE must fall at least this much, %
   double min_delta_bic = 10.0;   ///< and BIC at least this much
   bool second_effect = true;     ///< look for a second effect on top of the first
   int top_cells = 10;            ///< region x phase cells listed under `where`
