@@ -75,8 +75,8 @@ void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Un
       for (std::size_t k = 0; k < kExponentGrid.size(); ++k) {
         u.En[k + 1][i] = id.P_mm2 * std::pow(g, 2.0 + kExponentGrid[k]) * (1.0 - g / 3.0);
       }
-      u.V[i] = id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot * (6.0 - 4.0 * g + g * g) /
-               (3.0 * (2.0 - g));
+      u.V[i] =
+          id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot * (6.0 - 4.0 * g + g * g) / (3.0 * (2.0 - g));
       u.d_mm[i] = g * C_mm;
       u.ddot_mm_per_s[i] = gdot * C_mm;
     }
@@ -221,7 +221,8 @@ class ImpactEffect final : public Applied {
     for (std::size_t i = 0; i < F.size(); ++i) {
       const double tau = u.t[i] - t0;
       out[i] = F[i];
-      if (u.region == Region::Heel && tau > 0.0 && tau < T_) out[i] += a_ * std::sin(kPi * tau / T_);
+      if (u.region == Region::Heel && tau > 0.0 && tau < T_)
+        out[i] += a_ * std::sin(kPi * tau / T_);
     }
   }
 
@@ -269,13 +270,13 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
   const std::vector<double> fast_tau{0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.0};
   const std::vector<double> slow_tau{0.1, 0.25, 0.5, 1.0, 2.0, 4.0, 10.0};
   std::vector<CandidateSpec> specs;
-  specs.push_back({"stress_relaxation",
-                   0,
-                   {{"strength", 0.0, 0.95, linspace(0.07, 0.7, 10)},
-                    {"tau_s", 0.005, 10.0, fast_tau}},
-                   [](const std::vector<Unit>& units, std::span<const double> th) {
-                     return std::make_unique<LagEffect>(units, -th[0], th[1]);
-                   }});
+  specs.push_back(
+      {"stress_relaxation",
+       0,
+       {{"strength", 0.0, 0.95, linspace(0.07, 0.7, 10)}, {"tau_s", 0.005, 10.0, fast_tau}},
+       [](const std::vector<Unit>& units, std::span<const double> th) {
+         return std::make_unique<LagEffect>(units, -th[0], th[1]);
+       }});
   specs.push_back({"hysteresis",
                    0,
                    {{"strength", 0.0, 0.9, linspace(0.04, 0.4, 10)},
@@ -291,14 +292,13 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
                    [](const std::vector<Unit>&, std::span<const double> th) {
                      return std::make_unique<ImpactEffect>(th[0], th[1], th[2]);
                    }});
-  specs.push_back({"sensor_saturation",
-                   1,
-                   {{"ceiling_bits", 5.0, 1000.0, linspace(40.0, 260.0, 12)}},
-                   [cell_area_mm2, newtons_per_bit](const std::vector<Unit>&,
-                                                    std::span<const double> th) {
-                     return std::make_unique<SaturationEffect>(th[0], cell_area_mm2,
-                                                               newtons_per_bit);
-                   }});
+  specs.push_back(
+      {"sensor_saturation",
+       1,
+       {{"ceiling_bits", 5.0, 1000.0, linspace(40.0, 260.0, 12)}},
+       [cell_area_mm2, newtons_per_bit](const std::vector<Unit>&, std::span<const double> th) {
+         return std::make_unique<SaturationEffect>(th[0], cell_area_mm2, newtons_per_bit);
+       }});
   specs.push_back({"sensor_creep",
                    1,
                    {{"gain", 0.0, 2.0, linspace(0.05, 0.5, 10)}, {"tau_s", 0.02, 60.0, slow_tau}},
@@ -308,7 +308,8 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
   return specs;
 }
 
-// ---- fitting -------------------------------------------------------------------------------------
+// ---- fitting
+// -------------------------------------------------------------------------------------
 
 // A chain of applied effects in physical order (tissue, then sensor).
 using Chain = std::vector<const Applied*>;
@@ -453,8 +454,8 @@ void parallel_for(std::size_t count, const std::function<void(std::size_t)>& wor
       next = count;
     }
   };
-  const unsigned threads =
-      std::clamp(std::thread::hardware_concurrency(), 1u, static_cast<unsigned>(std::max<std::size_t>(count, 1)));
+  const unsigned threads = std::clamp(std::thread::hardware_concurrency(), 1u,
+                                      static_cast<unsigned>(std::max<std::size_t>(count, 1)));
   {
     std::vector<std::jthread> workers;
     for (unsigned i = 1; i < threads; ++i) workers.emplace_back(run);
@@ -465,7 +466,6 @@ void parallel_for(std::size_t count, const std::function<void(std::size_t)>& wor
 
 // Per-unit SSE of the chain `fixed` followed by one candidate at theta, in physical order.
 struct Model {
-  const std::vector<Unit>* units;
   std::vector<std::unique_ptr<Applied>> owned;
   std::vector<int> stages;
 
@@ -487,7 +487,6 @@ struct FixedEffect {
 
 Model build(const std::vector<Unit>& units, std::span<const FixedEffect> effects) {
   Model m;
-  m.units = &units;
   for (const FixedEffect& e : effects) {
     m.owned.push_back(e.spec->make(units, e.theta));
     m.stages.push_back(e.spec->stage);
@@ -535,10 +534,10 @@ double bic(double sse, const Pooled& p, int params) {
 
 struct CandidateOutcome {
   const CandidateSpec* spec = nullptr;
-  std::vector<double> theta;     // full data, refined
-  std::vector<double> se;        // of theta
-  std::vector<double> heldout;   // per unit
-  std::vector<double> in_sample; // per unit at theta
+  std::vector<double> theta;      // full data, refined
+  std::vector<double> se;         // of theta
+  std::vector<double> heldout;    // per unit
+  std::vector<double> in_sample;  // per unit at theta
   double heldout_sse = 0.0;
   double in_sample_sse = 0.0;
 };
@@ -692,7 +691,8 @@ double savgol_noise_sd(std::span<const double> y) {
   if (y.size() < 7) return 0.0;
   std::vector<double> res;
   for (std::size_t i = 2; i + 2 < y.size(); ++i) {
-    const double s = (-3 * y[i - 2] + 12 * y[i - 1] + 17 * y[i] + 12 * y[i + 1] - 3 * y[i + 2]) / 35;
+    const double s =
+        (-3 * y[i - 2] + 12 * y[i - 1] + 17 * y[i] + 12 * y[i + 1] - 3 * y[i + 2]) / 35;
     res.push_back(std::abs(y[i] - s));
   }
   std::nth_element(res.begin(), res.begin() + static_cast<std::ptrdiff_t>(res.size() / 2),
@@ -824,8 +824,8 @@ ResidualMap residual_map(const std::vector<Unit>& units,
     const Unit& u = units[ui];
     for (std::size_t i = 0; i < u.y.size(); ++i) {
       const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
-      const std::size_t c = index_of(u.region) * static_cast<std::size_t>(bins) +
-                            static_cast<std::size_t>(b);
+      const std::size_t c =
+          index_of(u.region) * static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
       const double r = u.y[i] - preds[ui][i];
       s[c] += r;
       s2[c] += r * r;
@@ -1009,8 +1009,7 @@ void check_discrepancy_effect(std::string_view name) {
 }
 
 DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,
-                                           const Config& config,
-                                           const AnalysisSettings& settings) {
+                                           const Config& config, const AnalysisSettings& settings) {
   std::vector<Step> ok;
   for (const Step& s : steps) {
     if (s.status == StepStatus::Ok && !s.stance.empty()) ok.push_back(s);
@@ -1094,8 +1093,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   std::vector<CandidateOutcome> outcomes;
   for (const CandidateSpec& spec : specs) {
     outcomes.push_back(fit_candidate(units, pooled, {}, spec));
-    out.candidates.push_back(result_of(outcomes.back(), pooled, out.baseline_heldout_nrmse_pct,
-                                       base_sse, base_params));
+    out.candidates.push_back(
+        result_of(outcomes.back(), pooled, out.baseline_heldout_nrmse_pct, base_sse, base_params));
   }
   const auto passes = [&](const CandidateResult& r) {
     return r.shrink_pct >= settings.min_shrink_pct && r.delta_bic <= -settings.min_delta_bic;
@@ -1195,7 +1194,8 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   std::vector<double> heldout = base;
   std::vector<double> in_sample = base;
   for (const std::string& name : effects) {
-    const CandidateOutcome c = fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name));
+    const CandidateOutcome c =
+        fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name));
     out.effects.push_back(estimate_of(c));
     chosen.push_back({c.spec, c.theta});
     heldout = c.heldout;

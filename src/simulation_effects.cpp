@@ -171,9 +171,9 @@ std::unique_ptr<SimulationEffect> make(const EffectParams& p) {
 
 const std::vector<EffectEntry>& registry() {
   static const std::vector<EffectEntry> entries{
-      {"none", {}, [](const EffectParams&) -> std::unique_ptr<SimulationEffect> {
-         return nullptr;
-       }},
+      {"none",
+       {},
+       [](const EffectParams&) -> std::unique_ptr<SimulationEffect> { return nullptr; }},
       {"stress_relaxation",
        {{"strength", 0.3, 0.05, 0.6, "fraction of the force that relaxes under a held load"},
         {"tau_s", 0.15, 0.02, 2.0, "relaxation time constant, s"}},

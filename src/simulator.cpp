@@ -300,8 +300,8 @@ nlohmann::json effects_json(const SimulationOptions& o) {
   nlohmann::json effects = nlohmann::json::array();
   for (const std::string& name : o.effects) {
     const auto given = o.effect_params.find(name);
-    const EffectParams params =
-        resolve_effect_params(name, given == o.effect_params.end() ? EffectParams{} : given->second);
+    const EffectParams params = resolve_effect_params(
+        name, given == o.effect_params.end() ? EffectParams{} : given->second);
     effects.push_back({{"name", name}, {"params", params}});
   }
   return effects;
@@ -505,8 +505,8 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
           const auto contact = contact_at(sr, kWindows[ri], stance, t);
           if (!contact) continue;
           double force = force_n(sr.params, contact->d_mm, contact->ddot_mm_per_s, options.model);
-          const TissueSample sample{foot,          r, t, stance.start_s, contact->area_mm2,
-                                    contact->d_mm, contact->ddot_mm_per_s};
+          const TissueSample sample{
+              foot, r, t, stance.start_s, contact->area_mm2, contact->d_mm, contact->ddot_mm_per_s};
           for (auto& effect : effects) force = effect->tissue_force_n(sample, force);
           if (force < 0.0) {
             ++truth.negative_force_samples;

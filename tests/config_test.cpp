@@ -558,9 +558,8 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   } cases[] = {
       {"ModelUnknownEffect", replace("effects = []", R"(effects = ["crosstalk"])"),
        "model.effects[0]", "unknown effect 'crosstalk'"},
-      {"ModelEffectTwice",
-       replace("effects = []", R"(effects = ["hysteresis", "hysteresis"])"), "model.effects[1]",
-       "listed twice"},
+      {"ModelEffectTwice", replace("effects = []", R"(effects = ["hysteresis", "hysteresis"])"),
+       "model.effects[1]", "listed twice"},
       {"ModelEffectNotString", replace("effects = []", "effects = [1]"), "model.effects[0]",
        "must be a string"},
       {"ModelUnknownKey", replace("effects = []", "effects = []\nstrength = 1"), "model.strength",

@@ -80,12 +80,16 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
        {{{"amplitude_n", 80.0}, {"duration_s", 0.03}},
         {{"amplitude_n", 130.0}, {"duration_s", 0.04}},
         {{"amplitude_n", 200.0}, {"duration_s", 0.06}}}},
-      {"sensor_saturation", {{{"ceiling_bits", 110.0}}, {{"ceiling_bits", 85.0}}, {{"ceiling_bits", 60.0}}}},
+      {"sensor_saturation",
+       {{{"ceiling_bits", 110.0}}, {{"ceiling_bits", 85.0}}, {{"ceiling_bits", 60.0}}}},
       {"sensor_creep",
-       {{{"gain", 0.2}, {"tau_s", 1.0}}, {{"gain", 0.3}, {"tau_s", 2.0}}, {{"gain", 0.4}, {"tau_s", 0.5}}}},
+       {{{"gain", 0.2}, {"tau_s", 1.0}},
+        {{"gain", 0.3}, {"tau_s", 2.0}},
+        {{"gain", 0.4}, {"tau_s", 0.5}}}},
   };
-  const std::vector<std::string> classes{"none",           "stress_relaxation", "hysteresis",
-                                         "impact_transient", "sensor_saturation", "sensor_creep"};
+  const std::vector<std::string> classes{
+      "none",        "stress_relaxation", "hysteresis", "impact_transient", "sensor_saturation",
+      "sensor_creep"};
   const auto dir = test::scratch_dir("discrepancy-sessions");
   std::map<std::string, std::map<std::string, int>> named_matrix, ranked_matrix;
   std::string shrinks;
@@ -105,12 +109,12 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       ++ranked_matrix[effect][r.candidates[best].name];
       if (effect == "none" && first != "none") ++none_named;
       if (effect != "none" && first != "none" && first != effect) ++wrong_names;
-      shrinks += fmt::format("  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> "
-                             "{:6.2f} % (gap shrink {:5.1f} %; best candidate {} {:+.1f} %)\n",
-                             effect, insole_size_name(c.size), c.seed, first,
-                             r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct,
-                             r.gap_shrink_pct, r.candidates[best].name,
-                             r.candidates[best].shrink_pct);
+      shrinks += fmt::format(
+          "  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> "
+          "{:6.2f} % (gap shrink {:5.1f} %; best candidate {} {:+.1f} %)\n",
+          effect, insole_size_name(c.size), c.seed, first, r.baseline_heldout_nrmse_pct,
+          r.extended_heldout_nrmse_pct, r.gap_shrink_pct, r.candidates[best].name,
+          r.candidates[best].shrink_pct);
     }
   }
   const auto print = [&](const char* title, std::map<std::string, std::map<std::string, int>>& m) {
@@ -144,9 +148,9 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
   std::string texts[2];
   for (int k = 0; k < 2; ++k) {
     const auto out = dir / fmt::format("out{}", k);
-    const std::string command = fmt::format("{} discrepancy {} --out {} --report",
-                                            test::gaitmon_binary().string(),
-                                            (dir / "s.csv").string(), out.string());
+    const std::string command =
+        fmt::format("{} discrepancy {} --out {} --report", test::gaitmon_binary().string(),
+                    (dir / "s.csv").string(), out.string());
     std::string output;
     ASSERT_EQ(test::run_command(command, &output), 0) << output;
     std::ifstream in(out / "discrepancy.json");
@@ -154,8 +158,9 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
     text << in.rdbuf();
     texts[k] = text.str();
     const auto j = nlohmann::json::parse(texts[k]);
-    for (const char* key : {"named_effects", "baseline_heldout_nrmse_pct",
-                            "extended_heldout_nrmse_pct", "gap_shrink_pct", "where", "candidates"}) {
+    for (const char* key :
+         {"named_effects", "baseline_heldout_nrmse_pct", "extended_heldout_nrmse_pct",
+          "gap_shrink_pct", "where", "candidates"}) {
       EXPECT_TRUE(j.contains(key)) << key;
     }
     EXPECT_EQ(j["candidates"].size(), 5u);

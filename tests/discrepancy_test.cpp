@@ -132,10 +132,9 @@ TEST(Discrepancy, OnCleanSeriesNamesEachEffectAndClosesTheHeldOutGap) {
       {"sensor_creep", {"sensor_creep", {{"gain", 0.3}, {"tau_s", 1.0}}}},
   };
   for (const auto& [expected, c] : cases) {
-    const DiscrepancyResult r = find_discrepancy(clean_session(c, 20, 7));
-    fmt::print("clean {}: named {}, held-out {:.2f} % -> {:.2f} % ({:.1f} %)\n", expected,
-               named(r), r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct,
-               r.gap_shrink_pct);
+    const DiscrepancyResult r = find_discrepancy(clean_session(c, 14, 7));
+    fmt::print("clean {}: named {}, held-out {:.2f} % -> {:.2f} % ({:.1f} %)\n", expected, named(r),
+               r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
     ASSERT_FALSE(r.candidates.empty());
     if (expected == "none") {
       EXPECT_TRUE(r.named_effects.empty()) << named(r);
@@ -145,6 +144,44 @@ TEST(Discrepancy, OnCleanSeriesNamesEachEffectAndClosesTheHeldOutGap) {
     EXPECT_EQ(r.named_effects.front().name, expected);
     EXPECT_GE(r.gap_shrink_pct, 40.0) << expected;
   }
+}
+
+TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
+  const DiscrepancyInput input =
+      clean_session({"impact_transient", {{"amplitude_n", 120.0}, {"duration_s", 0.05}}}, 10, 3);
+  const std::vector<std::string> effects{"impact_transient"};
+  const ExtendedModelFit fit = fit_extended_model(input, effects);
+  ASSERT_EQ(fit.effects.size(), 1u);
+  const auto& params = fit.effects.front().params;
+  ASSERT_EQ(params.size(), 3u);
+  EXPECT_EQ(params[0].name, "amplitude_n");
+  // The pulse is sampled every 10 ms and starts between frames, so within 15 %.
+  EXPECT_NEAR(params[0].value, 120.0, 18.0);
+  EXPECT_NEAR(params[1].value, 0.05, 0.0075);
+  EXPECT_GT(params[0].se, 0.0);
+  EXPECT_LT(fit.extended_nrmse_pct, 0.5 * fit.baseline_nrmse_pct);
+  EXPECT_LT(fit.extended_heldout_nrmse_pct, 0.5 * fit.baseline_heldout_nrmse_pct);
+
+  const std::vector<std::string> twice{"hysteresis", "hysteresis"};
+  EXPECT_THROW(fit_extended_model(input, twice), std::invalid_argument);
+  const std::vector<std::string> unknown{"crosstalk"};
+  EXPECT_THROW(fit_extended_model(input, unknown), std::invalid_argument);
+}
+
+TEST(Discrepancy, RefusesBadSettingsAndTooFewSteps) {
+  const DiscrepancyInput input = clean_session({"none", {}}, 4, 1);
+  EXPECT_THROW(find_discrepancy(input), std::invalid_argument);  // 4 steps, 5 folds
+  DiscrepancySettings s;
+  s.folds = 2;
+  s.phase_bins = 9;
+  EXPECT_THROW(find_discrepancy(input, s), std::invalid_argument);
+  s.phase_bins = 10;
+  s.second_effect = false;
+  const DiscrepancyResult a = find_discrepancy(input, s);
+  const DiscrepancyResult b = find_discrepancy(input, s);
+  EXPECT_EQ(a.baseline_heldout_nrmse_pct, b.baseline_heldout_nrmse_pct);
+  ASSERT_EQ(a.map_before.cells.size(), kRegionCount * 10);
+  EXPECT_EQ(a.per_step.size(), 4u);
 }
 
 }  // namespace

@@ -53,7 +53,8 @@ TEST(SimulationEffects, HysteresisRaisesLoadingAndLowersUnloadingRateIndependent
 }
 
 TEST(SimulationEffects, ImpactTransientAddsAHalfSineAtHeelContactOnly) {
-  auto e = make_simulation_effect("impact_transient", {{"amplitude_n", 90.0}, {"duration_s", 0.04}});
+  auto e =
+      make_simulation_effect("impact_transient", {{"amplitude_n", 90.0}, {"duration_s", 0.04}});
   EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 1.02, 1.0, 1.0), 10.0), 100.0, 1e-9);
   EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 1.01, 1.0, 1.0), 10.0),
               10.0 + 90.0 * std::sin(std::numbers::pi / 4.0), 1e-9);
@@ -120,6 +121,37 @@ TEST(SimulationEffects, SaturatedSessionNeverReadsAboveTheCeilingAndTheTruthSays
   const auto truth = nlohmann::json::parse(in);
   EXPECT_EQ(truth["options"]["effects"][0]["name"], "sensor_saturation");
   EXPECT_EQ(truth["options"]["effects"][0]["params"]["ceiling_bits"], 70.0);
+}
+
+}  // namespace
+}  // namespace gaitmon
+
+namespace gaitmon {
+namespace {
+
+TEST(SimulationEffects, SimulateCommandChecksEffectParamsJson) {
+  const auto dir = test::scratch_dir("sim-effects-cli");
+  const std::string base =
+      test::gaitmon_binary().string() + " simulate --duration 2 --out " + (dir / "s.csv").string();
+  std::string output;
+  EXPECT_NE(
+      test::run_command(base + " --effect hysteresis --effect-params '{\"strength\":'", &output),
+      0);
+  EXPECT_NE(output.find("not valid JSON"), std::string::npos) << output;
+  EXPECT_NE(
+      test::run_command(base + " --effect hysteresis --effect-params '{\"tau_s\":1}'", &output), 0);
+  EXPECT_NE(output.find("unknown parameter 'tau_s'"), std::string::npos) << output;
+  EXPECT_NE(test::run_command(base + " --effect crosstalk", &output), 0);
+  EXPECT_NE(output.find("unknown simulation effect 'crosstalk'"), std::string::npos) << output;
+  ASSERT_EQ(test::run_command(base + " --effect hysteresis --effect sensor_creep --effect-params "
+                                     "'{\"sensor_creep\":{\"gain\":0.1}}'",
+                              &output),
+            0)
+      << output;
+  std::ifstream in(dir / "s.truth.json");
+  const auto truth = nlohmann::json::parse(in);
+  EXPECT_EQ(truth["options"]["effects"][1]["params"]["gain"], 0.1);
+  EXPECT_EQ(truth["options"]["effects"][0]["params"]["strength"], 0.12);
 }
 
 }  // namespace

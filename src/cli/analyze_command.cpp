@@ -363,10 +363,11 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     const auto start = std::chrono::steady_clock::now();
     analyses = analyse_steps(ok_steps, layout, config, settings,
                              [&](double fraction) { progress.update(0.1 + 0.85 * fraction); });
-    const std::vector<std::string>& names = args.effects_given ? args.effects : config.model.effects;
+    const std::vector<std::string>& names =
+        args.effects_given ? args.effects : config.model.effects;
     if (!names.empty()) {
-      extended = fit_extended_model(make_discrepancy_input(ok_steps, analyses, layout, config),
-                                    names);
+      extended =
+          fit_extended_model(make_discrepancy_input(ok_steps, analyses, layout, config), names);
     }
     spdlog::debug("analysed {} steps in {:.2f} s", analyses.size(),
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
@@ -427,9 +428,10 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
       }
       fmt::print("effect {}:{}\n", e.name, params);
     }
-    fmt::print("extended model: pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)\n",
-               extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
-               extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
+    fmt::print(
+        "extended model: pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)\n",
+        extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
+        extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
   }
 }
 

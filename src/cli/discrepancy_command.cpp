@@ -91,12 +91,13 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
   j["noise_floor_nrmse_pct"] = r.noise_floor_nrmse_pct;
   j["baseline_in_sample_nrmse_pct"] = r.baseline_in_sample_nrmse_pct;
   j["baseline_bic"] = r.baseline_bic;
-  j["settings"] = {{"folds", args.settings.folds},
-                   {"phase_bins", args.settings.phase_bins},
-                   {"min_shrink_pct", args.settings.min_shrink_pct},
-                   {"min_delta_bic", args.settings.min_delta_bic},
-                   {"second_effect", args.settings.second_effect},
-                   {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
+  j["settings"] = {
+      {"folds", args.settings.folds},
+      {"phase_bins", args.settings.phase_bins},
+      {"min_shrink_pct", args.settings.min_shrink_pct},
+      {"min_delta_bic", args.settings.min_delta_bic},
+      {"second_effect", args.settings.second_effect},
+      {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
   j["data"] = {{"steps", r.steps}, {"step_regions", r.step_regions}, {"frames", r.frames}};
   nlohmann::json where = nlohmann::json::array();
   for (const ResidualCell& c : r.where) where.push_back(cell_json(c, args.settings.phase_bins));

@@ -17,11 +17,20 @@ std::string escape(const std::string& text) {
   std::string out;
   for (char c : text) {
     switch (c) {
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '&': out += "&amp;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '&':
+        out += "&amp;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -39,10 +48,10 @@ std::string heat_map(const ResidualMap& map, const std::string& title) {
   constexpr int kLabel = 140, kCell = 44, kRow = 26, kTop = 30;
   const int width = kLabel + kCell * map.bins + 10;
   const int height = kTop + kRow * static_cast<int>(kRegionCount) + 30;
-  std::string s = fmt::format(
-      R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" role="img">)"
-      R"(<text x="4" y="18" font-weight="bold">{}</text>)",
-      width, height, escape(title));
+  std::string s =
+      fmt::format(R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" role="img">)"
+                  R"(<text x="4" y="18" font-weight="bold">{}</text>)",
+                  width, height, escape(title));
   for (const ResidualCell& c : map.cells) {
     const int x = kLabel + kCell * c.bin;
     const int y = kTop + kRow * static_cast<int>(index_of(c.region));
@@ -110,7 +119,8 @@ std::string step_plot(const std::vector<StepComparison>& steps) {
     std::string pts;
     for (std::size_t i = 0; i < steps.size(); ++i) {
       const double v = extended ? steps[i].extended_nrmse_pct : steps[i].baseline_nrmse_pct;
-      const double x = kPad + (kW - 2 * kPad) * (steps.size() > 1 ? double(i) / (steps.size() - 1) : 0.5);
+      const double x =
+          kPad + (kW - 2 * kPad) * (steps.size() > 1 ? double(i) / (steps.size() - 1) : 0.5);
       const double y = kH - kPad + 10 - (kH - kPad) * v / top;
       pts += fmt::format("{:.1f},{:.1f} ", x, y);
     }
@@ -129,8 +139,7 @@ std::string step_plot(const std::vector<StepComparison>& steps) {
 
 }  // namespace
 
-std::string render_discrepancy_html(const std::string& session_name,
-                                    const DiscrepancyResult& r) {
+std::string render_discrepancy_html(const std::string& session_name, const DiscrepancyResult& r) {
   std::string named;
   for (const EffectEstimate& e : r.named_effects) {
     named += "<li><b>" + escape(e.name) + "</b>: ";
@@ -161,9 +170,10 @@ std::string render_discrepancy_html(const std::string& session_name,
   candidates += "</table>";
   std::string seconds;
   if (!r.second_candidates.empty()) {
-    candidates += "<h3>On top of the first named effect</h3><table><tr><th>candidate</th>"
-                  "<th>held-out NRMSE %</th><th>shrink %</th><th>in-sample NRMSE %</th>"
-                  "<th>&Delta;BIC</th><th>parameters</th></tr>";
+    candidates +=
+        "<h3>On top of the first named effect</h3><table><tr><th>candidate</th>"
+        "<th>held-out NRMSE %</th><th>shrink %</th><th>in-sample NRMSE %</th>"
+        "<th>&Delta;BIC</th><th>parameters</th></tr>";
     rows(r.second_candidates);
     candidates += "</table>";
   }
@@ -185,8 +195,9 @@ std::string render_discrepancy_html(const std::string& session_name,
   cand_labels.insert(cand_labels.begin(), "baseline");
   cand_values.insert(cand_values.begin(), r.baseline_heldout_nrmse_pct);
 
-  std::string where = "<table><tr><th>region</th><th>phase</th><th>samples</th><th>residual RMS "
-                      "N</th><th>bias N</th><th>noise floor N</th></tr>";
+  std::string where =
+      "<table><tr><th>region</th><th>phase</th><th>samples</th><th>residual RMS "
+      "N</th><th>bias N</th><th>noise floor N</th></tr>";
   for (const ResidualCell& c : r.where) {
     where += fmt::format(
         "<tr><td>{}</td><td>{:.1f}-{:.1f}</td><td>{}</td><td>{:.2f}</td><td>{:+.2f}</td><td>{:.2f}"
@@ -222,8 +233,9 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
       r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
   html += "<h2>Held-out NRMSE before (grey) and after (blue)</h2>" +
           paired_bars(labels, before, after, " %");
-  html += "<h2>Residual maps</h2><p>Residual RMS / noise floor per region and normalised stance "
-          "time (heel strike 0, toe off 1); 1 is noise, 3 or more is deep red.</p>";
+  html +=
+      "<h2>Residual maps</h2><p>Residual RMS / noise floor per region and normalised stance "
+      "time (heel strike 0, toe off 1); 1 is noise, 3 or more is deep red.</p>";
   html += heat_map(r.map_before, "Before (baseline model)");
   html += heat_map(r.map_after, "After (with the named effects)");
   html += "<h2>Where: the cells furthest above the noise floor</h2>" + where;

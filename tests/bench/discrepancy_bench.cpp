@@ -36,19 +36,23 @@ fs::path simulated(const std::string& effect) {
 
 void run(benchmark::State& state, const std::string& effect) {
   const fs::path csv = simulated(effect);
-  const gaitmon::InsoleLayout layout(config().insole(gaitmon::InsoleSize::S37_38),
-                                     config().sensor);
+  const gaitmon::InsoleLayout layout(config().insole(gaitmon::InsoleSize::S37_38), config().sensor);
   for (auto _ : state) {
     std::vector<gaitmon::Step> steps;
-    gaitmon::segment_session(csv, config(), [&](gaitmon::Step&& s) { steps.push_back(std::move(s)); });
+    gaitmon::segment_session(csv, config(),
+                             [&](gaitmon::Step&& s) { steps.push_back(std::move(s)); });
     const auto input =
         gaitmon::prepare_discrepancy_input(steps, layout, config(), gaitmon::AnalysisSettings{});
     benchmark::DoNotOptimize(gaitmon::find_discrepancy(input));
   }
 }
 
-void BM_Discrepancy60sNone(benchmark::State& state) { run(state, "none"); }
-void BM_Discrepancy60sImpact(benchmark::State& state) { run(state, "impact_transient"); }
+void BM_Discrepancy60sNone(benchmark::State& state) {
+  run(state, "none");
+}
+void BM_Discrepancy60sImpact(benchmark::State& state) {
+  run(state, "impact_transient");
+}
 
 }  // namespace
 
