@@ -701,7 +701,7 @@ double savgol_noise_sd(std::span<const double> y) {
   return 1.4826 * mad / std::sqrt(630.0 / 1225.0);
 }
 
-Prepared prepare(const DiscrepancyInput& input, int folds, int bins) {
+Prepared prepare(const DiscrepancyInput& input, int folds) {
   Prepared out;
   std::vector<std::size_t> order(input.steps.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -808,7 +808,6 @@ Prepared prepare(const DiscrepancyInput& input, int folds, int bins) {
   }
   p.r1 = c0 > 0 ? std::clamp(c1 / c0, -0.99, 0.99) : 0.0;
   p.neff_fraction = std::max(0.0, p.r1) > 0 ? (1 - p.r1) / (1 + p.r1) : 1.0;
-  (void)bins;
   return out;
 }
 
@@ -964,7 +963,7 @@ CandidateResult result_of(const CandidateOutcome& c, const Pooled& pooled, doubl
   r.params = estimate_of(c).params;
   r.in_sample_nrmse_pct = nrmse(c.in_sample_sse, pooled.norm);
   r.heldout_nrmse_pct = nrmse(c.heldout_sse, pooled.norm);
-  r.shrink_pct = 100.0 * (1.0 - r.heldout_nrmse_pct / base_heldout);
+  r.shrink_pct = base_heldout > 0.0 ? 100.0 * (1.0 - r.heldout_nrmse_pct / base_heldout) : 0.0;
   const int params = base_params + static_cast<int>(c.theta.size());
   r.bic = bic(c.in_sample_sse, pooled, params);
   r.delta_bic = r.bic - bic(base_sse, pooled, base_params);
@@ -1067,7 +1066,7 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
 DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                                    const DiscrepancySettings& settings) {
   check_settings(settings, input);
-  const Prepared prep = prepare(input, settings.folds, settings.phase_bins);
+  const Prepared prep = prepare(input, settings.folds);
   const std::vector<Unit>& units = prep.units;
   const Pooled& pooled = prep.pooled;
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
@@ -1136,7 +1135,9 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   }
   out.extended_heldout_nrmse_pct = nrmse(sum(heldout), pooled.norm);
   out.gap_shrink_pct =
-      100.0 * (1.0 - out.extended_heldout_nrmse_pct / out.baseline_heldout_nrmse_pct);
+      out.baseline_heldout_nrmse_pct > 0.0
+          ? 100.0 * (1.0 - out.extended_heldout_nrmse_pct / out.baseline_heldout_nrmse_pct)
+          : 0.0;
 
   std::vector<std::vector<double>> ext_preds;
   unit_costs(units, chosen, &ext_preds);
@@ -1184,7 +1185,7 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
       }
     }
   }
-  const Prepared prep = prepare(input, settings.folds, settings.phase_bins);
+  const Prepared prep = prepare(input, settings.folds);
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   ExtendedModelFit out;
   const std::vector<double> base = unit_costs(prep.units, {});

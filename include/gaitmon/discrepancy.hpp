@@ -3,13 +3,14 @@
 // effect helps on steps it was not fitted on. Free of I/O.
 //
 // Baseline. Each step's regions are fitted by analyse_step. The workflow keeps each fit's
-// exponents n, m and declared geometry and writes the model as F = K E + D V (E, V the elastic
-// and damping shapes of the measured contact area, as in tissue_fit), re-solving the two
-// amplitudes K, D >= 0 per step and region by least squares. Baseline and extended models are
-// then nested: an effect with zero strength is the baseline exactly.
+// damping exponent m and declared geometry and writes the model as F = K E(n) + D V (E, V the
+// elastic and damping shapes of the measured contact area, as in tissue_fit, over the frames
+// with a contact ellipse); n is re-chosen from the fit's own value and a grid of nine, and K,
+// D >= 0 are re-solved by least squares, per step and region, with every effect as without.
+// Baseline and extended models are then nested: an effect of zero strength is the baseline.
 //
 // Candidates: named extensions with a few parameters SHARED by all the session's steps, while
-// K, D stay per step and region (they are re-solved for every parameter value):
+// n, K, D stay per step and region (re-solved for every parameter value):
 //   stress_relaxation  F_meas = F - g LP_tau(F)                (strength g, tau_s)
 //   sensor_creep       F_meas = F + beta LP_tau(F)             (gain beta, tau_s)
 //   hysteresis         F_meas = F (1 + h z(d)), Dahl state z   (strength h, transition_mm)
