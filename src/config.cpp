@@ -16,12 +16,14 @@
 #include <optional>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <tuple>
 #include <utility>
 #include <vector>
 
+#include "gaitmon/discrepancy.hpp"
 #include "gaitmon/error.hpp"
 
 namespace gaitmon {
@@ -478,6 +480,25 @@ fs::path named_file(TableReader& root, std::string_view key, const fs::path& mai
   return main_file.parent_path() / name;
 }
 
+void read_model(TableReader table, const std::string& file, ModelSettings& model) {
+  const toml::array& effects = table.array("effects");
+  for (std::size_t i = 0; i < effects.size(); ++i) {
+    const std::string key = fmt::format("model.effects[{}]", i);
+    const auto* name = effects[i].as_string();
+    if (name == nullptr) fail_element(file, key, effects[i], "must be a string");
+    try {
+      check_discrepancy_effect(name->get());
+    } catch (const std::invalid_argument& e) {
+      fail_element(file, key, effects[i], e.what());
+    }
+    if (std::find(model.effects.begin(), model.effects.end(), name->get()) != model.effects.end()) {
+      fail_element(file, key, effects[i], fmt::format("'{}' is listed twice", name->get()));
+    }
+    model.effects.push_back(name->get());
+  }
+  table.finish();
+}
+
 }  // namespace
 
 Config load_config(const fs::path& main_file) {
@@ -496,6 +517,7 @@ Config load_config(const fs::path& main_file) {
   read_calibration(root.table("calibration"), config.calibration);
   read_segmentation(root.table("segmentation"), config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
+  read_model(root.table("model"), file, config.model);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

@@ -94,15 +94,6 @@ class Rng {
   bool has_spare_ = false;
 };
 
-/// The named effects simulate_session can apply; a new effect is one more entry.
-struct EffectEntry {
-  std::string_view name;
-  std::unique_ptr<SimulationEffect> (*make)();
-};
-constexpr std::array<EffectEntry, 1> kEffects{{
-    {"none", []() -> std::unique_ptr<SimulationEffect> { return nullptr; }},
-}};
-
 /// A region's cells in the grid frame, gathered once per session.
 struct RegionCells {
   std::vector<std::size_t> sensors;
@@ -308,6 +299,18 @@ struct StanceTally {
   double peak_total_force_n = 0.0;
 };
 
+/// Every effect applied, in order, with every parameter (defaults filled in).
+nlohmann::json effects_json(const SimulationOptions& o) {
+  nlohmann::json effects = nlohmann::json::array();
+  for (const std::string& name : o.effects) {
+    const auto given = o.effect_params.find(name);
+    const EffectParams params = resolve_effect_params(
+        name, given == o.effect_params.end() ? EffectParams{} : given->second);
+    effects.push_back({{"name", name}, {"params", params}});
+  }
+  return effects;
+}
+
 void write_truth(const SimulationTruth& truth, const std::filesystem::path& path) {
   const SimulationOptions& o = truth.options;
   nlohmann::json j;
@@ -324,7 +327,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                   {"jitter_pct", o.timing.jitter_pct},
                   {"noise_sd_bits", o.noise_sd_bits},
                   {"max_bias_bits", o.max_bias_bits},
-                  {"effects", o.effects},
+                  {"effects", effects_json(o)},
                   {"subject", o.subject}};
   j["sample_rate_hz"] = truth.sample_rate_hz;
   j["frames_per_foot"] = truth.frames_per_foot;
@@ -392,22 +395,6 @@ std::optional<Rasterisation> parse_rasterisation(std::string_view text) {
   return std::nullopt;
 }
 
-std::vector<std::string_view> simulation_effect_names() {
-  std::vector<std::string_view> names;
-  for (const EffectEntry& entry : kEffects) names.push_back(entry.name);
-  return names;
-}
-
-std::unique_ptr<SimulationEffect> make_simulation_effect(std::string_view name) {
-  std::string known;
-  for (const EffectEntry& entry : kEffects) {
-    if (entry.name == name) return entry.make();
-    known += (known.empty() ? "" : ", ") + std::string(entry.name);
-  }
-  throw std::invalid_argument("unknown simulation effect '" + std::string(name) +
-                              "' (known: " + known + ")");
-}
-
 double contact_area_for_elastic_force(const EllipsoidParams& params, double target_force_n,
                                       double max_area_mm2) {
   const auto elastic = [&](double area) {
@@ -441,7 +428,11 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
   validate(options);
   std::vector<std::unique_ptr<SimulationEffect>> effects;
   for (const std::string& name : options.effects) {
-    if (auto effect = make_simulation_effect(name)) effects.push_back(std::move(effect));
+    const auto params = options.effect_params.find(name);
+    if (auto effect = make_simulation_effect(
+            name, params == options.effect_params.end() ? EffectParams{} : params->second)) {
+      effects.push_back(std::move(effect));
+    }
   }
   const InsoleLayout layout(config.insole(options.size), config.sensor);
   const std::size_t sensor_count = layout.sensor_count();
@@ -521,7 +512,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
           if (!contact) continue;
           double force = force_n(sr.params, contact->d_mm, contact->ddot_mm_per_s, options.model);
           const TissueSample sample{
-              foot, r, t, contact->area_mm2, contact->d_mm, contact->ddot_mm_per_s};
+              foot, r, t, stance.start_s, contact->area_mm2, contact->d_mm, contact->ddot_mm_per_s};
           for (auto& effect : effects) force = effect->tissue_force_n(sample, force);
           if (force < 0.0) {
             ++truth.negative_force_samples;

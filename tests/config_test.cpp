@@ -544,3 +544,45 @@ TEST(Config, FitBoundsAreValidated) {
 
 }  // namespace
 }  // namespace gaitmon
+
+namespace gaitmon {
+namespace {
+
+TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
+  EXPECT_TRUE(load_config(shipped_config()).model.effects.empty());
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"ModelUnknownEffect", replace("effects = []", R"(effects = ["crosstalk"])"),
+       "model.effects[0]", "unknown effect 'crosstalk'"},
+      {"ModelEffectTwice", replace("effects = []", R"(effects = ["hysteresis", "hysteresis"])"),
+       "model.effects[1]", "listed twice"},
+      {"ModelEffectNotString", replace("effects = []", "effects = [1]"), "model.effects[0]",
+       "must be a string"},
+      {"ModelUnknownKey", replace("effects = []", "effects = []\nstrength = 1"), "model.strength",
+       "unknown key"},
+      {"ModelMissing", replace("effects = []", ""), "model.effects", "missing"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+  const fs::path dir = copy_config("ModelTwoEffects");
+  edit_file(dir / kMain,
+            replace("effects = []", R"(effects = ["sensor_saturation", "impact_transient"])"));
+  EXPECT_EQ(load_config(dir / kMain).model.effects,
+            (std::vector<std::string>{"sensor_saturation", "impact_transient"}));
+}
+
+}  // namespace
+}  // namespace gaitmon

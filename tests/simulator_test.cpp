@@ -286,10 +286,14 @@ TEST(Simulator, PeakAreaBisectionHitsTheTargetElasticForce) {
   EXPECT_EQ(contact_area_for_elastic_force(p, 0.0, 3000.0), 0.0);
 }
 
-TEST(Simulator, EffectRegistryHasOnlyNone) {
-  EXPECT_EQ(simulation_effect_names(), std::vector<std::string_view>{"none"});
+TEST(Simulator, EffectRegistryListsNoneAndTheFivePhysicalEffects) {
+  EXPECT_EQ(
+      simulation_effect_names(),
+      (std::vector<std::string_view>{"none", "stress_relaxation", "hysteresis", "impact_transient",
+                                     "sensor_saturation", "sensor_creep"}));
   EXPECT_EQ(make_simulation_effect("none"), nullptr);
-  EXPECT_THROW(make_simulation_effect("hysteresis"), std::invalid_argument);
+  EXPECT_NE(make_simulation_effect("hysteresis"), nullptr);
+  EXPECT_THROW(make_simulation_effect("crosstalk"), std::invalid_argument);
 }
 
 std::string slurp(const std::filesystem::path& path) {

@@ -75,6 +75,13 @@ struct SeedTissueStats {
   double nrmse_pct_sd = 0.0;
 };
 
+/// [model] of the main file: what the tissue model includes beyond the ellipsoid.
+struct ModelSettings {
+  /// Named effects (discrepancy_effect_names()) that `gaitmon analyze` and the live monitor add
+  /// to the model, in order; empty is the ellipsoid alone.
+  std::vector<std::string> effects;
+};
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -84,6 +91,7 @@ struct Config {
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
   FitBounds fit_bounds;  ///< [fit] of the main file: the tissue fit's parameter bounds
+  ModelSettings model;   ///< [model] of the main file
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {

@@ -37,6 +37,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -79,6 +80,10 @@ inline constexpr std::array<double, kRegionCount> kPeakElasticForceShare{0.75, 0
 inline constexpr double kMaxContactFractionOfSensorArea = 0.9;
 inline constexpr double kMaxContactFractionOfInscribedEllipse = 0.95;
 
+/// Parameters of one simulation effect by name (e.g. {"tau_s", 0.1}); the ones left out take
+/// their defaults (simulation_effect_params).
+using EffectParams = std::map<std::string, double>;
+
 struct GaitTiming {
   double stride_s = 1.10;         ///< heel strike to the same foot's next heel strike, (0.5, 3]
   double stance_fraction = 0.62;  ///< contact (any load) / stride duration, [0.3, 0.8]
@@ -99,6 +104,8 @@ struct SimulationOptions {
   std::array<std::optional<EllipsoidParams>, kRegionCount> region_params;
   /// Named physical effects (simulation_effect_names()), applied in this order.
   std::vector<std::string> effects;
+  /// Parameters per effect name; an effect without an entry uses its defaults.
+  std::map<std::string, EffectParams> effect_params;
   std::string subject = "simulated";
 };
 
@@ -171,6 +178,7 @@ struct TissueSample {
   Foot foot = Foot::Left;
   Region region = Region::Heel;
   double t_s = 0.0;
+  double t_contact_start_s = 0.0;  ///< when this stance's contact (any load) began
   double area_mm2 = 0.0;
   double d_mm = 0.0;
   double ddot_mm_per_s = 0.0;
@@ -196,10 +204,30 @@ class SimulationEffect {
   virtual double sensor_bits(const SensorSample& /*sample*/, double bits) { return bits; }
 };
 
-/// The effect names simulate_session accepts; "none" is the model alone.
+/// The effect names simulate_session accepts; "none" is the model alone. The effects and their
+/// physics are described in src/simulation_effects.cpp and the README.
 std::vector<std::string_view> simulation_effect_names();
 
-/// The effect for `name`: nullptr for "none"; throws std::invalid_argument for an unknown name.
-std::unique_ptr<SimulationEffect> make_simulation_effect(std::string_view name);
+/// One parameter of an effect: its default and the physically plausible range it must lie in.
+struct EffectParamSpec {
+  std::string_view name;
+  double default_value = 0.0;
+  double min = 0.0;
+  double max = 0.0;
+  std::string_view meaning;
+};
+
+/// The parameters `name` takes (empty for "none"); throws std::invalid_argument for an unknown
+/// name.
+std::vector<EffectParamSpec> simulation_effect_params(std::string_view name);
+
+/// `params` completed with the defaults; throws std::invalid_argument naming the effect and the
+/// parameter for an unknown name, an unknown parameter or a value outside its range.
+EffectParams resolve_effect_params(std::string_view name, const EffectParams& params);
+
+/// The effect for `name` with `params` (resolved as above): nullptr for "none"; throws
+/// std::invalid_argument as resolve_effect_params does.
+std::unique_ptr<SimulationEffect> make_simulation_effect(std::string_view name,
+                                                         const EffectParams& params = {});
 
 }  // namespace gaitmon

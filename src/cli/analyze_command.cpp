@@ -18,6 +18,7 @@
 #include "commands.hpp"
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
+#include "gaitmon/discrepancy.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/json.hpp"
 #include "gaitmon/session.hpp"
@@ -36,6 +37,8 @@ struct AnalyzeArgs {
   std::string fit = "identifiable";
   std::string smoothing = "seed";
   bool free_scale = false;
+  std::vector<std::string> effects;
+  bool effects_given = false;
 };
 
 std::string declared_note(const FitSettings& fit) {
@@ -181,10 +184,36 @@ nlohmann::json bounds_json(const FitBounds& b) {
           {"m", one(b.m)}};
 }
 
+nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
+  if (!fit) return nlohmann::json::array();
+  nlohmann::json effects = nlohmann::json::array();
+  for (const EffectEstimate& e : fit->effects) {
+    nlohmann::json params = nlohmann::json::object();
+    for (const ParamEstimate& p : e.params) params[p.name] = {{"value", p.value}, {"se", p.se}};
+    effects.push_back({{"name", e.name}, {"params", params}});
+  }
+  nlohmann::json regions = nlohmann::json::object();
+  for (const RegionComparison& c : fit->regions) {
+    regions[std::string(region_name(c.region))] = {
+        {"baseline_heldout_nrmse_pct", c.baseline_heldout_nrmse_pct},
+        {"extended_heldout_nrmse_pct", c.extended_heldout_nrmse_pct}};
+  }
+  return {{"effects", effects},
+          {"note",
+           "effect parameters are shared by all steps; each step and region keeps its own "
+           "tissue amplitudes and stiffness exponent (include/gaitmon/discrepancy.hpp); NRMSE "
+           "pooled over step-regions"},
+          {"baseline_nrmse_pct", fit->baseline_nrmse_pct},
+          {"extended_nrmse_pct", fit->extended_nrmse_pct},
+          {"baseline_heldout_nrmse_pct", fit->baseline_heldout_nrmse_pct},
+          {"extended_heldout_nrmse_pct", fit->extended_heldout_nrmse_pct},
+          {"regions", regions}};
+}
+
 std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, const Config& config,
                          const AnalysisSettings& settings, const std::vector<StepRow>& steps,
-                         const std::vector<StepAnalysis>& analyses,
-                         const SessionAnalysis& session) {
+                         const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
+                         const std::optional<ExtendedModelFit>& extended) {
   nlohmann::json j;
   j["session"] = args.session.string();
   j["insole_size"] = insole_size_name(header.insole_size);
@@ -225,6 +254,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
           {"nrmse_pct_sd", seed.nrmse_pct_sd}}}};
   }
   j["regions"] = regions;
+  j["extended_model"] = effects_json(extended);
   return j.dump(2) + "\n";
 }
 
@@ -310,6 +340,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   std::vector<StepRow> steps;
   std::vector<Step> ok_steps;
   std::vector<StepAnalysis> analyses;
+  std::optional<ExtendedModelFit> extended;
   {
     ProgressBar progress("analyze");
     auto on_step = [&](Step&& step) {
@@ -322,6 +353,12 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     const auto start = std::chrono::steady_clock::now();
     analyses = analyse_steps(ok_steps, layout, config, settings,
                              [&](double fraction) { progress.update(0.1 + 0.85 * fraction); });
+    const std::vector<std::string>& names =
+        args.effects_given ? args.effects : config.model.effects;
+    if (!names.empty()) {
+      extended =
+          fit_extended_model(make_discrepancy_input(ok_steps, analyses, layout, config), names);
+    }
     spdlog::debug("analysed {} steps in {:.2f} s", analyses.size(),
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
@@ -353,7 +390,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   };
   add("steps.csv", steps_csv(steps));
   add("regions.csv", regions_csv(analyses));
-  add("session.json", session_json(args, header, config, settings, steps, analyses, session));
+  add("session.json",
+      session_json(args, header, config, settings, steps, analyses, session, extended));
   if (args.report) {
     ReportInput input;
     input.session_name = args.session.filename().string();
@@ -374,6 +412,25 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   }
   OutputFile::commit_all(to_commit);
   print_summary(args, header, settings, steps, analyses, session, written);
+  if (extended) {
+    for (const EffectEstimate& e : extended->effects) {
+      std::string params;
+      for (const ParamEstimate& p : e.params) {
+        params += fmt::format(" {} = {:.4g} +- {:.2g};", p.name, p.value, p.se);
+      }
+      fmt::print("effect {}:{}\n", e.name, params);
+    }
+    fmt::print(
+        "extended model: pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)\n",
+        extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
+        extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
+  }
+}
+
+std::vector<std::string> effect_names() {
+  std::vector<std::string> names;
+  for (std::string_view n : discrepancy_effect_names()) names.emplace_back(n);
+  return names;
 }
 
 }  // namespace
@@ -399,7 +456,16 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_flag("--free-scale", args->free_scale,
                 "Also fit P = pi A B (keeping A/B); identifiable mode only");
-  sub->callback([&global, args] { run_analyze(global, *args); });
+  sub->add_option("--effects", args->effects,
+                  "Effects added to the model, comma-separated (stress_relaxation, hysteresis, "
+                  "impact_transient, sensor_saturation, sensor_creep); default: [model] effects "
+                  "of the config")
+      ->delimiter(',')
+      ->check(CLI::IsMember(effect_names()));
+  sub->callback([&global, args, sub] {
+    args->effects_given = sub->count("--effects") > 0;
+    run_analyze(global, *args);
+  });
 }
 
 }  // namespace gaitmon::cli

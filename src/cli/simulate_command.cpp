@@ -2,8 +2,10 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 
 #include "commands.hpp"
 #include "gaitmon/simulator.hpp"
@@ -17,6 +19,7 @@ struct SimulateArgs {
   std::string model = "correct";
   std::string rasterisation = "centre";
   std::vector<std::string> params;
+  std::string effect_params;
   std::filesystem::path out;
   std::filesystem::path truth;
 };
@@ -60,6 +63,53 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
   (*slot).*(it->second) = value;
 }
 
+/// Parses --effect-params: a JSON object of numbers for the one --effect given, or an object of
+/// such objects keyed by effect name when there are several. Names and ranges are checked by
+/// the simulator (resolve_effect_params).
+void apply_effect_params(const std::string& text, SimulationOptions& options) {
+  if (text.empty()) return;
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw std::invalid_argument("--effect-params: not valid JSON (" + std::string(e.what()) + ")");
+  }
+  if (!j.is_object()) throw std::invalid_argument("--effect-params: expected a JSON object");
+  const auto numbers = [](const nlohmann::json& obj, const std::string& effect) {
+    EffectParams params;
+    if (!obj.is_object()) {
+      throw std::invalid_argument("--effect-params: the parameters of '" + effect +
+                                  "' must be a JSON object");
+    }
+    for (const auto& [key, value] : obj.items()) {
+      if (!value.is_number()) {
+        throw std::invalid_argument("--effect-params: '" + key + "' of '" + effect +
+                                    "' must be a number");
+      }
+      params[key] = value.get<double>();
+    }
+    resolve_effect_params(effect, params);
+    return params;
+  };
+  const bool nested = !j.empty() && j.begin()->is_object();
+  if (!nested) {
+    if (options.effects.size() != 1) {
+      throw std::invalid_argument(
+          "--effect-params: with a flat object give exactly one --effect; with several, key the "
+          "parameters by effect name");
+    }
+    options.effect_params[options.effects.front()] = numbers(j, options.effects.front());
+    return;
+  }
+  for (const auto& [effect, obj] : j.items()) {
+    if (std::find(options.effects.begin(), options.effects.end(), effect) ==
+        options.effects.end()) {
+      throw std::invalid_argument("--effect-params: '" + effect + "' is not one of the --effect");
+    }
+    options.effect_params[effect] = numbers(obj, effect);
+  }
+}
+
 void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   const Config config = load_global_config(global);
   SimulationOptions& options = args.options;
@@ -67,6 +117,8 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   options.model = *parse_model_variant(args.model);
   options.rasterisation = *parse_rasterisation(args.rasterisation);
   for (const auto& p : args.params) apply_param(p, config, options);
+  for (const auto& name : options.effects) simulation_effect_params(name);  // known names only
+  apply_effect_params(args.effect_params, options);
   if (args.truth.empty()) {
     args.truth = args.out;
     args.truth.replace_extension(".truth.json");
@@ -143,7 +195,12 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "Override one tissue parameter, REGION.FIELD=VALUE (e.g. "
                   "heel.kbar_n_per_mm3=0.15); the rest are the seed's Appendix I means");
   sub->add_option("--effect", args->options.effects,
-                  "Named physical effect to apply on top of the model (default: none)");
+                  "Physical effect to apply on top of the model, repeatable: none (default), "
+                  "stress_relaxation, hysteresis, impact_transient, sensor_saturation, "
+                  "sensor_creep");
+  sub->add_option("--effect-params", args->effect_params,
+                  R"(Effect parameters as JSON, e.g. '{"strength":0.3,"tau_s":0.1}' for one )"
+                  R"(--effect, or '{"NAME":{...},...}' for several (defaults otherwise))");
   sub->add_option("--subject", args->options.subject, "Subject label in the session metadata")
       ->capture_default_str();
   sub->callback([&global, args] { run_simulate(global, *args); });

@@ -1,0 +1,204 @@
+// The model-data discrepancy workflow (issue 5): where the fitted tissue model and the
+// measurements disagree, which missing physical effect explains it, and how much adding that
+// effect helps on steps it was not fitted on. Free of I/O.
+//
+// Baseline. Each step's regions are fitted by analyse_step. The workflow keeps each fit's
+// damping exponent m and declared geometry and writes the model as F = K E(n) + D V (E, V the
+// elastic and damping shapes of the measured contact area, as in tissue_fit, over the frames
+// with a contact ellipse); n is re-chosen from the fit's own value and a grid of nine, and K,
+// D >= 0 are re-solved by least squares, per step and region, with every effect as without.
+// Baseline and extended models are then nested: an effect of zero strength is the baseline.
+//
+// Candidates: named extensions with a few parameters SHARED by all the session's steps, while
+// n, K, D stay per step and region (re-solved for every parameter value):
+//   stress_relaxation  F_meas = F - g LP_tau(F)                (strength g, tau_s)
+//   sensor_creep       F_meas = F + beta LP_tau(F)             (gain beta, tau_s)
+//   hysteresis         F_meas = F (1 + h z(d)), Dahl state z   (strength h, transition_mm)
+//   impact_transient   heel F_meas = F + a sin(pi (t - t0) / T) (amplitude_n, duration_s,
+//                      onset_frames: t0 is that many frames before the heel strike frame)
+//   sensor_saturation  F_meas = F (1 - (1 - c / p)^2) for p > c, p = 2 F / cells / N-per-bit
+//                      the peak reading of a paraboloid pressure over the measured contact
+//                      (ceiling_bits c)
+// LP_tau is a first-order lag running through the foot's steps in time order (the lag carried
+// into a step is that of the measured force of the foot's earlier steps, decayed over the
+// swing). Each candidate is fitted on a grid of its parameters (profiled over every step's K,
+// D) and refined locally; standard errors come from the curvature of the profiled sum of
+// squares, with the sample size reduced to the effective one of autocorrelated residuals.
+//
+// Choice. Steps are split into k folds (by time order, step i in fold i mod k); a candidate's
+// held-out error is that of each fold's steps under the parameters fitted on the other folds.
+// The criterion is BIC with the effective sample size N_eff = N (1 - r1) / (1 + r1), r1 the
+// lag-1 autocorrelation of the baseline residuals. The best candidate by held-out error is named
+// when its held-out NRMSE is at least min_shrink_pct below the baseline's AND its BIC is at
+// least min_delta_bic below; a second effect is named on top of the first by the same rules
+// against the one-effect model.
+//
+// NRMSE here is pooled eq 58: 100 sqrt(sum of squared residuals / sum over step-regions of
+// frames x (max measured force)^2), so regions weigh by their force.
+#pragma once
+
+#include <array>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/config.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/segmentation.hpp"
+#include "gaitmon/types.hpp"
+
+namespace gaitmon {
+
+/// The candidate effects, in the order they are tried.
+std::vector<std::string_view> discrepancy_effect_names();
+
+/// Throws std::invalid_argument naming the known effects unless `name` is one of them.
+void check_discrepancy_effect(std::string_view name);
+
+/// One analysed step and what the workflow needs beyond the fits.
+struct DiscrepancyStep {
+  StepAnalysis analysis;
+  /// Per region and stance frame: cells within kSaturationBandBits of the session's highest
+  /// zeroed reading (a reading that has stopped rising). Empty means unknown (all zero).
+  std::array<std::vector<int>, kRegionCount> saturated_cells;
+};
+
+/// A cell counts as saturated within this many bits of the session's highest zeroed reading.
+inline constexpr double kSaturationBandBits = 3.0;
+
+struct DiscrepancyInput {
+  std::vector<DiscrepancyStep> steps;  ///< complete steps of both feet, any order
+  double sample_rate_hz = 100.0;
+  double cell_area_mm2 = 112.5;
+  double newtons_per_bit = 0.2824;
+};
+
+/// Segmented steps -> analysed steps with saturated-cell counts. Only Ok steps are analysed; they
+/// are analysed on all cores and the result does not depend on it.
+DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,
+                                           const Config& config, const AnalysisSettings& settings);
+
+/// The same from steps already analysed: analyses[i] is analyse_step of steps[i]. Throws
+/// std::invalid_argument if the counts differ.
+DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
+                                        std::vector<StepAnalysis> analyses,
+                                        const InsoleLayout& layout, const Config& config);
+
+struct DiscrepancySettings {
+  int folds = 5;                 ///< k of the k-fold over steps, >= 2
+  int phase_bins = 10;           ///< bins of normalised stance time, >= 10
+  double min_shrink_pct = 15.0;  ///< held-out NRMSE must fall at least this much, %
+  double min_delta_bic = 10.0;   ///< and BIC at least this much
+  bool second_effect = true;     ///< look for a second effect on top of the first
+  int top_cells = 10;            ///< region x phase cells listed under `where`
+};
+
+struct ParamEstimate {
+  std::string name;
+  double value = 0.0;
+  double se = 0.0;
+};
+
+struct EffectEstimate {
+  std::string name;
+  std::vector<ParamEstimate> params;
+};
+
+struct CandidateResult {
+  std::string name;
+  std::vector<ParamEstimate> params;  ///< fitted on all steps
+  double in_sample_nrmse_pct = 0.0;
+  double heldout_nrmse_pct = 0.0;
+  double shrink_pct = 0.0;  ///< held-out, against the model it extends
+  double bic = 0.0;
+  double delta_bic = 0.0;  ///< against the model it extends
+};
+
+/// One region x stance-phase cell of the residual map.
+struct ResidualCell {
+  Region region = Region::Heel;
+  int bin = 0;
+  int samples = 0;
+  double rms_n = 0.0;          ///< residual RMS
+  double bias_n = 0.0;         ///< mean residual (measured - model)
+  double noise_floor_n = 0.0;  ///< RMS of the per-frame noise floor
+};
+
+struct ResidualMap {
+  int bins = 0;
+  std::vector<ResidualCell> cells;  ///< region-major, bins cells per region
+};
+
+struct RegionComparison {
+  Region region = Region::Heel;
+  int step_regions = 0;
+  double baseline_heldout_nrmse_pct = 0.0;
+  double extended_heldout_nrmse_pct = 0.0;
+};
+
+struct StepComparison {
+  Foot foot = Foot::Left;
+  int step = 0;
+  double baseline_nrmse_pct = 0.0;
+  double extended_nrmse_pct = 0.0;  ///< held-out
+};
+
+/// Pearson correlation of the residual (scaled by its step-region's peak force) with one state.
+struct StateCorrelation {
+  std::string state;
+  double r = 0.0;
+};
+
+struct ResidualDiagnostics {
+  std::vector<double> bias_per_phase_pct;  ///< mean residual / peak force per phase bin, %
+  double lag1_autocorrelation = 0.0;       ///< within step-regions
+  double runs_z = 0.0;                     ///< Wald-Wolfowitz runs test, pooled
+  double effective_sample_fraction = 1.0;  ///< (1 - r1) / (1 + r1)
+  std::vector<StateCorrelation> correlations;
+};
+
+struct DiscrepancyResult {
+  int steps = 0;
+  int step_regions = 0;
+  long frames = 0;
+  double noise_floor_nrmse_pct = 0.0;  ///< the pooled noise floor on the NRMSE scale
+  double baseline_in_sample_nrmse_pct = 0.0;
+  double baseline_heldout_nrmse_pct = 0.0;  ///< the baseline has no shared parameters
+  double extended_heldout_nrmse_pct = 0.0;
+  double gap_shrink_pct = 0.0;  ///< 100 (1 - extended / baseline)
+  double baseline_bic = 0.0;
+  std::vector<EffectEstimate> named_effects;
+  std::vector<CandidateResult> candidates;         ///< each on top of the baseline
+  std::vector<CandidateResult> second_candidates;  ///< each on top of the first named effect
+  std::vector<ResidualCell> where;                 ///< top cells by excess over the noise floor
+  ResidualMap map_before;
+  ResidualMap map_after;
+  std::vector<RegionComparison> regions;
+  std::vector<StepComparison> per_step;
+  ResidualDiagnostics diagnostics;
+};
+
+/// Runs the workflow. Deterministic. Throws std::invalid_argument for bad settings or fewer
+/// steps than folds.
+DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
+                                   const DiscrepancySettings& settings = {});
+
+/// The extended model with the named effects (in the given order, each fitted on top of the
+/// previous), fitted on all steps: what `gaitmon analyze --effects` reports.
+struct ExtendedModelFit {
+  std::vector<EffectEstimate> effects;
+  double baseline_nrmse_pct = 0.0;  ///< pooled, in sample
+  double extended_nrmse_pct = 0.0;  ///< pooled, in sample
+  double baseline_heldout_nrmse_pct = 0.0;
+  double extended_heldout_nrmse_pct = 0.0;
+  std::vector<RegionComparison> regions;
+};
+
+/// Throws std::invalid_argument for an unknown or repeated name or fewer steps than folds.
+ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
+                                    std::span<const std::string> effects,
+                                    const DiscrepancySettings& settings = {});
+
+}  // namespace gaitmon

@@ -1,0 +1,215 @@
+// `gaitmon discrepancy`: where the fitted model and the session disagree, which missing effect
+// explains it, and how far adding it closes the held-out gap (DIR/discrepancy.json, report).
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "discrepancy_report.hpp"
+#include "gaitmon/batch.hpp"
+#include "gaitmon/discrepancy.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/session.hpp"
+#include "output_file.hpp"
+#include "progress.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+struct DiscrepancyArgs {
+  std::filesystem::path session;
+  std::filesystem::path out_dir;
+  bool report = false;
+  DiscrepancySettings settings;
+};
+
+nlohmann::json params_json(const std::vector<ParamEstimate>& params) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const ParamEstimate& p : params) j[p.name] = {{"value", p.value}, {"se", p.se}};
+  return j;
+}
+
+nlohmann::json candidates_json(const std::vector<CandidateResult>& list) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const CandidateResult& c : list) {
+    j.push_back({{"name", c.name},
+                 {"params", params_json(c.params)},
+                 {"in_sample_nrmse_pct", c.in_sample_nrmse_pct},
+                 {"heldout_nrmse_pct", c.heldout_nrmse_pct},
+                 {"heldout_shrink_pct", c.shrink_pct},
+                 {"bic", c.bic},
+                 {"delta_bic", c.delta_bic}});
+  }
+  return j;
+}
+
+nlohmann::json cell_json(const ResidualCell& c, int bins) {
+  return {{"region", region_name(c.region)},
+          {"phase_bin", c.bin},
+          {"phase_from", static_cast<double>(c.bin) / bins},
+          {"phase_to", static_cast<double>(c.bin + 1) / bins},
+          {"samples", c.samples},
+          {"residual_rms_n", c.rms_n},
+          {"residual_bias_n", c.bias_n},
+          {"noise_floor_n", c.noise_floor_n}};
+}
+
+nlohmann::json map_json(const ResidualMap& map) {
+  nlohmann::json j = nlohmann::json::object();
+  for (Region region : kRegions) {
+    nlohmann::json rms = nlohmann::json::array(), bias = rms, floor = rms;
+    for (const ResidualCell& c : map.cells) {
+      if (c.region != region) continue;
+      rms.push_back(c.rms_n);
+      bias.push_back(c.bias_n);
+      floor.push_back(c.noise_floor_n);
+    }
+    j[std::string(region_name(region))] = {
+        {"residual_rms_n", rms}, {"residual_bias_n", bias}, {"noise_floor_n", floor}};
+  }
+  return j;
+}
+
+std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResult& r) {
+  nlohmann::json j;
+  j["session"] = args.session.filename().string();
+  nlohmann::json named = nlohmann::json::array();
+  nlohmann::json named_params = nlohmann::json::array();
+  for (const EffectEstimate& e : r.named_effects) {
+    named.push_back(e.name);
+    named_params.push_back({{"name", e.name}, {"params", params_json(e.params)}});
+  }
+  j["named_effects"] = named;
+  j["named_effect_params"] = named_params;
+  j["baseline_heldout_nrmse_pct"] = r.baseline_heldout_nrmse_pct;
+  j["extended_heldout_nrmse_pct"] = r.extended_heldout_nrmse_pct;
+  j["gap_shrink_pct"] = r.gap_shrink_pct;
+  j["noise_floor_nrmse_pct"] = r.noise_floor_nrmse_pct;
+  j["baseline_in_sample_nrmse_pct"] = r.baseline_in_sample_nrmse_pct;
+  j["baseline_bic"] = r.baseline_bic;
+  j["settings"] = {
+      {"folds", args.settings.folds},
+      {"phase_bins", args.settings.phase_bins},
+      {"min_shrink_pct", args.settings.min_shrink_pct},
+      {"min_delta_bic", args.settings.min_delta_bic},
+      {"second_effect", args.settings.second_effect},
+      {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
+  j["data"] = {{"steps", r.steps}, {"step_regions", r.step_regions}, {"frames", r.frames}};
+  nlohmann::json where = nlohmann::json::array();
+  for (const ResidualCell& c : r.where) where.push_back(cell_json(c, args.settings.phase_bins));
+  j["where"] = where;
+  j["candidates"] = candidates_json(r.candidates);
+  j["second_candidates"] = candidates_json(r.second_candidates);
+  nlohmann::json regions = nlohmann::json::object();
+  for (const RegionComparison& c : r.regions) {
+    regions[std::string(region_name(c.region))] = {
+        {"step_regions", c.step_regions},
+        {"baseline_heldout_nrmse_pct", c.baseline_heldout_nrmse_pct},
+        {"extended_heldout_nrmse_pct", c.extended_heldout_nrmse_pct}};
+  }
+  j["regions"] = regions;
+  j["residual_map_before"] = map_json(r.map_before);
+  j["residual_map_after"] = map_json(r.map_after);
+  nlohmann::json steps = nlohmann::json::array();
+  for (const StepComparison& s : r.per_step) {
+    steps.push_back({{"foot", foot_name(s.foot)},
+                     {"step", s.step},
+                     {"baseline_nrmse_pct", s.baseline_nrmse_pct},
+                     {"extended_heldout_nrmse_pct", s.extended_nrmse_pct}});
+  }
+  j["steps"] = steps;
+  const ResidualDiagnostics& d = r.diagnostics;
+  nlohmann::json corr = nlohmann::json::object();
+  for (const StateCorrelation& c : d.correlations) corr[c.state] = c.r;
+  j["diagnostics"] = {{"bias_per_phase_pct_of_peak", d.bias_per_phase_pct},
+                      {"lag1_autocorrelation", d.lag1_autocorrelation},
+                      {"runs_test_z", d.runs_z},
+                      {"effective_sample_fraction", d.effective_sample_fraction},
+                      {"correlation_with_state", corr}};
+  return j.dump(2) + "\n";
+}
+
+void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
+  const Config config = load_global_config(global);
+  const SessionHeader header = SessionReader(args.session).header();
+  const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+  std::vector<Step> steps;
+  DiscrepancyInput input;
+  {
+    ProgressBar progress("discrepancy");
+    segment_session(
+        args.session, config,
+        [&](Step&& step) {
+          if (step.status == StepStatus::Ok) steps.push_back(std::move(step));
+        },
+        [&](double fraction) { progress.update(0.1 * fraction); });
+    input = prepare_discrepancy_input(steps, layout, config, AnalysisSettings{});
+    progress.update(0.6);
+  }
+  const DiscrepancyResult result = find_discrepancy(input, args.settings);
+
+  std::filesystem::create_directories(args.out_dir);
+  std::vector<std::unique_ptr<OutputFile>> files;
+  files.push_back(std::make_unique<OutputFile>(args.out_dir / "discrepancy.json"));
+  files.back()->write(discrepancy_json(args, result));
+  if (args.report) {
+    files.push_back(std::make_unique<OutputFile>(args.out_dir / "discrepancy.html"));
+    files.back()->write(render_discrepancy_html(args.session.filename().string(), result));
+  }
+  for (auto& f : files) f->commit();
+
+  fmt::print("{}: {} steps, {} step-regions; noise floor {:.1f} %\n", args.session.string(),
+             result.steps, result.step_regions, result.noise_floor_nrmse_pct);
+  fmt::print("{:<20}{:>14}{:>12}{:>12}\n", "candidate", "held-out %", "shrink %", "dBIC");
+  for (const CandidateResult& c : result.candidates) {
+    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.0f}\n", c.name, c.heldout_nrmse_pct, c.shrink_pct,
+               c.delta_bic);
+  }
+  std::string named;
+  for (const EffectEstimate& e : result.named_effects) {
+    named += (named.empty() ? "" : ", ") + e.name;
+    for (const ParamEstimate& p : e.params) {
+      named += fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se);
+    }
+  }
+  fmt::print("named: {}\n", named.empty() ? "none (no missing effect found)" : named);
+  fmt::print("held-out NRMSE {:.2f} % -> {:.2f} % (gap shrink {:.1f} %)\n",
+             result.baseline_heldout_nrmse_pct, result.extended_heldout_nrmse_pct,
+             result.gap_shrink_pct);
+  for (auto& f : files) fmt::print("wrote {}\n", f->path().string());
+}
+
+}  // namespace
+
+void add_discrepancy_command(CLI::App& app, const GlobalOptions& global) {
+  auto args = std::make_shared<DiscrepancyArgs>();
+  CLI::App* sub = app.add_subcommand(
+      "discrepancy",
+      "Find where the fitted tissue model and the session disagree, name the missing effect "
+      "and show the held-out gap shrink: writes DIR/discrepancy.json and, with --report, "
+      "DIR/discrepancy.html");
+  sub->add_option("session", args->session, "Session CSV v1")->required()->check(CLI::ExistingFile);
+  sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
+  sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
+  sub->add_option("--folds", args->settings.folds, "k of the k-fold over steps")
+      ->check(CLI::Range(2, 20))
+      ->capture_default_str();
+  sub->add_option("--phase-bins", args->settings.phase_bins, "Bins of normalised stance time")
+      ->check(CLI::Range(10, 100))
+      ->capture_default_str();
+  sub->add_option("--min-shrink", args->settings.min_shrink_pct,
+                  "Held-out NRMSE fall needed to name an effect, %")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  sub->add_option("--min-delta-bic", args->settings.min_delta_bic,
+                  "BIC fall needed to name an effect")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  sub->callback([&global, args] { run_discrepancy(global, *args); });
+}
+
+}  // namespace gaitmon::cli

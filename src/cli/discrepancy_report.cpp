@@ -1,0 +1,255 @@
+// The discrepancy report: heat maps of the residual (region x stance phase) against the noise
+// floor before and after the named effects, the candidates, and held-out NRMSE per region and
+// per step. One HTML document, no script, no network.
+#include "discrepancy_report.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <string>
+
+namespace gaitmon::cli {
+namespace {
+
+std::string escape(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '&':
+        out += "&amp;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+// Residual RMS / noise floor: 1 (white) is noise, 3 and above is saturated red.
+std::string ratio_colour(double ratio) {
+  const double x = std::clamp((ratio - 1.0) / 2.0, 0.0, 1.0);
+  const int g = static_cast<int>(std::lround(255 - 200 * x));
+  const int b = static_cast<int>(std::lround(255 - 220 * x));
+  return fmt::format("rgb(255,{},{})", g, b);
+}
+
+std::string heat_map(const ResidualMap& map, const std::string& title) {
+  constexpr int kLabel = 140, kCell = 44, kRow = 26, kTop = 30;
+  const int width = kLabel + kCell * map.bins + 10;
+  const int height = kTop + kRow * static_cast<int>(kRegionCount) + 30;
+  std::string s =
+      fmt::format(R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" role="img">)"
+                  R"(<text x="4" y="18" font-weight="bold">{}</text>)",
+                  width, height, escape(title));
+  for (const ResidualCell& c : map.cells) {
+    const int x = kLabel + kCell * c.bin;
+    const int y = kTop + kRow * static_cast<int>(index_of(c.region));
+    const double ratio = c.noise_floor_n > 0 ? c.rms_n / c.noise_floor_n : 0.0;
+    const std::string fill = c.samples > 0 ? ratio_colour(ratio) : "#eee";
+    fmt::format_to(std::back_inserter(s),
+                   R"(<rect x="{}" y="{}" width="{}" height="{}" fill="{}" stroke="#fff"/>)", x, y,
+                   kCell, kRow, fill);
+    if (c.samples > 0) {
+      fmt::format_to(std::back_inserter(s),
+                     R"(<text x="{}" y="{}" font-size="10" text-anchor="middle">{:.1f}</text>)",
+                     x + kCell / 2, y + 17, ratio);
+    }
+  }
+  for (Region r : kRegions) {
+    fmt::format_to(std::back_inserter(s), R"(<text x="4" y="{}" font-size="12">{}</text>)",
+                   kTop + kRow * static_cast<int>(index_of(r)) + 17, region_name(r));
+  }
+  for (int b = 0; b <= map.bins; b += 2) {
+    fmt::format_to(std::back_inserter(s),
+                   R"(<text x="{}" y="{}" font-size="10" text-anchor="middle">{:.1f}</text>)",
+                   kLabel + kCell * b, height - 12, static_cast<double>(b) / map.bins);
+  }
+  s += "</svg>";
+  return s;
+}
+
+// Horizontal paired bars: before (grey) and after (blue) per label.
+std::string paired_bars(const std::vector<std::string>& labels, const std::vector<double>& before,
+                        const std::vector<double>& after, const std::string& unit) {
+  constexpr int kLabel = 150, kBar = 10, kGap = 8, kWidth = 420;
+  double top = 1e-9;
+  for (double v : before) top = std::max(top, v);
+  for (double v : after) top = std::max(top, v);
+  const int height = static_cast<int>(labels.size()) * (2 * kBar + kGap) + 20;
+  std::string s =
+      fmt::format(R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" role="img">)",
+                  kLabel + kWidth + 80, height);
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    const int y = static_cast<int>(i) * (2 * kBar + kGap) + 4;
+    const auto w = [&](double v) { return static_cast<int>(std::lround(kWidth * v / top)); };
+    fmt::format_to(std::back_inserter(s),
+                   R"(<text x="4" y="{}" font-size="12">{}</text>)"
+                   R"(<rect x="{}" y="{}" width="{}" height="{}" fill="#999"/>)"
+                   R"(<text x="{}" y="{}" font-size="10">{:.2f}{}</text>)",
+                   y + 2 * kBar - 2, escape(labels[i]), kLabel, y, w(before[i]), kBar,
+                   kLabel + w(before[i]) + 4, y + kBar - 1, before[i], unit);
+    if (i < after.size()) {
+      fmt::format_to(std::back_inserter(s),
+                     R"(<rect x="{}" y="{}" width="{}" height="{}" fill="#2b6cb0"/>)"
+                     R"(<text x="{}" y="{}" font-size="10">{:.2f}{}</text>)",
+                     kLabel, y + kBar, w(after[i]), kBar, kLabel + w(after[i]) + 4,
+                     y + 2 * kBar - 1, after[i], unit);
+    }
+  }
+  s += "</svg>";
+  return s;
+}
+
+std::string step_plot(const std::vector<StepComparison>& steps) {
+  constexpr int kW = 640, kH = 200, kPad = 40;
+  double top = 1e-9;
+  for (const auto& s : steps) top = std::max({top, s.baseline_nrmse_pct, s.extended_nrmse_pct});
+  const auto line = [&](bool extended, const char* colour) {
+    std::string pts;
+    for (std::size_t i = 0; i < steps.size(); ++i) {
+      const double v = extended ? steps[i].extended_nrmse_pct : steps[i].baseline_nrmse_pct;
+      const double x =
+          kPad + (kW - 2 * kPad) * (steps.size() > 1 ? double(i) / (steps.size() - 1) : 0.5);
+      const double y = kH - kPad + 10 - (kH - kPad) * v / top;
+      pts += fmt::format("{:.1f},{:.1f} ", x, y);
+    }
+    return fmt::format(R"(<polyline fill="none" stroke="{}" stroke-width="1.5" points="{}"/>)",
+                       colour, pts);
+  };
+  return fmt::format(
+      R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" role="img">)"
+      R"(<line x1="{}" y1="{}" x2="{}" y2="{}" stroke="#000"/>{}{})"
+      R"(<text x="4" y="14" font-size="11">{:.1f} %</text>)"
+      R"(<text x="{}" y="{}" font-size="11" text-anchor="middle">steps in time order</text>)"
+      R"(</svg>)",
+      kW, kH + 10, kPad, kH - kPad + 10, kW - kPad, kH - kPad + 10, line(false, "#999"),
+      line(true, "#2b6cb0"), top, kW / 2, kH + 4);
+}
+
+}  // namespace
+
+std::string render_discrepancy_html(const std::string& session_name, const DiscrepancyResult& r) {
+  std::string named;
+  for (const EffectEstimate& e : r.named_effects) {
+    named += "<li><b>" + escape(e.name) + "</b>: ";
+    for (const ParamEstimate& p : e.params) {
+      named += fmt::format("{} = {:.4g} &plusmn; {:.2g}; ", escape(p.name), p.value, p.se);
+    }
+    named += "</li>";
+  }
+  if (named.empty()) named = "<li>none: no candidate improved the held-out error beyond noise</li>";
+
+  std::string candidates =
+      "<table><tr><th>candidate</th><th>held-out NRMSE %</th><th>shrink %</th><th>in-sample "
+      "NRMSE %</th><th>&Delta;BIC</th><th>parameters</th></tr>";
+  const auto rows = [&](const std::vector<CandidateResult>& list) {
+    for (const CandidateResult& c : list) {
+      std::string params;
+      for (const ParamEstimate& p : c.params) {
+        params += fmt::format("{} = {:.4g} &plusmn; {:.2g}<br>", escape(p.name), p.value, p.se);
+      }
+      candidates += fmt::format(
+          "<tr><td>{}</td><td>{:.2f}</td><td>{:.1f}</td><td>{:.2f}</td><td>{:.0f}</td><td>{}</td>"
+          "</tr>",
+          escape(c.name), c.heldout_nrmse_pct, c.shrink_pct, c.in_sample_nrmse_pct, c.delta_bic,
+          params);
+    }
+  };
+  rows(r.candidates);
+  candidates += "</table>";
+  std::string seconds;
+  if (!r.second_candidates.empty()) {
+    candidates +=
+        "<h3>On top of the first named effect</h3><table><tr><th>candidate</th>"
+        "<th>held-out NRMSE %</th><th>shrink %</th><th>in-sample NRMSE %</th>"
+        "<th>&Delta;BIC</th><th>parameters</th></tr>";
+    rows(r.second_candidates);
+    candidates += "</table>";
+  }
+
+  std::vector<std::string> labels{"overall"};
+  std::vector<double> before{r.baseline_heldout_nrmse_pct}, after{r.extended_heldout_nrmse_pct};
+  for (const RegionComparison& c : r.regions) {
+    if (c.step_regions == 0) continue;
+    labels.emplace_back(region_name(c.region));
+    before.push_back(c.baseline_heldout_nrmse_pct);
+    after.push_back(c.extended_heldout_nrmse_pct);
+  }
+  std::vector<std::string> cand_labels;
+  std::vector<double> cand_values;
+  for (const CandidateResult& c : r.candidates) {
+    cand_labels.push_back(c.name);
+    cand_values.push_back(c.heldout_nrmse_pct);
+  }
+  cand_labels.insert(cand_labels.begin(), "baseline");
+  cand_values.insert(cand_values.begin(), r.baseline_heldout_nrmse_pct);
+
+  std::string where =
+      "<table><tr><th>region</th><th>phase</th><th>samples</th><th>residual RMS "
+      "N</th><th>bias N</th><th>noise floor N</th></tr>";
+  for (const ResidualCell& c : r.where) {
+    where += fmt::format(
+        "<tr><td>{}</td><td>{:.1f}-{:.1f}</td><td>{}</td><td>{:.2f}</td><td>{:+.2f}</td><td>{:.2f}"
+        "</td></tr>",
+        region_name(c.region), static_cast<double>(c.bin) / r.map_before.bins,
+        static_cast<double>(c.bin + 1) / r.map_before.bins, c.samples, c.rms_n, c.bias_n,
+        c.noise_floor_n);
+  }
+  where += "</table>";
+
+  std::string diag = "<table><tr><th>state</th><th>correlation with residual</th></tr>";
+  for (const StateCorrelation& c : r.diagnostics.correlations) {
+    diag += fmt::format("<tr><td>{}</td><td>{:+.3f}</td></tr>", escape(c.state), c.r);
+  }
+  diag += "</table>";
+  std::string bias;
+  for (double b : r.diagnostics.bias_per_phase_pct) bias += fmt::format("{:+.2f} ", b);
+
+  std::string html = R"(<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">)";
+  html += "<title>gaitmon discrepancy: " + escape(session_name) + "</title>";
+  html += R"(<style>body{font-family:sans-serif;margin:20px;max-width:1000px}
+table{border-collapse:collapse;margin:8px 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px}
+th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;margin:0 4px}</style>)";
+  html += "</head><body>";
+  html += "<h1>Model-data discrepancy: " + escape(session_name) + "</h1>";
+  html += fmt::format(
+      "<p>{} steps, {} step-regions, {} frames. Pooled NRMSE (eq 58, regions weighted by their "
+      "force). Noise floor {:.2f} %.</p>",
+      r.steps, r.step_regions, r.frames, r.noise_floor_nrmse_pct);
+  html += "<h2>Named effects</h2><ul>" + named + "</ul>";
+  html += fmt::format(
+      "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.</p>",
+      r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
+  html += "<h2>Held-out NRMSE before (grey) and after (blue)</h2>" +
+          paired_bars(labels, before, after, " %");
+  html +=
+      "<h2>Residual maps</h2><p>Residual RMS / noise floor per region and normalised stance "
+      "time (heel strike 0, toe off 1); 1 is noise, 3 or more is deep red.</p>";
+  html += heat_map(r.map_before, "Before (baseline model)");
+  html += heat_map(r.map_after, "After (with the named effects)");
+  html += "<h2>Where: the cells furthest above the noise floor</h2>" + where;
+  html += "<h2>Candidates (each on top of the baseline)</h2>" +
+          paired_bars(cand_labels, cand_values, {}, " %") + candidates;
+  html += "<h2>Per step (held-out)</h2>" + step_plot(r.per_step);
+  html += fmt::format(
+      "<h2>Residual diagnostics (baseline)</h2><p>Lag-1 autocorrelation {:.3f}; runs test z "
+      "{:.1f}; effective sample fraction {:.3f}.</p><p>Bias per phase bin, % of peak force: {}</p>",
+      r.diagnostics.lag1_autocorrelation, r.diagnostics.runs_z,
+      r.diagnostics.effective_sample_fraction, bias);
+  html += diag;
+  html += "</body></html>\n";
+  return html;
+}
+
+}  // namespace gaitmon::cli

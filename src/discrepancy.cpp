@@ -1,0 +1,1211 @@
+// The discrepancy workflow: baseline as nested linear amplitudes, candidate effects on a shared
+// parameter grid with k-fold held-out error and BIC, residual maps and diagnostics.
+#include "gaitmon/discrepancy.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <exception>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <numbers>
+#include <stdexcept>
+#include <thread>
+#include <utility>
+
+namespace gaitmon {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kMaxAreaFraction = 0.999;  // as tissue_fit: g stays finite at the equator
+constexpr int kMinContactFrames = 5;
+constexpr std::array<double, 9> kExponentGrid{0.01, 0.12, 0.25, 0.38, 0.5, 0.62, 0.75, 0.88, 0.98};
+
+// One region of one step: the measured series and the baseline's shapes.
+struct Unit {
+  int ordinal = 0;  // the step's place in time order (both feet)
+  Foot foot = Foot::Left;
+  int step = 0;
+  Region region = Region::Heel;
+  std::vector<double> t, y, area, E, V, d_mm, ddot_mm_per_s, phase, floor2, sat;
+  // Elastic shapes for the fit's n (first) and a grid of n: the exponent is re-chosen with every
+  // effect, since a per-step fit bends n to absorb what the model lacks.
+  std::vector<std::vector<double>> En;
+  double K0 = 0.0, D0 = 0.0;
+  double base_sse = 0.0;
+  std::vector<double> base_pred;
+  double peak_n = 0.0;
+  double dt_s = 0.01;
+  int prev = -1;  // the foot's previous unit of the same region, in time order
+  double norm() const { return static_cast<double>(y.size()) * peak_n * peak_n; }
+};
+
+double g_of(double area, double P) {
+  const double a = std::min(area / P, kMaxAreaFraction);
+  return 1.0 - std::sqrt(1.0 - a);
+}
+
+// The elastic and damping shapes of one series (tissue_fit's raw-series model): F = K E + D V.
+void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Unit& u) {
+  const std::size_t n = s.t_s.size();
+  u.E.assign(n, 0.0);
+  u.En.assign(1 + kExponentGrid.size(), std::vector<double>(n, 0.0));
+  u.V.assign(n, 0.0);
+  u.d_mm.assign(n, 0.0);
+  u.ddot_mm_per_s.assign(n, 0.0);
+  std::size_t begin = 0;
+  while (begin < n) {
+    if (!(s.area_mm2[begin] > 0.0)) {
+      ++begin;
+      continue;
+    }
+    std::size_t end = begin;
+    while (end < n && s.area_mm2[end] > 0.0) ++end;
+    for (std::size_t i = begin; i < end; ++i) {
+      const std::size_t lo = i > begin ? i - 1 : i;
+      const std::size_t hi = i + 1 < end ? i + 1 : i;
+      const double g = g_of(s.area_mm2[i], id.P_mm2);
+      const double dt = s.t_s[hi] - s.t_s[lo];
+      const double gdot =
+          hi > lo ? (g_of(s.area_mm2[hi], id.P_mm2) - g_of(s.area_mm2[lo], id.P_mm2)) / dt : 0.0;
+      u.E[i] = id.P_mm2 * std::pow(g, 2.0 + id.n) * (1.0 - g / 3.0);
+      u.En[0][i] = u.E[i];
+      for (std::size_t k = 0; k < kExponentGrid.size(); ++k) {
+        u.En[k + 1][i] = id.P_mm2 * std::pow(g, 2.0 + kExponentGrid[k]) * (1.0 - g / 3.0);
+      }
+      u.V[i] =
+          id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot * (6.0 - 4.0 * g + g * g) / (3.0 * (2.0 - g));
+      u.d_mm[i] = g * C_mm;
+      u.ddot_mm_per_s[i] = gdot * C_mm;
+    }
+    begin = end;
+  }
+}
+
+// Non-negative least squares of y on two columns (a x + b z).
+std::pair<double, double> nnls2(std::span<const double> y, std::span<const double> x,
+                                std::span<const double> z) {
+  double xx = 0, xz = 0, zz = 0, xy = 0, zy = 0;
+  for (std::size_t i = 0; i < y.size(); ++i) {
+    xx += x[i] * x[i];
+    xz += x[i] * z[i];
+    zz += z[i] * z[i];
+    xy += x[i] * y[i];
+    zy += z[i] * y[i];
+  }
+  const double det = xx * zz - xz * xz;
+  if (det > 1e-12 * xx * zz && xx > 0 && zz > 0) {
+    const double a = (xy * zz - zy * xz) / det;
+    const double b = (zy * xx - xy * xz) / det;
+    if (a >= 0 && b >= 0) return {a, b};
+  }
+  const double a_only = xx > 0 ? std::max(0.0, xy / xx) : 0.0;
+  const double b_only = zz > 0 ? std::max(0.0, zy / zz) : 0.0;
+  const auto sse = [&](double a, double b) {
+    double s = 0;
+    for (std::size_t i = 0; i < y.size(); ++i) {
+      const double r = y[i] - a * x[i] - b * z[i];
+      s += r * r;
+    }
+    return s;
+  };
+  return sse(a_only, 0.0) <= sse(0.0, b_only) ? std::pair{a_only, 0.0} : std::pair{0.0, b_only};
+}
+
+// ---- candidate effects ------------------------------------------------------------------------
+
+// An effect with its shared parameters fixed, ready to transform model forces unit by unit.
+class Applied {
+ public:
+  virtual ~Applied() = default;
+  virtual bool affects(const Unit& u) const = 0;
+  /// Measured force predicted from the model force F of unit `ui`.
+  virtual void apply(std::size_t ui, const Unit& u, std::span<const double> F,
+                     std::span<double> out) const = 0;
+  virtual bool affine() const { return true; }
+};
+
+struct ParamSpec {
+  std::string name;
+  double lo, hi;
+  std::vector<double> grid;
+};
+
+struct CandidateSpec {
+  std::string name;
+  int stage = 0;  // 0 tissue, 1 sensor: the order in which effects chain
+  std::vector<ParamSpec> params;
+  std::function<std::unique_ptr<Applied>(const std::vector<Unit>&, std::span<const double>)> make;
+};
+
+// The lag carried into each unit: the foot's earlier measured force of that region, low-passed.
+std::vector<double> carried_lag(const std::vector<Unit>& units, double tau_s) {
+  std::vector<double> r0(units.size(), 0.0);
+  std::vector<double> r_end(units.size(), 0.0);
+  std::vector<std::size_t> order(units.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return units[a].t.front() < units[b].t.front();
+  });
+  for (std::size_t ui : order) {
+    const Unit& u = units[ui];
+    if (u.prev >= 0) {
+      const Unit& p = units[static_cast<std::size_t>(u.prev)];
+      const double gap = (u.t.front() - u.dt_s) - p.t.back();
+      r0[ui] = r_end[static_cast<std::size_t>(u.prev)] * std::exp(-std::max(0.0, gap) / tau_s);
+    }
+    const double keep = std::exp(-u.dt_s / tau_s);
+    double r = r0[ui];
+    for (double v : u.y) r = r * keep + v * (1.0 - keep);
+    r_end[ui] = r;
+  }
+  return r0;
+}
+
+class LagEffect final : public Applied {
+ public:
+  LagEffect(const std::vector<Unit>& units, double sign_gain, double tau_s)
+      : gain_(sign_gain), tau_s_(tau_s), r0_(carried_lag(units, tau_s)) {}
+  bool affects(const Unit&) const override { return gain_ != 0.0; }
+  void apply(std::size_t ui, const Unit& u, std::span<const double> F,
+             std::span<double> out) const override {
+    double r = r0_[ui];
+    for (std::size_t i = 0; i < F.size(); ++i) {
+      const double keep = std::exp(-(i > 0 ? u.t[i] - u.t[i - 1] : u.dt_s) / tau_s_);
+      r = r * keep + F[i] * (1.0 - keep);
+      out[i] = F[i] + gain_ * r;
+    }
+  }
+
+ private:
+  double gain_;
+  double tau_s_;
+  std::vector<double> r0_;
+};
+
+class HysteresisEffect final : public Applied {
+ public:
+  HysteresisEffect(double h, double transition_mm) : h_(h), transition_mm_(transition_mm) {}
+  bool affects(const Unit&) const override { return h_ != 0.0; }
+  void apply(std::size_t, const Unit& u, std::span<const double> F,
+             std::span<double> out) const override {
+    // Each contact starts from the unloaded state the previous one left: z = -1 at d = 0.
+    double z = -1.0;
+    double d_prev = 0.0;
+    for (std::size_t i = 0; i < F.size(); ++i) {
+      const double step = u.d_mm[i] - d_prev;
+      if (step != 0.0) {
+        const double target = step > 0.0 ? 1.0 : -1.0;
+        z = target + (z - target) * std::exp(-std::abs(step) / transition_mm_);
+        d_prev = u.d_mm[i];
+      }
+      out[i] = F[i] * (1.0 + h_ * z);
+    }
+  }
+
+ private:
+  double h_;
+  double transition_mm_;
+};
+
+class ImpactEffect final : public Applied {
+ public:
+  ImpactEffect(double amplitude_n, double duration_s, double onset_frames)
+      : a_(amplitude_n), T_(duration_s), onset_(onset_frames) {}
+  bool affects(const Unit& u) const override { return u.region == Region::Heel && a_ != 0.0; }
+  void apply(std::size_t, const Unit& u, std::span<const double> F,
+             std::span<double> out) const override {
+    const double t0 = u.t.front() - onset_ * u.dt_s;
+    for (std::size_t i = 0; i < F.size(); ++i) {
+      const double tau = u.t[i] - t0;
+      out[i] = F[i];
+      if (u.region == Region::Heel && tau > 0.0 && tau < T_)
+        out[i] += a_ * std::sin(kPi * tau / T_);
+    }
+  }
+
+ private:
+  double a_;
+  double T_;
+  double onset_;
+};
+
+class SaturationEffect final : public Applied {
+ public:
+  SaturationEffect(double ceiling_bits, double cell_area_mm2, double newtons_per_bit)
+      : ceiling_(ceiling_bits), cell_area_(cell_area_mm2), npb_(newtons_per_bit) {}
+  bool affects(const Unit&) const override { return true; }
+  bool affine() const override { return false; }
+  void apply(std::size_t, const Unit& u, std::span<const double> F,
+             std::span<double> out) const override {
+    for (std::size_t i = 0; i < F.size(); ++i) {
+      out[i] = F[i];
+      if (!(u.area[i] > 0.0) || !(F[i] > 0.0)) continue;
+      // A paraboloid pressure over the contact peaks at twice its mean.
+      const double peak_bits = 2.0 * F[i] / npb_ / (u.area[i] / cell_area_);
+      if (peak_bits > ceiling_) {
+        const double lost = 1.0 - ceiling_ / peak_bits;
+        out[i] = F[i] * (1.0 - lost * lost);
+      }
+    }
+  }
+
+ private:
+  double ceiling_;
+  double cell_area_;
+  double npb_;
+};
+
+std::vector<double> linspace(double lo, double hi, int n) {
+  std::vector<double> v;
+  for (int i = 0; i < n; ++i) v.push_back(lo + (hi - lo) * i / (n - 1));
+  return v;
+}
+
+std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_per_bit) {
+  // Coarse grids (the local refinement takes the parameters between the points): time
+  // constants log-spaced over the physically plausible ranges.
+  const std::vector<double> fast_tau{0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.0};
+  const std::vector<double> slow_tau{0.1, 0.25, 0.5, 1.0, 2.0, 4.0, 10.0};
+  std::vector<CandidateSpec> specs;
+  specs.push_back(
+      {"stress_relaxation",
+       0,
+       {{"strength", 0.0, 0.95, linspace(0.07, 0.7, 10)}, {"tau_s", 0.005, 10.0, fast_tau}},
+       [](const std::vector<Unit>& units, std::span<const double> th) {
+         return std::make_unique<LagEffect>(units, -th[0], th[1]);
+       }});
+  specs.push_back({"hysteresis",
+                   0,
+                   {{"strength", 0.0, 0.9, linspace(0.04, 0.4, 10)},
+                    {"transition_mm", 0.005, 10.0, {0.05, 0.12, 0.3, 0.7, 2.0}}},
+                   [](const std::vector<Unit>&, std::span<const double> th) {
+                     return std::make_unique<HysteresisEffect>(th[0], th[1]);
+                   }});
+  specs.push_back({"impact_transient",
+                   0,
+                   {{"amplitude_n", 0.0, 1000.0, linspace(10.0, 250.0, 9)},
+                    {"duration_s", 0.005, 0.2, linspace(0.02, 0.1, 5)},
+                    {"onset_frames", 0.0, 2.0, {0.0, 0.5, 1.0}}},
+                   [](const std::vector<Unit>&, std::span<const double> th) {
+                     return std::make_unique<ImpactEffect>(th[0], th[1], th[2]);
+                   }});
+  specs.push_back(
+      {"sensor_saturation",
+       1,
+       {{"ceiling_bits", 5.0, 1000.0, linspace(40.0, 260.0, 12)}},
+       [cell_area_mm2, newtons_per_bit](const std::vector<Unit>&, std::span<const double> th) {
+         return std::make_unique<SaturationEffect>(th[0], cell_area_mm2, newtons_per_bit);
+       }});
+  specs.push_back({"sensor_creep",
+                   1,
+                   {{"gain", 0.0, 2.0, linspace(0.05, 0.5, 10)}, {"tau_s", 0.02, 60.0, slow_tau}},
+                   [](const std::vector<Unit>& units, std::span<const double> th) {
+                     return std::make_unique<LagEffect>(units, th[0], th[1]);
+                   }});
+  return specs;
+}
+
+// ---- fitting
+// -------------------------------------------------------------------------------------
+
+// A chain of applied effects in physical order (tissue, then sensor).
+using Chain = std::vector<const Applied*>;
+
+struct Workspace {
+  std::vector<double> F, a, f, fk, fd;
+};
+
+void run_chain(const Chain& chain, std::size_t ui, const Unit& u, std::span<const double> F,
+               std::span<double> out, Workspace& w) {
+  std::copy(F.begin(), F.end(), out.begin());
+  for (const Applied* e : chain) {
+    if (!e->affects(u)) continue;
+    w.a.assign(out.begin(), out.end());
+    e->apply(ui, u, w.a, out);
+  }
+}
+
+double sse_of(std::span<const double> y, std::span<const double> f) {
+  double s = 0;
+  for (std::size_t i = 0; i < y.size(); ++i) s += (y[i] - f[i]) * (y[i] - f[i]);
+  return s;
+}
+
+// Re-solves one unit under the chain: the exponent n from the unit's grid and K, D >= 0 by least
+// squares (exactly when every effect is affine in F, else by Gauss-Newton from the plain
+// solution). Returns the sum of squared residuals; fills `pred` if given. A unit no effect
+// touches keeps its baseline.
+double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& w,
+                  std::vector<double>* pred = nullptr, bool baseline = false) {
+  const std::size_t n = u.y.size();
+  bool active = false;
+  bool affine = true;
+  for (const Applied* e : chain) {
+    if (e->affects(u)) {
+      active = true;
+      affine = affine && e->affine();
+    }
+  }
+  if (!active && !baseline) {
+    if (pred != nullptr) *pred = u.base_pred;
+    return u.base_sse;
+  }
+  w.F.resize(n);
+  w.f.resize(n);
+  std::vector<double> off(n), tv(n), te(n), target(n);
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t best_n = 0;
+  double best_K = 0, best_D = 0;
+  if (affine) {
+    std::fill(w.F.begin(), w.F.end(), 0.0);
+    run_chain(chain, ui, u, w.F, off, w);
+    run_chain(chain, ui, u, u.V, tv, w);
+    for (std::size_t i = 0; i < n; ++i) {
+      tv[i] -= off[i];
+      target[i] = u.y[i] - off[i];
+    }
+    for (std::size_t k = 0; k < u.En.size(); ++k) {
+      run_chain(chain, ui, u, u.En[k], te, w);
+      for (std::size_t i = 0; i < n; ++i) te[i] -= off[i];
+      const auto [K, D] = nnls2(target, te, tv);
+      double s = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const double r = target[i] - K * te[i] - D * tv[i];
+        s += r * r;
+      }
+      if (s < best) {
+        best = s;
+        best_n = k;
+        best_K = K;
+        best_D = D;
+      }
+    }
+  } else {
+    w.fk.resize(n);
+    w.fd.resize(n);
+    for (std::size_t k = 0; k < u.En.size(); ++k) {
+      const std::vector<double>& E = u.En[k];
+      const auto model = [&](double K, double D) {
+        for (std::size_t i = 0; i < n; ++i) w.F[i] = K * E[i] + D * u.V[i];
+        run_chain(chain, ui, u, w.F, w.f, w);
+      };
+      auto [K, D] = nnls2(u.y, E, u.V);
+      model(K, D);
+      double value = sse_of(u.y, w.f);
+      for (int it = 0; it < 6; ++it) {
+        const double hK = std::max(1e-9, 1e-4 * std::abs(K));
+        const double hD = std::max(1e-9, 1e-4 * std::abs(D));
+        model(K + hK, D);
+        w.fk = w.f;
+        model(K, D + hD);
+        w.fd = w.f;
+        model(K, D);
+        for (std::size_t i = 0; i < n; ++i) {
+          w.fk[i] = (w.fk[i] - w.f[i]) / hK;
+          w.fd[i] = (w.fd[i] - w.f[i]) / hD;
+          target[i] = u.y[i] - w.f[i] + K * w.fk[i] + D * w.fd[i];  // the linearised target
+        }
+        const auto [K1, D1] = nnls2(target, w.fk, w.fd);
+        double step = 1.0;
+        double after = value;
+        for (int halving = 0; halving < 6; ++halving, step *= 0.5) {
+          model(K + step * (K1 - K), D + step * (D1 - D));
+          after = sse_of(u.y, w.f);
+          if (after <= value) break;
+        }
+        if (after > value) break;
+        K += step * (K1 - K);
+        D += step * (D1 - D);
+        const bool done = value - after <= 1e-9 * value;
+        value = after;
+        if (done) break;
+      }
+      if (value < best) {
+        best = value;
+        best_n = k;
+        best_K = K;
+        best_D = D;
+      }
+    }
+  }
+  if (pred != nullptr) {
+    for (std::size_t i = 0; i < n; ++i) w.F[i] = best_K * u.En[best_n][i] + best_D * u.V[i];
+    run_chain(chain, ui, u, w.F, w.f, w);
+    *pred = w.f;
+  }
+  return best;
+}
+
+// Runs `work(i)` for i in [0, count) on every core; results go to fixed slots, so the outcome
+// does not depend on the threads.
+void parallel_for(std::size_t count, const std::function<void(std::size_t)>& work) {
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr failure;
+  std::mutex failure_mutex;
+  const auto run = [&] {
+    try {
+      for (std::size_t i = next++; i < count; i = next++) work(i);
+    } catch (...) {
+      const std::lock_guard lock(failure_mutex);
+      if (!failure) failure = std::current_exception();
+      next = count;
+    }
+  };
+  const unsigned threads = std::clamp(std::thread::hardware_concurrency(), 1u,
+                                      static_cast<unsigned>(std::max<std::size_t>(count, 1)));
+  {
+    std::vector<std::jthread> workers;
+    for (unsigned i = 1; i < threads; ++i) workers.emplace_back(run);
+    run();
+  }
+  if (failure) std::rethrow_exception(failure);
+}
+
+// Per-unit SSE of the chain `fixed` followed by one candidate at theta, in physical order.
+struct Model {
+  std::vector<std::unique_ptr<Applied>> owned;
+  std::vector<int> stages;
+
+  Chain chain() const {
+    std::vector<std::size_t> order(owned.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return stages[a] < stages[b]; });
+    Chain c;
+    for (std::size_t i : order) c.push_back(owned[i].get());
+    return c;
+  }
+};
+
+struct FixedEffect {
+  const CandidateSpec* spec;
+  std::vector<double> theta;
+};
+
+Model build(const std::vector<Unit>& units, std::span<const FixedEffect> effects) {
+  Model m;
+  for (const FixedEffect& e : effects) {
+    m.owned.push_back(e.spec->make(units, e.theta));
+    m.stages.push_back(e.spec->stage);
+  }
+  return m;
+}
+
+std::vector<double> unit_costs(const std::vector<Unit>& units, std::span<const FixedEffect> fx,
+                               std::vector<std::vector<double>>* preds = nullptr) {
+  const Model m = build(units, fx);
+  const Chain chain = m.chain();
+  std::vector<double> cost(units.size());
+  Workspace w;
+  if (preds != nullptr) preds->resize(units.size());
+  for (std::size_t ui = 0; ui < units.size(); ++ui) {
+    cost[ui] = solve_unit(chain, ui, units[ui], w, preds != nullptr ? &(*preds)[ui] : nullptr);
+  }
+  return cost;
+}
+
+double sum(std::span<const double> v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return s;
+}
+
+struct Pooled {
+  double norm = 0.0;  // sum of frames x peak^2
+  long frames = 0;
+  double r1 = 0.0;  // lag-1 autocorrelation of the baseline residuals
+  double neff_fraction = 1.0;
+  int folds = 5;
+  std::vector<int> fold_of;  // per unit
+};
+
+double nrmse(double sse, double norm) {
+  return norm > 0 ? 100.0 * std::sqrt(sse / norm) : 0.0;
+}
+
+double bic(double sse, const Pooled& p, int params) {
+  const double n = static_cast<double>(p.frames);
+  const double neff = std::max(2.0, n * p.neff_fraction);
+  return neff * std::log(std::max(sse, 1e-300) / n) + params * std::log(neff);
+}
+
+struct CandidateOutcome {
+  const CandidateSpec* spec = nullptr;
+  std::vector<double> theta;      // full data, refined
+  std::vector<double> se;         // of theta
+  std::vector<double> heldout;    // per unit
+  std::vector<double> in_sample;  // per unit at theta
+  double heldout_sse = 0.0;
+  double in_sample_sse = 0.0;
+};
+
+std::vector<std::vector<double>> grid_of(const CandidateSpec& spec) {
+  std::vector<std::vector<double>> grid{{}};
+  for (const ParamSpec& p : spec.params) {
+    std::vector<std::vector<double>> next;
+    for (const auto& partial : grid) {
+      for (double v : p.grid) {
+        auto t = partial;
+        t.push_back(v);
+        next.push_back(std::move(t));
+      }
+    }
+    grid = std::move(next);
+  }
+  return grid;
+}
+
+// Fits one candidate on top of `base` (fixed effects): grid, k-fold, local refinement, SEs.
+CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& pooled,
+                               std::span<const FixedEffect> base, const CandidateSpec& spec) {
+  const auto grid = grid_of(spec);
+  std::vector<std::vector<double>> costs(grid.size());
+  parallel_for(grid.size(), [&](std::size_t gi) {
+    std::vector<FixedEffect> fx(base.begin(), base.end());
+    fx.push_back({&spec, grid[gi]});
+    costs[gi] = unit_costs(units, fx);
+  });
+  const int k = pooled.folds;
+  std::vector<std::vector<double>> fold_sse(grid.size(), std::vector<double>(k, 0.0));
+  std::vector<double> total(grid.size(), 0.0);
+  for (std::size_t gi = 0; gi < grid.size(); ++gi) {
+    for (std::size_t ui = 0; ui < units.size(); ++ui) {
+      fold_sse[gi][static_cast<std::size_t>(pooled.fold_of[ui])] += costs[gi][ui];
+    }
+    total[gi] = sum(fold_sse[gi]);
+  }
+  CandidateOutcome out;
+  out.spec = &spec;
+  out.heldout.assign(units.size(), 0.0);
+  for (int f = 0; f < k; ++f) {
+    std::size_t best = 0;
+    for (std::size_t gi = 1; gi < grid.size(); ++gi) {
+      if (total[gi] - fold_sse[gi][f] < total[best] - fold_sse[best][f]) best = gi;
+    }
+    for (std::size_t ui = 0; ui < units.size(); ++ui) {
+      if (pooled.fold_of[ui] == f) out.heldout[ui] = costs[best][ui];
+    }
+  }
+  out.heldout_sse = sum(out.heldout);
+
+  // Refinement on all steps: coordinate search in shrinking steps from the best grid point.
+  std::size_t best = 0;
+  for (std::size_t gi = 1; gi < grid.size(); ++gi) {
+    if (total[gi] < total[best]) best = gi;
+  }
+  std::vector<double> theta = grid[best];
+  const auto objective = [&](const std::vector<double>& th) {
+    std::vector<FixedEffect> fx(base.begin(), base.end());
+    fx.push_back({&spec, th});
+    return sum(unit_costs(units, fx));
+  };
+  double value = total[best];
+  std::vector<double> step(theta.size());
+  for (std::size_t p = 0; p < theta.size(); ++p) {
+    const auto& g = spec.params[p].grid;
+    step[p] = g.size() > 1 ? 0.5 * (g[1] - g[0]) : 0.1 * theta[p];
+  }
+  for (int round = 0; round < 4; ++round) {
+    for (std::size_t p = 0; p < theta.size(); ++p) {
+      if (spec.params[p].name == "onset_frames") continue;  // a discrete choice
+      for (double dir : {-1.0, 1.0}) {
+        auto trial = theta;
+        trial[p] = std::clamp(theta[p] + dir * step[p], spec.params[p].lo, spec.params[p].hi);
+        const double v = objective(trial);
+        if (v < value) {
+          value = v;
+          theta = trial;
+          break;
+        }
+      }
+      step[p] *= 0.5;
+    }
+  }
+  out.theta = theta;
+  std::vector<FixedEffect> fx(base.begin(), base.end());
+  fx.push_back({&spec, theta});
+  out.in_sample = unit_costs(units, fx);
+  out.in_sample_sse = sum(out.in_sample);
+
+  // Standard errors from the curvature of the profiled SSE: cov = 2 s^2 H^-1 (diagonal of the
+  // inverse for up to three parameters), s^2 = SSE / (N_eff - p), N_eff inflating for
+  // autocorrelated residuals.
+  const std::size_t np = theta.size();
+  out.se.assign(np, 0.0);
+  std::vector<std::size_t> free;
+  for (std::size_t p = 0; p < np; ++p) {
+    if (spec.params[p].name != "onset_frames") free.push_back(p);
+  }
+  const std::size_t q = free.size();
+  std::vector<double> h(q);
+  for (std::size_t i = 0; i < q; ++i) h[i] = std::max(1e-4, 1e-2 * std::abs(theta[free[i]]));
+  const auto at = [&](std::size_t i, double di, std::size_t j, double dj) {
+    auto th = theta;
+    th[free[i]] += di;
+    th[free[j]] += dj;
+    return objective(th);
+  };
+  std::vector<double> H(q * q, 0.0);
+  for (std::size_t i = 0; i < q; ++i) {
+    H[i * q + i] = (at(i, h[i], i, 0) - 2 * value + at(i, -h[i], i, 0)) / (h[i] * h[i]);
+    for (std::size_t j = i + 1; j < q; ++j) {
+      const double v = (at(i, h[i], j, h[j]) - at(i, h[i], j, -h[j]) - at(i, -h[i], j, h[j]) +
+                        at(i, -h[i], j, -h[j])) /
+                       (4 * h[i] * h[j]);
+      H[i * q + j] = H[j * q + i] = v;
+    }
+  }
+  const double neff = std::max(2.0, static_cast<double>(pooled.frames) * pooled.neff_fraction);
+  const double s2 = value / std::max(1.0, neff - static_cast<double>(q));
+  // Invert H (q <= 2 here; a three-parameter candidate has a discrete onset).
+  std::vector<double> inv(q * q, 0.0);
+  if (q == 1 && H[0] > 0) {
+    inv[0] = 1.0 / H[0];
+  } else if (q == 2) {
+    const double det = H[0] * H[3] - H[1] * H[2];
+    if (det > 0 && H[0] > 0) {
+      inv = {H[3] / det, -H[1] / det, -H[2] / det, H[0] / det};
+    }
+  }
+  for (std::size_t i = 0; i < q; ++i) {
+    const double var = 2.0 * s2 * inv[i * q + i];
+    out.se[free[i]] = var > 0 ? std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
+  }
+  return out;
+}
+
+// ---- preparation ------------------------------------------------------------------------------
+
+struct Prepared {
+  std::vector<Unit> units;
+  Pooled pooled;
+  int steps = 0;
+  std::vector<std::pair<Foot, int>> step_ids;  // by ordinal
+};
+
+double savgol_noise_sd(std::span<const double> y) {
+  // Residual of the 5-point quadratic smoother; for white noise its SD is 0.717 of the noise's.
+  if (y.size() < 7) return 0.0;
+  std::vector<double> res;
+  for (std::size_t i = 2; i + 2 < y.size(); ++i) {
+    const double s =
+        (-3 * y[i - 2] + 12 * y[i - 1] + 17 * y[i] + 12 * y[i + 1] - 3 * y[i + 2]) / 35;
+    res.push_back(std::abs(y[i] - s));
+  }
+  std::nth_element(res.begin(), res.begin() + static_cast<std::ptrdiff_t>(res.size() / 2),
+                   res.end());
+  const double mad = res[res.size() / 2];
+  return 1.4826 * mad / std::sqrt(630.0 / 1225.0);
+}
+
+Prepared prepare(const DiscrepancyInput& input, int folds) {
+  Prepared out;
+  std::vector<std::size_t> order(input.steps.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    const auto& x = input.steps[a].analysis;
+    const auto& y = input.steps[b].analysis;
+    if (x.t_heel_strike_s != y.t_heel_strike_s) return x.t_heel_strike_s < y.t_heel_strike_s;
+    return x.foot < y.foot;
+  });
+  std::array<std::array<int, kRegionCount>, 2> last{};
+  for (auto& f : last) f.fill(-1);
+  const double dt = 1.0 / input.sample_rate_hz;
+  for (std::size_t o = 0; o < order.size(); ++o) {
+    const DiscrepancyStep& ds = input.steps[order[o]];
+    const StepAnalysis& sa = ds.analysis;
+    out.step_ids.emplace_back(sa.foot, sa.step);
+    const double stance = std::max(dt, sa.t_toe_off_s - sa.t_heel_strike_s);
+    for (Region region : kRegions) {
+      const RegionAnalysis& ra = sa.at(region);
+      if (ra.fit.status != FitStatus::Ok || ra.frames < kMinContactFrames) continue;
+      if (ra.series.t_s.empty() || !(ra.peak_force_n > 0.0)) continue;
+      Unit u;
+      u.ordinal = static_cast<int>(o);
+      u.foot = sa.foot;
+      u.step = sa.step;
+      u.region = region;
+      // Only frames with a contact ellipse: without a measured area the model has nothing to say
+      // (the tissue fit leaves them out too).
+      RegionSeries contact;
+      for (std::size_t i = 0; i < ra.series.t_s.size(); ++i) {
+        if (!(ra.series.area_mm2[i] > 0.0)) continue;
+        contact.t_s.push_back(ra.series.t_s[i]);
+        contact.area_mm2.push_back(ra.series.area_mm2[i]);
+        contact.force_n.push_back(ra.series.force_n[i]);
+      }
+      if (contact.t_s.size() < static_cast<std::size_t>(kMinContactFrames)) continue;
+      u.t = contact.t_s;
+      u.y = contact.force_n;
+      u.area = contact.area_mm2;
+      u.dt_s = dt;
+      u.peak_n = *std::max_element(u.y.begin(), u.y.end());
+      if (!(u.peak_n > 0.0)) continue;
+      const EllipsoidParams p = ra.fit.params();
+      const IdentifiableParams id = identifiable(p);
+      shapes(contact, id, p.C_mm, u);
+      std::tie(u.K0, u.D0) = nnls2(u.y, u.E, u.V);
+      const std::size_t n = u.t.size();
+      u.phase.resize(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        u.phase[i] = std::clamp((u.t[i] - sa.t_heel_strike_s) / stance, 0.0, 1.0);
+      }
+      u.sat.assign(n, 0.0);
+      const auto& sat = ds.saturated_cells[index_of(region)];
+      for (std::size_t i = 0, k = 0; i < ra.series.t_s.size() && k < n; ++i) {
+        if (!(ra.series.area_mm2[i] > 0.0)) continue;
+        if (i < sat.size()) u.sat[k] = sat[i];
+        ++k;
+      }
+      // Noise floor: the force's own noise about a smooth fit, and the force the model moves
+      // when the measured area moves by one cell's quantisation (cell area / sqrt 12).
+      const double meas_sd = savgol_noise_sd(u.y);
+      u.floor2.assign(n, meas_sd * meas_sd);
+      for (std::size_t i = 0; i < n; ++i) {
+        if (!(u.area[i] > 0.0)) continue;
+        const double a = std::min(u.area[i] / id.P_mm2, kMaxAreaFraction);
+        const double g = 1.0 - std::sqrt(1.0 - a);
+        const double dE_dg = id.P_mm2 * ((2.0 + id.n) * std::pow(g, 1.0 + id.n) * (1.0 - g / 3.0) -
+                                         std::pow(g, 2.0 + id.n) / 3.0);
+        const double dg_dA = 1.0 / (2.0 * std::sqrt(1.0 - a) * id.P_mm2);
+        const double q = u.K0 * dE_dg * dg_dA * input.cell_area_mm2 / std::sqrt(12.0);
+        u.floor2[i] += q * q;
+      }
+      int& prev = last[static_cast<std::size_t>(sa.foot)][index_of(region)];
+      u.prev = prev;
+      prev = static_cast<int>(out.units.size());
+      out.units.push_back(std::move(u));
+    }
+  }
+  out.steps = static_cast<int>(order.size());
+  {
+    Workspace w;
+    for (std::size_t ui = 0; ui < out.units.size(); ++ui) {
+      Unit& u = out.units[ui];
+      u.base_sse = solve_unit({}, ui, u, w, &u.base_pred, true);
+    }
+  }
+  Pooled& p = out.pooled;
+  p.folds = folds;
+  for (const Unit& u : out.units) {
+    p.norm += u.norm();
+    p.frames += static_cast<long>(u.y.size());
+    p.fold_of.push_back(u.ordinal % folds);
+  }
+  // Lag-1 autocorrelation of the baseline residuals, within units.
+  double c0 = 0, c1 = 0;
+  for (const Unit& u : out.units) {
+    double prev = 0;
+    for (std::size_t i = 0; i < u.y.size(); ++i) {
+      const double r = u.y[i] - u.base_pred[i];
+      c0 += r * r;
+      if (i > 0) c1 += r * prev;
+      prev = r;
+    }
+  }
+  p.r1 = c0 > 0 ? std::clamp(c1 / c0, -0.99, 0.99) : 0.0;
+  p.neff_fraction = std::max(0.0, p.r1) > 0 ? (1 - p.r1) / (1 + p.r1) : 1.0;
+  return out;
+}
+
+// ---- maps, comparisons, diagnostics ----------------------------------------------------------
+
+ResidualMap residual_map(const std::vector<Unit>& units,
+                         const std::vector<std::vector<double>>& preds, int bins) {
+  ResidualMap map;
+  map.bins = bins;
+  std::vector<double> s(kRegionCount * static_cast<std::size_t>(bins), 0.0), s2 = s, f2 = s;
+  std::vector<int> count(s.size(), 0);
+  for (std::size_t ui = 0; ui < units.size(); ++ui) {
+    const Unit& u = units[ui];
+    for (std::size_t i = 0; i < u.y.size(); ++i) {
+      const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
+      const std::size_t c =
+          index_of(u.region) * static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
+      const double r = u.y[i] - preds[ui][i];
+      s[c] += r;
+      s2[c] += r * r;
+      f2[c] += u.floor2[i];
+      ++count[c];
+    }
+  }
+  for (Region region : kRegions) {
+    for (int b = 0; b < bins; ++b) {
+      const std::size_t c =
+          index_of(region) * static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
+      ResidualCell cell;
+      cell.region = region;
+      cell.bin = b;
+      cell.samples = count[c];
+      if (count[c] > 0) {
+        cell.rms_n = std::sqrt(s2[c] / count[c]);
+        cell.bias_n = s[c] / count[c];
+        cell.noise_floor_n = std::sqrt(f2[c] / count[c]);
+      }
+      map.cells.push_back(cell);
+    }
+  }
+  return map;
+}
+
+double pearson(const std::vector<double>& x, const std::vector<double>& y) {
+  const double n = static_cast<double>(x.size());
+  if (n < 3) return 0.0;
+  double mx = 0, my = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    mx += x[i];
+    my += y[i];
+  }
+  mx /= n;
+  my /= n;
+  double sxy = 0, sxx = 0, syy = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    sxy += (x[i] - mx) * (y[i] - my);
+    sxx += (x[i] - mx) * (x[i] - mx);
+    syy += (y[i] - my) * (y[i] - my);
+  }
+  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
+}
+
+ResidualDiagnostics diagnose(const Prepared& prep, const std::vector<std::vector<double>>& preds,
+                             int bins) {
+  ResidualDiagnostics d;
+  d.lag1_autocorrelation = prep.pooled.r1;
+  d.effective_sample_fraction = prep.pooled.neff_fraction;
+  std::vector<double> bias(static_cast<std::size_t>(bins), 0.0);
+  std::vector<int> count(bias.size(), 0);
+  std::vector<double> res, dd, rate, sign, since, history, sat, step;
+  double runs = 0, expected = 0, variance = 0;
+  for (std::size_t ui = 0; ui < prep.units.size(); ++ui) {
+    const Unit& u = prep.units[ui];
+    double impulse = 0;
+    int plus = 0, minus = 0, unit_runs = 0;
+    int last_sign = 0;
+    for (std::size_t i = 0; i < u.y.size(); ++i) {
+      const double r = (u.y[i] - preds[ui][i]) / u.peak_n;
+      const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
+      bias[static_cast<std::size_t>(b)] += r;
+      ++count[static_cast<std::size_t>(b)];
+      impulse += u.y[i] * u.dt_s;
+      res.push_back(r);
+      dd.push_back(u.d_mm[i]);
+      rate.push_back(u.ddot_mm_per_s[i]);
+      sign.push_back(u.ddot_mm_per_s[i] > 0 ? 1.0 : (u.ddot_mm_per_s[i] < 0 ? -1.0 : 0.0));
+      since.push_back(u.t[i] - u.t.front());
+      history.push_back(impulse / u.peak_n);
+      sat.push_back(u.sat[i]);
+      step.push_back(u.ordinal);
+      const int sg = r > 0 ? 1 : (r < 0 ? -1 : 0);
+      if (sg == 0) continue;
+      (sg > 0 ? plus : minus)++;
+      if (sg != last_sign) ++unit_runs;
+      last_sign = sg;
+    }
+    const double n = plus + minus;
+    if (plus > 0 && minus > 0 && n > 1) {
+      runs += unit_runs;
+      expected += 1.0 + 2.0 * plus * minus / n;
+      variance += 2.0 * plus * minus * (2.0 * plus * minus - n) / (n * n * (n - 1));
+    }
+  }
+  for (std::size_t b = 0; b < bias.size(); ++b) {
+    d.bias_per_phase_pct.push_back(count[b] > 0 ? 100.0 * bias[b] / count[b] : 0.0);
+  }
+  d.runs_z = variance > 0 ? (runs - expected) / std::sqrt(variance) : 0.0;
+  d.correlations = {{"d_mm", pearson(dd, res)},
+                    {"ddot_mm_per_s", pearson(rate, res)},
+                    {"sign_ddot", pearson(sign, res)},
+                    {"time_since_heel_strike_s", pearson(since, res)},
+                    {"load_history_impulse", pearson(history, res)},
+                    {"saturated_cells", pearson(sat, res)},
+                    {"step_index", pearson(step, res)}};
+  return d;
+}
+
+std::vector<RegionComparison> compare_regions(const std::vector<Unit>& units,
+                                              std::span<const double> before,
+                                              std::span<const double> after) {
+  std::vector<RegionComparison> out;
+  for (Region region : kRegions) {
+    RegionComparison c;
+    c.region = region;
+    double b = 0, a = 0, norm = 0;
+    for (std::size_t ui = 0; ui < units.size(); ++ui) {
+      if (units[ui].region != region) continue;
+      ++c.step_regions;
+      b += before[ui];
+      a += after[ui];
+      norm += units[ui].norm();
+    }
+    c.baseline_heldout_nrmse_pct = nrmse(b, norm);
+    c.extended_heldout_nrmse_pct = nrmse(a, norm);
+    out.push_back(c);
+  }
+  return out;
+}
+
+EffectEstimate estimate_of(const CandidateOutcome& c) {
+  EffectEstimate e;
+  e.name = c.spec->name;
+  for (std::size_t p = 0; p < c.theta.size(); ++p) {
+    e.params.push_back({c.spec->params[p].name, c.theta[p], c.se[p]});
+  }
+  return e;
+}
+
+CandidateResult result_of(const CandidateOutcome& c, const Pooled& pooled, double base_heldout,
+                          double base_sse, int base_params) {
+  CandidateResult r;
+  r.name = c.spec->name;
+  r.params = estimate_of(c).params;
+  r.in_sample_nrmse_pct = nrmse(c.in_sample_sse, pooled.norm);
+  r.heldout_nrmse_pct = nrmse(c.heldout_sse, pooled.norm);
+  r.shrink_pct = base_heldout > 0.0 ? 100.0 * (1.0 - r.heldout_nrmse_pct / base_heldout) : 0.0;
+  const int params = base_params + static_cast<int>(c.theta.size());
+  r.bic = bic(c.in_sample_sse, pooled, params);
+  r.delta_bic = r.bic - bic(base_sse, pooled, base_params);
+  return r;
+}
+
+const CandidateSpec& spec_named(const std::vector<CandidateSpec>& specs, std::string_view name) {
+  for (const CandidateSpec& s : specs) {
+    if (s.name == name) return s;
+  }
+  check_discrepancy_effect(name);
+  throw std::logic_error("candidate list and names disagree");
+}
+
+void check_settings(const DiscrepancySettings& s, const DiscrepancyInput& input) {
+  if (s.folds < 2) throw std::invalid_argument("discrepancy: folds must be >= 2");
+  if (s.phase_bins < 10) throw std::invalid_argument("discrepancy: phase_bins must be >= 10");
+  if (!(input.sample_rate_hz > 0) || !(input.cell_area_mm2 > 0) || !(input.newtons_per_bit > 0)) {
+    throw std::invalid_argument("discrepancy: sample rate, cell area and N/bit must be > 0");
+  }
+  if (static_cast<int>(input.steps.size()) < s.folds) {
+    throw std::invalid_argument("discrepancy: " + std::to_string(input.steps.size()) +
+                                " complete steps, need at least " + std::to_string(s.folds) +
+                                " (one per fold)");
+  }
+}
+
+}  // namespace
+
+std::vector<std::string_view> discrepancy_effect_names() {
+  return {"stress_relaxation", "hysteresis", "impact_transient", "sensor_saturation",
+          "sensor_creep"};
+}
+
+void check_discrepancy_effect(std::string_view name) {
+  std::string known;
+  for (std::string_view n : discrepancy_effect_names()) {
+    if (n == name) return;
+    known += (known.empty() ? "" : ", ") + std::string(n);
+  }
+  throw std::invalid_argument("unknown effect '" + std::string(name) + "' (known: " + known + ")");
+}
+
+DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,
+                                           const Config& config, const AnalysisSettings& settings) {
+  std::vector<Step> ok;
+  for (const Step& s : steps) {
+    if (s.status == StepStatus::Ok && !s.stance.empty()) ok.push_back(s);
+  }
+  std::vector<StepAnalysis> analyses(ok.size());
+  parallel_for(ok.size(), [&](std::size_t i) {
+    // One cache per step keeps the threads apart; the ellipses do not depend on it.
+    ContactEllipseCache cache;
+    analyses[i] = analyse_step(ok[i], layout, config, settings, &cache);
+  });
+  return make_discrepancy_input(ok, std::move(analyses), layout, config);
+}
+
+DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
+                                        std::vector<StepAnalysis> analyses,
+                                        const InsoleLayout& layout, const Config& config) {
+  if (steps.size() != analyses.size()) {
+    throw std::invalid_argument("make_discrepancy_input: one analysis per step expected");
+  }
+  DiscrepancyInput input;
+  input.sample_rate_hz = config.sample_rate_hz;
+  input.cell_area_mm2 = config.sensor.area_mm2();
+  input.newtons_per_bit = config.calibration.newtons_per_bit(config.sensor.area_mm2());
+  input.steps.resize(steps.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    input.steps[i].analysis = std::move(analyses[i]);
+  }
+  double highest = 0.0;
+  for (const Step& s : steps) {
+    for (const Frame& f : s.stance) {
+      for (std::size_t c = 0; c < f.bits.size() && c < s.sensor_zero_bits.size(); ++c) {
+        highest = std::max(highest, f.bits[c] - s.sensor_zero_bits[c]);
+      }
+    }
+  }
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const Step& s = steps[i];
+    for (Region region : kRegions) {
+      auto& counts = input.steps[i].saturated_cells[index_of(region)];
+      for (const Frame& f : s.stance) {
+        int n = 0;
+        for (std::size_t c : layout.region_sensors(region)) {
+          if (c < f.bits.size() && c < s.sensor_zero_bits.size() &&
+              f.bits[c] - s.sensor_zero_bits[c] >= highest - kSaturationBandBits) {
+            ++n;
+          }
+        }
+        counts.push_back(n);
+      }
+    }
+  }
+  return input;
+}
+
+DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
+                                   const DiscrepancySettings& settings) {
+  check_settings(settings, input);
+  const Prepared prep = prepare(input, settings.folds);
+  const std::vector<Unit>& units = prep.units;
+  const Pooled& pooled = prep.pooled;
+  const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
+  const int base_params = 2 * static_cast<int>(units.size());
+
+  DiscrepancyResult out;
+  out.steps = prep.steps;
+  out.step_regions = static_cast<int>(units.size());
+  out.frames = pooled.frames;
+  double floor_sum = 0;
+  for (const Unit& u : units) floor_sum += sum(u.floor2);
+  out.noise_floor_nrmse_pct = nrmse(floor_sum, pooled.norm);
+
+  std::vector<std::vector<double>> base_preds;
+  const std::vector<double> base = unit_costs(units, {}, &base_preds);
+  const double base_sse = sum(base);
+  out.baseline_in_sample_nrmse_pct = nrmse(base_sse, pooled.norm);
+  out.baseline_heldout_nrmse_pct = out.baseline_in_sample_nrmse_pct;
+  out.baseline_bic = bic(base_sse, pooled, base_params);
+  out.map_before = residual_map(units, base_preds, settings.phase_bins);
+  out.diagnostics = diagnose(prep, base_preds, settings.phase_bins);
+
+  std::vector<CandidateOutcome> outcomes;
+  for (const CandidateSpec& spec : specs) {
+    outcomes.push_back(fit_candidate(units, pooled, {}, spec));
+    out.candidates.push_back(
+        result_of(outcomes.back(), pooled, out.baseline_heldout_nrmse_pct, base_sse, base_params));
+  }
+  const auto passes = [&](const CandidateResult& r) {
+    return r.shrink_pct >= settings.min_shrink_pct && r.delta_bic <= -settings.min_delta_bic;
+  };
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < out.candidates.size(); ++i) {
+    if (out.candidates[i].heldout_nrmse_pct < out.candidates[best].heldout_nrmse_pct) best = i;
+  }
+  std::vector<double> heldout = base;
+  std::vector<FixedEffect> chosen;
+  if (passes(out.candidates[best])) {
+    const CandidateOutcome& first = outcomes[best];
+    out.named_effects.push_back(estimate_of(first));
+    chosen.push_back({first.spec, first.theta});
+    heldout = first.heldout;
+    if (settings.second_effect) {
+      const double first_heldout = out.candidates[best].heldout_nrmse_pct;
+      std::vector<CandidateOutcome> seconds;
+      for (const CandidateSpec& spec : specs) {
+        if (spec.name == first.spec->name) continue;
+        seconds.push_back(fit_candidate(units, pooled, chosen, spec));
+        out.second_candidates.push_back(
+            result_of(seconds.back(), pooled, first_heldout, first.in_sample_sse,
+                      base_params + static_cast<int>(first.theta.size())));
+      }
+      std::size_t b2 = 0;
+      for (std::size_t i = 1; i < out.second_candidates.size(); ++i) {
+        if (out.second_candidates[i].heldout_nrmse_pct <
+            out.second_candidates[b2].heldout_nrmse_pct) {
+          b2 = i;
+        }
+      }
+      if (!out.second_candidates.empty() && passes(out.second_candidates[b2])) {
+        out.named_effects.push_back(estimate_of(seconds[b2]));
+        chosen.push_back({seconds[b2].spec, seconds[b2].theta});
+        heldout = seconds[b2].heldout;
+      }
+    }
+  }
+  out.extended_heldout_nrmse_pct = nrmse(sum(heldout), pooled.norm);
+  out.gap_shrink_pct =
+      out.baseline_heldout_nrmse_pct > 0.0
+          ? 100.0 * (1.0 - out.extended_heldout_nrmse_pct / out.baseline_heldout_nrmse_pct)
+          : 0.0;
+
+  std::vector<std::vector<double>> ext_preds;
+  unit_costs(units, chosen, &ext_preds);
+  out.map_after = residual_map(units, ext_preds, settings.phase_bins);
+  out.regions = compare_regions(units, base, heldout);
+
+  // Where: the cells whose residual exceeds the noise floor most.
+  std::vector<ResidualCell> cells;
+  for (const ResidualCell& c : out.map_before.cells) {
+    if (c.samples > 0) cells.push_back(c);
+  }
+  const auto excess = [](const ResidualCell& c) {
+    return c.rms_n * c.rms_n - c.noise_floor_n * c.noise_floor_n;
+  };
+  std::stable_sort(cells.begin(), cells.end(), [&](const ResidualCell& a, const ResidualCell& b) {
+    return excess(a) > excess(b);
+  });
+  cells.resize(std::min(cells.size(), static_cast<std::size_t>(settings.top_cells)));
+  out.where = cells;
+
+  // By step: pooled over the step's regions.
+  std::vector<double> sb(static_cast<std::size_t>(prep.steps), 0.0), se = sb, sn = sb;
+  for (std::size_t ui = 0; ui < units.size(); ++ui) {
+    const auto o = static_cast<std::size_t>(units[ui].ordinal);
+    sb[o] += base[ui];
+    se[o] += heldout[ui];
+    sn[o] += units[ui].norm();
+  }
+  for (std::size_t o = 0; o < sb.size(); ++o) {
+    out.per_step.push_back({prep.step_ids[o].first, prep.step_ids[o].second, nrmse(sb[o], sn[o]),
+                            nrmse(se[o], sn[o])});
+  }
+  return out;
+}
+
+ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
+                                    std::span<const std::string> effects,
+                                    const DiscrepancySettings& settings) {
+  check_settings(settings, input);
+  for (std::size_t i = 0; i < effects.size(); ++i) {
+    check_discrepancy_effect(effects[i]);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (effects[i] == effects[j]) {
+        throw std::invalid_argument("effect '" + effects[i] + "' given twice");
+      }
+    }
+  }
+  const Prepared prep = prepare(input, settings.folds);
+  const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
+  ExtendedModelFit out;
+  const std::vector<double> base = unit_costs(prep.units, {});
+  out.baseline_nrmse_pct = nrmse(sum(base), prep.pooled.norm);
+  out.baseline_heldout_nrmse_pct = out.baseline_nrmse_pct;
+  std::vector<FixedEffect> chosen;
+  std::vector<double> heldout = base;
+  std::vector<double> in_sample = base;
+  for (const std::string& name : effects) {
+    const CandidateOutcome c =
+        fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name));
+    out.effects.push_back(estimate_of(c));
+    chosen.push_back({c.spec, c.theta});
+    heldout = c.heldout;
+    in_sample = c.in_sample;
+  }
+  out.extended_nrmse_pct = nrmse(sum(in_sample), prep.pooled.norm);
+  out.extended_heldout_nrmse_pct = nrmse(sum(heldout), prep.pooled.norm);
+  out.regions = compare_regions(prep.units, base, heldout);
+  return out;
+}
+
+}  // namespace gaitmon

@@ -1,0 +1,188 @@
+// Tests of the discrepancy workflow: on clean region series (the model's own force with a known
+// effect, no sensor grid) it names the effect and closes the held-out gap; on simulated
+// sessions through the whole measurement chain it prints the confusion matrix; it is
+// deterministic and refuses bad settings.
+#include "gaitmon/discrepancy.hpp"
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "gaitmon/batch.hpp"
+#include "gaitmon/config.hpp"
+#include "gaitmon/simulator.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+const Config& shipped_config() {
+  static const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  return config;
+}
+
+// The region-level form of a cell ceiling for a paraboloid pressure over the contact (the
+// workflow's sensor_saturation candidate), written out here from its definition.
+double saturate(double force_n, double area_mm2, double ceiling_bits) {
+  const double npb = 0.2824;
+  const double peak_bits = 2.0 * force_n / npb / (area_mm2 / 112.5);
+  if (peak_bits <= ceiling_bits) return force_n;
+  const double lost = 1.0 - ceiling_bits / peak_bits;
+  return force_n * (1.0 - lost * lost);
+}
+
+struct CleanCase {
+  std::string effect;
+  EffectParams params;
+  double ceiling_bits = 0.0;  ///< > 0: region-level saturation on top
+};
+
+// Steps of one foot, heel and met3_5 only, whose areas follow smooth bumps (stance 0.55-0.65 s,
+// 100 Hz) and whose forces are the model's, with `effect` applied and 0.5 N of noise, each step
+// fitted by the project's tissue fit.
+DiscrepancyInput clean_session(const CleanCase& c, int steps, unsigned seed) {
+  const Config& config = shipped_config();
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, 0.5);
+  std::uniform_real_distribution<double> jitter(0.55, 0.65);
+  auto effect = make_simulation_effect(c.effect, c.params);
+  DiscrepancyInput input;
+  const std::array<Region, 2> regions{Region::Heel, Region::Met3_5};
+  const std::array<double, 2> peak_force{420.0, 300.0};
+  const std::array<std::array<double, 3>, 2> window{{{0.0, 0.12, 0.52}, {0.10, 0.80, 0.99}}};
+  double t0 = 0.5;
+  for (int s = 0; s < steps; ++s) {
+    const double stance = jitter(rng);
+    DiscrepancyStep ds;
+    StepAnalysis& sa = ds.analysis;
+    sa.foot = Foot::Left;
+    sa.step = s;
+    sa.t_heel_strike_s = t0;
+    sa.t_toe_off_s = t0 + stance;
+    const int frames = static_cast<int>(std::lround(stance * 100.0)) + 1;
+    for (std::size_t k = 0; k < regions.size(); ++k) {
+      const Region region = regions[k];
+      const SeedTissueStats& seed_stats = config.tissue(InsoleSize::S37_38, region);
+      const EllipsoidParams p = seed_stats.mean;
+      const double peak_area = contact_area_for_elastic_force(
+          p, peak_force[k], 0.9 * std::numbers::pi * p.A_mm * p.B_mm);
+      RegionAnalysis& ra = sa.regions[index_of(region)];
+      ra.region = region;
+      for (int f = 0; f < frames; ++f) {
+        const double t = t0 + 0.01 * f;
+        const double u = (t - t0) / stance;
+        const auto [w0, wp, w1] = window[k];
+        double shape = 0.0, rate = 0.0;
+        if (u > w0 && u < w1) {
+          const double span = u <= wp ? wp - w0 : w1 - wp;
+          const double phase = std::numbers::pi * (u <= wp ? u - w0 : u - wp) / span;
+          shape = u <= wp ? 0.5 * (1 - std::cos(phase)) : 0.5 * (1 + std::cos(phase));
+          rate = (u <= wp ? 1.0 : -1.0) * 0.5 * std::numbers::pi / span * std::sin(phase) / stance;
+        }
+        const double area = peak_area * shape;
+        double force = 0.0;
+        if (area > 0.0) {
+          const double d = deformation_mm(p, area);
+          const double ddot = deformation_rate_mm_per_s(p, area, peak_area * rate);
+          force = force_n(p, d, ddot, ModelVariant::Correct);
+          const TissueSample sample{Foot::Left, region, t, t0 - 0.005, area, d, ddot};
+          if (effect) {
+            force = effect->tissue_force_n(sample, force);
+            force = effect->sensor_bits({Foot::Left, index_of(region), t}, force);
+          }
+          if (c.ceiling_bits > 0.0) force = saturate(force, area, c.ceiling_bits);
+          force += noise(rng);
+        }
+        ra.series.t_s.push_back(t);
+        ra.series.area_mm2.push_back(area);
+        ra.series.force_n.push_back(area > 0.0 ? force : 0.0);
+        ra.peak_force_n = std::max(ra.peak_force_n, force);
+        ra.frames += area > 0.0 ? 1 : 0;
+      }
+      ra.aspect = p.A_mm / p.B_mm;
+      ra.declared = declared_params(seed_stats, ra.aspect);
+      ra.fit = fit_region(ra.series, ra.declared, config.fit_bounds, FitSettings{});
+    }
+    input.steps.push_back(std::move(ds));
+    t0 += 1.1;
+  }
+  return input;
+}
+
+std::string named(const DiscrepancyResult& r) {
+  std::string out;
+  for (const auto& e : r.named_effects) out += (out.empty() ? "" : "+") + e.name;
+  return out.empty() ? "none" : out;
+}
+
+TEST(Discrepancy, OnCleanSeriesNamesEachEffectAndClosesTheHeldOutGap) {
+  // "none" with a ceiling stands for sensor saturation at region level (no cells here).
+  const std::vector<std::pair<std::string, CleanCase>> cases{
+      {"none", {"none", {}}},
+      {"stress_relaxation", {"stress_relaxation", {{"strength", 0.4}, {"tau_s", 0.3}}}},
+      {"hysteresis", {"hysteresis", {{"strength", 0.15}, {"transition_mm", 0.3}}}},
+      {"impact_transient", {"impact_transient", {{"amplitude_n", 80.0}, {"duration_s", 0.04}}}},
+      {"sensor_saturation", {"none", {}, 90.0}},
+      {"sensor_creep", {"sensor_creep", {{"gain", 0.3}, {"tau_s", 1.0}}}},
+  };
+  for (const auto& [expected, c] : cases) {
+    const DiscrepancyResult r = find_discrepancy(clean_session(c, 14, 7));
+    fmt::print("clean {}: named {}, held-out {:.2f} % -> {:.2f} % ({:.1f} %)\n", expected, named(r),
+               r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
+    ASSERT_FALSE(r.candidates.empty());
+    if (expected == "none") {
+      EXPECT_TRUE(r.named_effects.empty()) << named(r);
+      continue;
+    }
+    ASSERT_FALSE(r.named_effects.empty()) << expected;
+    EXPECT_EQ(r.named_effects.front().name, expected);
+    EXPECT_GE(r.gap_shrink_pct, 40.0) << expected;
+  }
+}
+
+TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
+  const DiscrepancyInput input =
+      clean_session({"impact_transient", {{"amplitude_n", 120.0}, {"duration_s", 0.05}}}, 10, 3);
+  const std::vector<std::string> effects{"impact_transient"};
+  const ExtendedModelFit fit = fit_extended_model(input, effects);
+  ASSERT_EQ(fit.effects.size(), 1u);
+  const auto& params = fit.effects.front().params;
+  ASSERT_EQ(params.size(), 3u);
+  EXPECT_EQ(params[0].name, "amplitude_n");
+  // The pulse is sampled every 10 ms and starts between frames, so within 15 %.
+  EXPECT_NEAR(params[0].value, 120.0, 18.0);
+  EXPECT_NEAR(params[1].value, 0.05, 0.0075);
+  EXPECT_GT(params[0].se, 0.0);
+  EXPECT_LT(fit.extended_nrmse_pct, 0.5 * fit.baseline_nrmse_pct);
+  EXPECT_LT(fit.extended_heldout_nrmse_pct, 0.5 * fit.baseline_heldout_nrmse_pct);
+
+  const std::vector<std::string> twice{"hysteresis", "hysteresis"};
+  EXPECT_THROW(fit_extended_model(input, twice), std::invalid_argument);
+  const std::vector<std::string> unknown{"crosstalk"};
+  EXPECT_THROW(fit_extended_model(input, unknown), std::invalid_argument);
+}
+
+TEST(Discrepancy, RefusesBadSettingsAndTooFewSteps) {
+  const DiscrepancyInput input = clean_session({"none", {}}, 4, 1);
+  EXPECT_THROW(find_discrepancy(input), std::invalid_argument);  // 4 steps, 5 folds
+  DiscrepancySettings s;
+  s.folds = 2;
+  s.phase_bins = 9;
+  EXPECT_THROW(find_discrepancy(input, s), std::invalid_argument);
+  s.phase_bins = 10;
+  s.second_effect = false;
+  const DiscrepancyResult a = find_discrepancy(input, s);
+  const DiscrepancyResult b = find_discrepancy(input, s);
+  EXPECT_EQ(a.baseline_heldout_nrmse_pct, b.baseline_heldout_nrmse_pct);
+  ASSERT_EQ(a.map_before.cells.size(), kRegionCount * 10);
+  EXPECT_EQ(a.per_step.size(), 4u);
+}
+
+}  // namespace
+}  // namespace gaitmon

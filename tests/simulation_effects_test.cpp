@@ -1,0 +1,158 @@
+// Tests of the simulator's physical effects: each changes the force or reading in the expected
+// direction by an amount computed here from its definition, and bad names or parameters fail.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+#include "gaitmon/config.hpp"
+#include "gaitmon/session.hpp"
+#include "gaitmon/simulator.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+TissueSample tissue(Region region, double t_s, double d_mm = 1.0, double contact_s = 0.0) {
+  TissueSample s;
+  s.region = region;
+  s.t_s = t_s;
+  s.t_contact_start_s = contact_s;
+  s.d_mm = d_mm;
+  return s;
+}
+
+TEST(SimulationEffects, StressRelaxationRelaxesAHeldLoadTowardOneMinusStrength) {
+  auto e = make_simulation_effect("stress_relaxation", {{"strength", 0.3}, {"tau_s", 0.2}});
+  // A load of 100 N held from t = 0, sampled every 10 ms: the lag reaches 1 - exp(-t / tau).
+  double out = 0.0;
+  for (int k = 0; k <= 20; ++k) out = e->tissue_force_n(tissue(Region::Heel, 0.01 * k), 100.0);
+  EXPECT_NEAR(out, 100.0 - 30.0 * (1.0 - std::exp(-1.0)), 1e-9);  // at t = tau: 81.04 N
+  for (int k = 21; k <= 400; ++k) out = e->tissue_force_n(tissue(Region::Heel, 0.01 * k), 100.0);
+  EXPECT_NEAR(out, 70.0, 1e-6);
+  // Another region has its own memory: unrelaxed at its first sample.
+  EXPECT_DOUBLE_EQ(e->tissue_force_n(tissue(Region::Met1_2, 4.0), 100.0), 100.0);
+}
+
+TEST(SimulationEffects, HysteresisRaisesLoadingAndLowersUnloadingRateIndependently) {
+  auto e = make_simulation_effect("hysteresis", {{"strength", 0.1}, {"transition_mm", 0.25}});
+  // From z = 0, compressing by 1 mm drives z to 1 - exp(-4) whatever the time step.
+  const double up = e->tissue_force_n(tissue(Region::Heel, 0.01, 1.0), 200.0);
+  EXPECT_NEAR(up, 200.0 * (1.0 + 0.1 * (1.0 - std::exp(-4.0))), 1e-9);
+  // Holding the deformation keeps the state.
+  EXPECT_DOUBLE_EQ(e->tissue_force_n(tissue(Region::Heel, 5.0, 1.0), 200.0), up);
+  // Recovering by 2 mm: z = -1 + (z0 + 1) exp(-8).
+  const double z0 = 1.0 - std::exp(-4.0);
+  EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 5.01, -1.0), 200.0),
+              200.0 * (1.0 + 0.1 * (-1.0 + (z0 + 1.0) * std::exp(-8.0))), 1e-9);
+}
+
+TEST(SimulationEffects, ImpactTransientAddsAHalfSineAtHeelContactOnly) {
+  auto e =
+      make_simulation_effect("impact_transient", {{"amplitude_n", 90.0}, {"duration_s", 0.04}});
+  EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 1.02, 1.0, 1.0), 10.0), 100.0, 1e-9);
+  EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 1.01, 1.0, 1.0), 10.0),
+              10.0 + 90.0 * std::sin(std::numbers::pi / 4.0), 1e-9);
+  EXPECT_DOUBLE_EQ(e->tissue_force_n(tissue(Region::Heel, 1.05, 1.0, 1.0), 10.0), 10.0);
+  EXPECT_DOUBLE_EQ(e->tissue_force_n(tissue(Region::Met3_5, 1.02, 1.0, 1.0), 10.0), 10.0);
+}
+
+TEST(SimulationEffects, SensorSaturationStopsReadingsAtTheCeiling) {
+  auto e = make_simulation_effect("sensor_saturation", {{"ceiling_bits", 120.0}});
+  EXPECT_DOUBLE_EQ(e->sensor_bits(SensorSample{}, 200.0), 120.0);
+  EXPECT_DOUBLE_EQ(e->sensor_bits(SensorSample{}, 80.5), 80.5);
+}
+
+TEST(SimulationEffects, SensorCreepDriftsUpwardUnderAHeldLoad) {
+  auto e = make_simulation_effect("sensor_creep", {{"gain", 0.2}, {"tau_s", 1.0}});
+  double out = 0.0;
+  for (int k = 0; k <= 100; ++k) out = e->sensor_bits({Foot::Left, 3, 0.01 * k}, 100.0);
+  EXPECT_NEAR(out, 100.0 + 20.0 * (1.0 - std::exp(-1.0)), 1e-9);
+  // The right foot's sensor 3 is another cell.
+  EXPECT_DOUBLE_EQ(e->sensor_bits({Foot::Right, 3, 1.0}, 100.0), 100.0);
+}
+
+TEST(SimulationEffects, UnknownNamesAndParametersAndOutOfRangeValuesFailClearly) {
+  try {
+    make_simulation_effect("stress_relaxation", {{"tau", 0.1}});
+    FAIL() << "no throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown parameter 'tau'"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("tau_s"), std::string::npos);
+  }
+  try {
+    make_simulation_effect("sensor_saturation", {{"ceiling_bits", 300.0}});
+    FAIL() << "no throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("outside [60"), std::string::npos);
+  }
+  EXPECT_THROW(resolve_effect_params("none", {{"x", 1.0}}), std::invalid_argument);
+  EXPECT_EQ(resolve_effect_params("sensor_creep", {}).at("tau_s"), 1.5);
+}
+
+TEST(SimulationEffects, SaturatedSessionNeverReadsAboveTheCeilingAndTheTruthSaysSo) {
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const auto dir = test::scratch_dir("sim-effects");
+  SimulationOptions o;
+  o.duration_s = 6.0;
+  o.seed = 11;
+  o.noise_sd_bits = 0.0;
+  const auto max_reading = [&](const std::string& name) {
+    simulate_session(config, o, dir / (name + ".csv"), dir / (name + ".truth.json"));
+    SessionReader reader(dir / (name + ".csv"));
+    Frame frame;
+    int top = 0;
+    while (reader.next(frame)) {
+      for (auto b : frame.bits) top = std::max(top, static_cast<int>(b));
+    }
+    return top;
+  };
+  EXPECT_GT(max_reading("plain"), 100);
+  o.effects = {"sensor_saturation"};
+  o.effect_params["sensor_saturation"] = {{"ceiling_bits", 70.0}};
+  // The ceiling plus the largest dc bias (2 bits).
+  EXPECT_LE(max_reading("saturated"), 72);
+  std::ifstream in(dir / "saturated.truth.json");
+  const auto truth = nlohmann::json::parse(in);
+  EXPECT_EQ(truth["options"]["effects"][0]["name"], "sensor_saturation");
+  EXPECT_EQ(truth["options"]["effects"][0]["params"]["ceiling_bits"], 70.0);
+}
+
+}  // namespace
+}  // namespace gaitmon
+
+namespace gaitmon {
+namespace {
+
+TEST(SimulationEffects, SimulateCommandChecksEffectParamsJson) {
+  const auto dir = test::scratch_dir("sim-effects-cli");
+  const std::string base =
+      test::gaitmon_binary().string() + " simulate --duration 2 --out " + (dir / "s.csv").string();
+  std::string output;
+  EXPECT_NE(
+      test::run_command(base + " --effect hysteresis --effect-params '{\"strength\":'", &output),
+      0);
+  EXPECT_NE(output.find("not valid JSON"), std::string::npos) << output;
+  EXPECT_NE(
+      test::run_command(base + " --effect hysteresis --effect-params '{\"tau_s\":1}'", &output), 0);
+  EXPECT_NE(output.find("unknown parameter 'tau_s'"), std::string::npos) << output;
+  EXPECT_NE(test::run_command(base + " --effect crosstalk", &output), 0);
+  EXPECT_NE(output.find("unknown simulation effect 'crosstalk'"), std::string::npos) << output;
+  ASSERT_EQ(test::run_command(base + " --effect hysteresis --effect sensor_creep --effect-params "
+                                     "'{\"sensor_creep\":{\"gain\":0.1}}'",
+                              &output),
+            0)
+      << output;
+  std::ifstream in(dir / "s.truth.json");
+  const auto truth = nlohmann::json::parse(in);
+  EXPECT_EQ(truth["options"]["effects"][1]["params"]["gain"], 0.1);
+  EXPECT_EQ(truth["options"]["effects"][0]["params"]["strength"], 0.12);
+}
+
+}  // namespace
+}  // namespace gaitmon
