@@ -383,15 +383,11 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - session_start).count());
 
   std::filesystem::create_directories(args.out_dir);
-  std::vector<std::unique_ptr<OutputFile>> files;
-  const auto add = [&](const char* name, const std::string& text) {
-    files.push_back(std::make_unique<OutputFile>(args.out_dir / name));
-    files.back()->write(text);
-  };
-  add("steps.csv", steps_csv(steps));
-  add("regions.csv", regions_csv(analyses));
-  add("session.json",
-      session_json(args, header, config, settings, steps, analyses, session, extended));
+  OutputSet outputs(args.out_dir);
+  outputs.add("steps.csv", steps_csv(steps));
+  outputs.add("regions.csv", regions_csv(analyses));
+  outputs.add("session.json",
+              session_json(args, header, config, settings, steps, analyses, session, extended));
   if (args.report) {
     ReportInput input;
     input.session_name = args.session.filename().string();
@@ -402,15 +398,9 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     input.steps = steps;
     input.analyses = analyses;
     input.session = &session;
-    add("report.html", render_report_html(input));
+    outputs.add("report.html", render_report_html(input));
   }
-  std::vector<OutputFile*> to_commit;
-  std::vector<std::filesystem::path> written;
-  for (auto& file : files) {
-    to_commit.push_back(file.get());
-    written.push_back(file->path());
-  }
-  OutputFile::commit_all(to_commit);
+  const std::vector<std::filesystem::path> written = outputs.commit();
   print_summary(args, header, settings, steps, analyses, session, written);
   if (extended) {
     for (const EffectEstimate& e : extended->effects) {

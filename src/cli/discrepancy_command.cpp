@@ -153,14 +153,13 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const DiscrepancyResult result = find_discrepancy(input, args.settings);
 
   std::filesystem::create_directories(args.out_dir);
-  std::vector<std::unique_ptr<OutputFile>> files;
-  files.push_back(std::make_unique<OutputFile>(args.out_dir / "discrepancy.json"));
-  files.back()->write(discrepancy_json(args, result));
+  OutputSet outputs(args.out_dir);
+  outputs.add("discrepancy.json", discrepancy_json(args, result));
   if (args.report) {
-    files.push_back(std::make_unique<OutputFile>(args.out_dir / "discrepancy.html"));
-    files.back()->write(render_discrepancy_html(args.session.filename().string(), result));
+    outputs.add("discrepancy.html",
+                render_discrepancy_html(args.session.filename().string(), result));
   }
-  for (auto& f : files) f->commit();
+  const std::vector<std::filesystem::path> written = outputs.commit();
 
   fmt::print("{}: {} steps, {} step-regions; noise floor {:.1f} %\n", args.session.string(),
              result.steps, result.step_regions, result.noise_floor_nrmse_pct);
@@ -180,7 +179,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   fmt::print("held-out NRMSE {:.2f} % -> {:.2f} % (gap shrink {:.1f} %)\n",
              result.baseline_heldout_nrmse_pct, result.extended_heldout_nrmse_pct,
              result.gap_shrink_pct);
-  for (auto& f : files) fmt::print("wrote {}\n", f->path().string());
+  for (const auto& path : written) fmt::print("wrote {}\n", path.string());
 }
 
 }  // namespace

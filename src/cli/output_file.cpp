@@ -58,4 +58,20 @@ void OutputFile::commit_all(std::span<OutputFile* const> files) {
   }
 }
 
+void OutputSet::add(std::string_view name, std::string_view text) {
+  files_.push_back(std::make_unique<OutputFile>(dir_ / name));
+  files_.back()->write(text);
+}
+
+std::vector<std::filesystem::path> OutputSet::commit() {
+  std::vector<OutputFile*> files;
+  std::vector<std::filesystem::path> paths;
+  for (const auto& file : files_) {
+    files.push_back(file.get());
+    paths.push_back(file->path());
+  }
+  OutputFile::commit_all(files);
+  return paths;
+}
+
 }  // namespace gaitmon::cli

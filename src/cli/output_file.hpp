@@ -4,8 +4,10 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <span>
 #include <string_view>
+#include <vector>
 
 namespace gaitmon::cli {
 
@@ -34,6 +36,20 @@ class OutputFile {
   std::filesystem::path partial_;
   std::FILE* file_ = nullptr;
   bool published_ = false;
+};
+
+/// Whole files written in memory first and published together by commit().
+class OutputSet {
+ public:
+  explicit OutputSet(std::filesystem::path dir) : dir_(std::move(dir)) {}
+  /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file.
+  void add(std::string_view name, std::string_view text);
+  /// OutputFile::commit_all over the files added; returns their final paths.
+  std::vector<std::filesystem::path> commit();
+
+ private:
+  std::filesystem::path dir_;
+  std::vector<std::unique_ptr<OutputFile>> files_;
 };
 
 }  // namespace gaitmon::cli
