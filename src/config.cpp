@@ -136,6 +136,13 @@ class TableReader {
     return s->get();
   }
 
+  bool boolean(std::string_view key) {
+    const toml::node& n = node(key);
+    const auto* b = n.as_boolean();
+    if (b == nullptr) fail(key, expected("true or false", n));
+    return b->get();
+  }
+
   const toml::array& array(std::string_view key) {
     const toml::node& n = node(key);
     const auto* a = n.as_array();
@@ -472,6 +479,25 @@ void read_tissue(const fs::path& path, const std::string& main_file, Config& con
   root.finish();
 }
 
+void read_ring(TableReader table, RingSettings& ring) {
+  // 2^24 frames of 184 bytes would already be 3 GB.
+  ring.capacity_frames = static_cast<std::size_t>(integer_in(table, "capacity_frames", 2, 1 << 24));
+  table.finish();
+}
+
+void read_monitor(TableReader table, MonitorSettings& monitor) {
+  monitor.workers = integer_in(table, "workers", 1, 64);
+  monitor.max_step_backlog = integer_in(table, "max_step_backlog", 1, 100000);
+  monitor.status_period_s = table.number("status_period_s");
+  if (!(monitor.status_period_s >= 0.01 && monitor.status_period_s <= 3600.0)) {
+    table.fail("status_period_s",
+               fmt::format("must be in [0.01, 3600], got {}", monitor.status_period_s));
+  }
+  monitor.publish_frames = table.boolean("publish_frames");
+  monitor.publish_raw = table.boolean("publish_raw");
+  table.finish();
+}
+
 fs::path named_file(TableReader& root, std::string_view key, const fs::path& main_file) {
   const std::string name = root.string(key);
   if (name.empty()) root.fail(key, "must name a file");
@@ -496,6 +522,8 @@ Config load_config(const fs::path& main_file) {
   read_calibration(root.table("calibration"), config.calibration);
   read_segmentation(root.table("segmentation"), config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
+  read_ring(root.table("ring"), config.ring);
+  read_monitor(root.table("monitor"), config.monitor);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

@@ -542,5 +542,56 @@ TEST(Config, FitBoundsAreValidated) {
   }
 }
 
+TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
+  const Config config = load_config(shipped_config());
+  EXPECT_EQ(config.ring.capacity_frames, 4096u);
+  EXPECT_EQ(config.monitor.workers, 2);
+  EXPECT_EQ(config.monitor.max_step_backlog, 32);
+  EXPECT_DOUBLE_EQ(config.monitor.status_period_s, 1.0);
+  EXPECT_TRUE(config.monitor.publish_frames);
+  EXPECT_FALSE(config.monitor.publish_raw);
+}
+
+TEST(Config, RingAndMonitorAreValidated) {
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"RingMissing", erase_from_to("[ring]", "[monitor]"), "ring", "missing"},
+      {"RingCapacityOne", replace("capacity_frames = 4096", "capacity_frames = 1"),
+       "ring.capacity_frames", "must be in [2, 16777216]"},
+      {"RingCapacityFloat", replace("capacity_frames = 4096", "capacity_frames = 4096.0"),
+       "ring.capacity_frames", "expected an integer"},
+      {"RingUnknownKey", replace("[ring]\n", "[ring]\npolicy = \"drop\"\n"), "ring.policy",
+       "unknown key"},
+      {"MonitorWorkersZero", replace("workers = 2", "workers = 0"), "monitor.workers",
+       "must be in [1, 64]"},
+      {"MonitorBacklogZero", replace("max_step_backlog = 32", "max_step_backlog = 0"),
+       "monitor.max_step_backlog", "must be in [1, 100000]"},
+      {"MonitorStatusPeriodZero", replace("status_period_s = 1.0", "status_period_s = 0"),
+       "monitor.status_period_s", "must be in [0.01, 3600]"},
+      {"MonitorPublishFramesNotBool", replace("publish_frames = true", "publish_frames = 1"),
+       "monitor.publish_frames", "expected true or false"},
+      {"MonitorPublishRawMissing", replace("publish_raw = false\n", ""), "monitor.publish_raw",
+       "missing"},
+      {"MonitorUnknownKey", replace("[monitor]\n", "[monitor]\nthreads = 2\n"), "monitor.threads",
+       "unknown key"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -75,6 +76,20 @@ struct SeedTissueStats {
   double nrmse_pct_sd = 0.0;
 };
 
+/// [ring]: the lock-free ring between the driver thread and the detector thread.
+struct RingSettings {
+  std::size_t capacity_frames = 4096;  ///< 20 s of two feet at 100 Hz
+};
+
+/// [monitor]: the live monitor's detector thread, step workers and status.
+struct MonitorSettings {
+  int workers = 2;               ///< threads fitting steps
+  int max_step_backlog = 32;     ///< finalised steps waiting for a worker; beyond, oldest dropped
+  double status_period_s = 1.0;  ///< between two status reports
+  bool publish_frames = true;    ///< per-frame region reports (GAITMON_FRAME)
+  bool publish_raw = false;      ///< raw frames (GAITMON_RAW)
+};
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -84,6 +99,8 @@ struct Config {
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
   FitBounds fit_bounds;  ///< [fit] of the main file: the tissue fit's parameter bounds
+  RingSettings ring;
+  MonitorSettings monitor;
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {
