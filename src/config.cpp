@@ -494,7 +494,6 @@ void read_monitor(TableReader table, MonitorSettings& monitor) {
                fmt::format("must be in [0.01, 3600], got {}", monitor.status_period_s));
   }
   monitor.publish_frames = table.boolean("publish_frames");
-  monitor.publish_raw = table.boolean("publish_raw");
   table.finish();
 }
 

@@ -217,7 +217,7 @@ struct Monitor::Impl {
       processed.fetch_add(1, std::memory_order_relaxed);
       const std::int64_t index = foot.frame_base + foot.segmenter->frames() - 1;
       if (config.monitor.publish_frames) publish_frame(foot, index);
-      if (config.monitor.publish_raw) publish_raw(in);
+      if (options.publish_raw) publish_raw(in);
       deliver(foot);
     } catch (const std::exception& e) {
       reject(e.what());

@@ -549,7 +549,6 @@ TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
   EXPECT_EQ(config.monitor.max_step_backlog, 32);
   EXPECT_DOUBLE_EQ(config.monitor.status_period_s, 1.0);
   EXPECT_TRUE(config.monitor.publish_frames);
-  EXPECT_FALSE(config.monitor.publish_raw);
 }
 
 TEST(Config, RingAndMonitorAreValidated) {
@@ -574,8 +573,8 @@ TEST(Config, RingAndMonitorAreValidated) {
        "monitor.status_period_s", "must be in [0.01, 3600]"},
       {"MonitorPublishFramesNotBool", replace("publish_frames = true", "publish_frames = 1"),
        "monitor.publish_frames", "expected true or false"},
-      {"MonitorPublishRawMissing", replace("publish_raw = false\n", ""), "monitor.publish_raw",
-       "missing"},
+      {"MonitorPublishFramesMissing", replace("publish_frames = true\n", ""),
+       "monitor.publish_frames", "missing"},
       {"MonitorUnknownKey", replace("[monitor]\n", "[monitor]\nthreads = 2\n"), "monitor.threads",
        "unknown key"},
   };

@@ -87,7 +87,6 @@ struct MonitorSettings {
   int max_step_backlog = 32;     ///< finalised steps waiting for a worker; beyond, oldest dropped
   double status_period_s = 1.0;  ///< between two status reports
   bool publish_frames = true;    ///< per-frame region reports (GAITMON_FRAME)
-  bool publish_raw = false;      ///< raw frames (GAITMON_RAW)
 };
 
 struct Config {

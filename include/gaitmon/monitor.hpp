@@ -77,6 +77,8 @@ struct MonitorOptions {
   double sample_rate_hz = 100.0;
   AnalysisSettings analysis;
   BacklogOverflow backlog_overflow = BacklogOverflow::DropOldest;
+  /// Also publish every frame as a RawFrameReport (the commands follow [lcm] raw_enabled).
+  bool publish_raw = false;
   /// Fills the driver's fields of each status report (bytes_received, frames_decoded,
   /// crc_errors, resyncs, frames_lost_sequence, reconnects, connection). Called on the detector
   /// thread, and on the thread calling stop() for the final report: it must be thread-safe and
