@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "gaitmon/batch.hpp"
+#include "gaitmon/device_clock.hpp"
 #include "gaitmon/frame_ring.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/log_throttle.hpp"
@@ -133,11 +134,11 @@ struct Monitor::Impl {
     std::shared_ptr<const InsoleLayout> layout;
     std::optional<StepSegmenter> segmenter;
     Frame frame;  ///< reused: its bits keep their capacity
-    std::uint32_t last_device_us = 0;
-    std::int64_t time_us = 0;     ///< unwrapped device time, resets folded in
-    std::int64_t frame_base = 0;  ///< frames of the segmenters before a clock reset
-    int step_base = 0;            ///< steps of the segmenters before a clock reset
-    int steps_emitted = 0;        ///< by the current segmenter
+    std::optional<DeviceClock> clock;
+    std::uint32_t last_device_us = 0;  ///< for the log of a clock reset
+    std::int64_t frame_base = 0;       ///< frames of the segmenters before a clock reset
+    int step_base = 0;                 ///< steps of the segmenters before a clock reset
+    int steps_emitted = 0;             ///< by the current segmenter
     std::uint64_t next_seq = 0;
     std::vector<double> zero;     ///< latest known per-sensor bias
     double threshold_bits = 0.0;  ///< latest known adaptive threshold
@@ -209,7 +210,7 @@ struct Monitor::Impl {
         return;
       }
       if (!advance_time(foot, in)) return;
-      foot.frame.t_s = static_cast<double>(foot.time_us) / 1e6;
+      foot.frame.t_s = foot.clock->t_s();
       foot.frame.foot = in.foot;
       foot.frame.bits.assign(in.bits.begin(), in.bits.begin() + in.sensor_count);
       finalised.clear();
@@ -231,6 +232,7 @@ struct Monitor::Impl {
     foot.layout = std::make_shared<const InsoleLayout>(spec, config.sensor);
     foot.zero.assign(foot.layout->sensor_count(), 0.0);
     foot.threshold_bits = 0.0;
+    foot.clock.emplace(options.sample_rate_hz);
     new_segmenter(foot, in.foot);
     foot.started = true;
     spdlog::info("monitor: foot {} is a {} insole with {} sensors", foot_name(in.foot),
@@ -247,32 +249,27 @@ struct Monitor::Impl {
 
   /// Unwraps the 32-bit device clock; false (rejected) if it did not advance.
   bool advance_time(FootState& foot, const SensorFrame& in) {
-    if (foot.segmenter->frames() == 0 && foot.frame_base == 0) {
-      foot.time_us = in.device_time_us;
-    } else {
-      // Modulo 2^32 a forward step, wrap or not, is below 2^31; anything else went back.
-      const std::uint32_t delta = in.device_time_us - foot.last_device_us;
-      if (delta == 0) {
+    const std::uint32_t previous_us = foot.last_device_us;
+    switch (foot.clock->advance(in.device_time_us)) {
+      case DeviceClock::Tick::Repeated:
         reject(fmt::format("foot {}: device time {} us did not advance", foot_name(in.foot),
                            in.device_time_us));
         return false;
-      }
-      if (delta >= 0x80000000u) {
-        restart(foot, in);
-      } else {
-        foot.time_us += delta;
-      }
+      case DeviceClock::Tick::WentBack:
+        restart(foot, in, previous_us);
+        break;
+      case DeviceClock::Tick::First:
+      case DeviceClock::Tick::Forward:
+        break;
     }
     foot.last_device_us = in.device_time_us;
     return true;
   }
 
   /// The device clock went back: end this foot's segmentation as at the end of a recording.
-  void restart(FootState& foot, const SensorFrame& in) {
-    spdlog::warn(
-        "monitor: foot {}: device clock went back from {} to {} us; segmentation "
-        "restarts",
-        foot_name(in.foot), foot.last_device_us, in.device_time_us);
+  void restart(FootState& foot, const SensorFrame& in, std::uint32_t previous_us) {
+    spdlog::warn("monitor: foot {}: device clock went back from {} to {} us; segmentation restarts",
+                 foot_name(in.foot), previous_us, in.device_time_us);
     finalised.clear();
     foot.segmenter->finish(finalised);
     deliver(foot);
@@ -280,7 +277,6 @@ struct Monitor::Impl {
     foot.step_base += foot.steps_emitted;
     foot.steps_emitted = 0;
     new_segmenter(foot, in.foot);
-    foot.time_us += std::max<std::int64_t>(1, std::llround(1e6 / options.sample_rate_hz));
   }
 
   void reject(const std::string& why) {
