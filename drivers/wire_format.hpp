@@ -33,7 +33,7 @@ class WireFormat {
  public:
   /// The project's default framing: sync A5 5A, CRC-16/CCITT-FALSE little-endian, sensor count
   /// fixed by the insole size.
-  WireFormat() : WireFormat(WireSettings{}) {}
+  WireFormat() = default;
   /// Throws std::invalid_argument for a sync pattern of 0 or more than 4 bytes.
   explicit WireFormat(const WireSettings& settings);
 
@@ -50,8 +50,10 @@ class WireFormat {
   std::uint32_t checksum(std::span<const std::uint8_t> header_and_payload) const;
 
  private:
-  std::array<std::uint8_t, kMaxSyncBytes> sync_{};
-  std::size_t sync_length_ = 0;
+  // The defaults equal WireSettings{}; spelt out because g++ 12 warns (falsely) about
+  // delegating to the constructor that copies the settings' vector.
+  std::array<std::uint8_t, kMaxSyncBytes> sync_{0xA5, 0x5A};
+  std::size_t sync_length_ = 2;
   CrcKind crc_ = CrcKind::Crc16CcittFalse;
   bool crc_big_endian_ = false;
   bool require_size_sensor_count_ = true;
