@@ -9,28 +9,48 @@
 namespace gaitmon::drivers {
 namespace {
 
-constexpr std::array<std::uint16_t, 256> make_crc16_table() {
-  std::array<std::uint16_t, 256> table{};
+// Slicing-by-8 tables: table[k][x] is the CRC contribution of byte x followed by k zero
+// bytes, so eight bytes are folded in with eight independent lookups (CRC dominated the
+// decoder's profile with one lookup per byte).
+constexpr std::array<std::array<std::uint16_t, 256>, 8> make_crc16_tables() {
+  std::array<std::array<std::uint16_t, 256>, 8> t{};
   for (std::uint32_t i = 0; i < 256; ++i) {
     std::uint32_t crc = i << 8;
     for (int bit = 0; bit < 8; ++bit) crc = (crc & 0x8000U) != 0 ? (crc << 1) ^ 0x1021U : crc << 1;
-    table[i] = static_cast<std::uint16_t>(crc);
+    t[0][i] = static_cast<std::uint16_t>(crc);
   }
-  return table;
+  for (std::size_t k = 1; k < 8; ++k) {
+    for (std::size_t i = 0; i < 256; ++i) {
+      const std::uint16_t prev = t[k - 1][i];
+      t[k][i] = static_cast<std::uint16_t>((prev << 8) ^ t[0][prev >> 8]);
+    }
+  }
+  return t;
 }
 
-constexpr std::array<std::uint32_t, 256> make_crc32_table() {
-  std::array<std::uint32_t, 256> table{};
+constexpr std::array<std::array<std::uint32_t, 256>, 8> make_crc32_tables() {
+  std::array<std::array<std::uint32_t, 256>, 8> t{};
   for (std::uint32_t i = 0; i < 256; ++i) {
     std::uint32_t crc = i;
     for (int bit = 0; bit < 8; ++bit) crc = (crc & 1U) != 0 ? (crc >> 1) ^ 0xEDB88320U : crc >> 1;
-    table[i] = crc;
+    t[0][i] = crc;
   }
-  return table;
+  for (std::size_t k = 1; k < 8; ++k) {
+    for (std::size_t i = 0; i < 256; ++i) {
+      const std::uint32_t prev = t[k - 1][i];
+      t[k][i] = (prev >> 8) ^ t[0][prev & 0xFFU];
+    }
+  }
+  return t;
 }
 
-constexpr auto kCrc16Table = make_crc16_table();
-constexpr auto kCrc32Table = make_crc32_table();
+constexpr auto kCrc16 = make_crc16_tables();
+constexpr auto kCrc32 = make_crc32_tables();
+
+std::uint32_t get_u32_le(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
+}
 
 void put_u32_le(std::uint8_t* out, std::uint32_t value) {
   for (int i = 0; i < 4; ++i) out[i] = static_cast<std::uint8_t>(value >> (8 * i));
@@ -39,16 +59,29 @@ void put_u32_le(std::uint8_t* out, std::uint32_t value) {
 }  // namespace
 
 std::uint16_t crc16_ccitt_false(std::span<const std::uint8_t> data) {
-  std::uint16_t crc = 0xFFFF;
-  for (std::uint8_t byte : data) {
-    crc = static_cast<std::uint16_t>((crc << 8) ^ kCrc16Table[((crc >> 8) ^ byte) & 0xFFU]);
+  std::uint32_t crc = 0xFFFF;
+  const std::uint8_t* p = data.data();
+  std::size_t n = data.size();
+  for (; n >= 8; n -= 8, p += 8) {
+    crc = kCrc16[7][p[0] ^ (crc >> 8)] ^ kCrc16[6][p[1] ^ (crc & 0xFFU)] ^ kCrc16[5][p[2]] ^
+          kCrc16[4][p[3]] ^ kCrc16[3][p[4]] ^ kCrc16[2][p[5]] ^ kCrc16[1][p[6]] ^ kCrc16[0][p[7]];
   }
-  return crc;
+  for (; n > 0; --n, ++p) crc = ((crc << 8) & 0xFFFFU) ^ kCrc16[0][(crc >> 8) ^ *p];
+  return static_cast<std::uint16_t>(crc);
 }
 
 std::uint32_t crc32_iso_hdlc(std::span<const std::uint8_t> data) {
   std::uint32_t crc = 0xFFFFFFFFU;
-  for (std::uint8_t byte : data) crc = (crc >> 8) ^ kCrc32Table[(crc ^ byte) & 0xFFU];
+  const std::uint8_t* p = data.data();
+  std::size_t n = data.size();
+  for (; n >= 8; n -= 8, p += 8) {
+    const std::uint32_t lo = crc ^ get_u32_le(p);
+    const std::uint32_t hi = get_u32_le(p + 4);
+    crc = kCrc32[7][lo & 0xFFU] ^ kCrc32[6][(lo >> 8) & 0xFFU] ^ kCrc32[5][(lo >> 16) & 0xFFU] ^
+          kCrc32[4][lo >> 24] ^ kCrc32[3][hi & 0xFFU] ^ kCrc32[2][(hi >> 8) & 0xFFU] ^
+          kCrc32[1][(hi >> 16) & 0xFFU] ^ kCrc32[0][hi >> 24];
+  }
+  for (; n > 0; --n, ++p) crc = (crc >> 8) ^ kCrc32[0][(crc ^ *p) & 0xFFU];
   return crc ^ 0xFFFFFFFFU;
 }
 

@@ -96,6 +96,36 @@ TEST(WireFormat, ChecksumTestVectors) {
   EXPECT_EQ(crc16_ccitt_false({}), 0xFFFF);
 }
 
+// Bit-at-a-time references, independent of the table-driven code under test.
+std::uint16_t crc16_bitwise(std::span<const std::uint8_t> data) {
+  std::uint32_t crc = 0xFFFF;
+  for (std::uint8_t byte : data) {
+    crc ^= static_cast<std::uint32_t>(byte) << 8;
+    for (int bit = 0; bit < 8; ++bit) crc = (crc & 0x8000U) != 0 ? (crc << 1) ^ 0x1021U : crc << 1;
+    crc &= 0xFFFFU;
+  }
+  return static_cast<std::uint16_t>(crc);
+}
+
+std::uint32_t crc32_bitwise(std::span<const std::uint8_t> data) {
+  std::uint32_t crc = 0xFFFFFFFFU;
+  for (std::uint8_t byte : data) {
+    crc ^= byte;
+    for (int bit = 0; bit < 8; ++bit) crc = (crc & 1U) != 0 ? (crc >> 1) ^ 0xEDB88320U : crc >> 1;
+  }
+  return ~crc;
+}
+
+TEST(WireFormat, ChecksumsEqualABitwiseReferenceForEveryLength) {
+  std::mt19937 rng(3);
+  for (std::size_t length = 0; length < 200; ++length) {
+    Bytes data(length);
+    for (auto& b : data) b = static_cast<std::uint8_t>(rng());
+    EXPECT_EQ(crc16_ccitt_false(data), crc16_bitwise(data)) << length;
+    EXPECT_EQ(crc32_iso_hdlc(data), crc32_bitwise(data)) << length;
+  }
+}
+
 // The test vector of drivers/PROTOCOL.md, worked out independently (bitwise CRC in Python).
 TEST(WireFormat, EncodesTheProtocolTestVector) {
   SensorFrame frame;
