@@ -542,6 +542,99 @@ TEST(Config, FitBoundsAreValidated) {
   }
 }
 
+TEST(Config, WireAndSerialDefaults) {
+  const Config config = load_config(shipped_config());
+  EXPECT_EQ(config.wire.sync, (std::vector<std::uint8_t>{0xA5, 0x5A}));
+  EXPECT_EQ(config.wire.crc, CrcKind::Crc16CcittFalse);
+  EXPECT_FALSE(config.wire.crc_big_endian);
+  EXPECT_TRUE(config.wire.require_size_sensor_count);
+  EXPECT_EQ(config.serial.device, "/dev/ttyUSB0");
+  EXPECT_EQ(config.serial.baud, 921600U);
+  EXPECT_EQ(config.serial.parity, SerialParity::None);
+  EXPECT_EQ(config.serial.data_bits, 8);
+  EXPECT_EQ(config.serial.stop_bits, 1);
+  EXPECT_EQ(config.serial.flow_control, SerialFlowControl::None);
+  EXPECT_EQ(config.serial.reconnect_initial_ms, 50);
+  EXPECT_EQ(config.serial.reconnect_max_ms, 2000);
+}
+
+TEST(Config, WireAndSerialAcceptTheirAlternatives) {
+  const fs::path dir = copy_config("WireAlternatives");
+  edit_file(dir / kMain, [](std::string& text) {
+    replace("sync = [0xA5, 0x5A]", "sync = [0x7E]")(text);
+    replace("crc = \"crc16-ccitt-false\"", "crc = \"crc32\"")(text);
+    replace("crc_byte_order = \"little\"", "crc_byte_order = \"big\"")(text);
+    replace("require_size_sensor_count = true", "require_size_sensor_count = false")(text);
+    replace("parity = \"none\"", "parity = \"even\"")(text);
+    replace("flow_control = \"none\"", "flow_control = \"hardware\"")(text);
+  });
+  const Config config = load_config(dir / kMain);
+  EXPECT_EQ(config.wire.sync, (std::vector<std::uint8_t>{0x7E}));
+  EXPECT_EQ(config.wire.crc, CrcKind::Crc32);
+  EXPECT_TRUE(config.wire.crc_big_endian);
+  EXPECT_FALSE(config.wire.require_size_sensor_count);
+  EXPECT_EQ(config.serial.parity, SerialParity::Even);
+  EXPECT_EQ(config.serial.flow_control, SerialFlowControl::Hardware);
+}
+
+TEST(Config, WireAndSerialAreValidated) {
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"WireMissing", erase_from_to("[wire]\n", "[serial]\n"), "wire", "missing"},
+      {"WireUnknownKey", replace("[wire]\n", "[wire]\nsink = 1\n"), "wire.sink", "unknown key"},
+      {"WireSyncEmpty", replace("sync = [0xA5, 0x5A]", "sync = []"), "wire.sync",
+       "must list 1 to 4 bytes, got 0"},
+      {"WireSyncTooLong", replace("sync = [0xA5, 0x5A]", "sync = [1, 2, 3, 4, 5]"), "wire.sync",
+       "must list 1 to 4 bytes, got 5"},
+      {"WireSyncByteTooLarge", replace("sync = [0xA5, 0x5A]", "sync = [0xA5, 256]"), "wire.sync[1]",
+       "must be in [0, 255], got 256"},
+      {"WireSyncByteNotInteger", replace("sync = [0xA5, 0x5A]", "sync = [\"A5\"]"), "wire.sync[0]",
+       "expected an integer, got a string"},
+      {"WireUnknownCrc", replace("crc = \"crc16-ccitt-false\"", "crc = \"crc8\""), "wire.crc",
+       "must be one of \"crc16-ccitt-false\", \"crc32\", \"none\", got \"crc8\""},
+      {"WireBadByteOrder", replace("crc_byte_order = \"little\"", "crc_byte_order = \"middle\""),
+       "wire.crc_byte_order", "must be one of"},
+      {"WireCountNotBoolean",
+       replace("require_size_sensor_count = true", "require_size_sensor_count = 1"),
+       "wire.require_size_sensor_count", "expected a boolean, got an integer"},
+      {"SerialMissing", truncate_at("[serial]\n"), "serial", "missing"},
+      {"SerialUnknownKey", replace("[serial]\n", "[serial]\nbaudrate = 9600\n"), "serial.baudrate",
+       "unknown key"},
+      {"SerialEmptyDevice", replace("device = \"/dev/ttyUSB0\"", "device = \"\""), "serial.device",
+       "must not be empty"},
+      {"SerialBaudZero", replace("baud = 921600", "baud = 0"), "serial.baud",
+       "must be in [50, 4000000], got 0"},
+      {"SerialBadParity", replace("parity = \"none\"", "parity = \"mark\""), "serial.parity",
+       "must be one of \"none\", \"odd\", \"even\", got \"mark\""},
+      {"SerialDataBits", replace("data_bits = 8", "data_bits = 9"), "serial.data_bits",
+       "must be in [5, 8], got 9"},
+      {"SerialStopBits", replace("stop_bits = 1", "stop_bits = 3"), "serial.stop_bits",
+       "must be in [1, 2], got 3"},
+      {"SerialBadFlow", replace("flow_control = \"none\"", "flow_control = \"xon\""),
+       "serial.flow_control", "must be one of"},
+      {"SerialBackoffZero", replace("reconnect_initial_ms = 50", "reconnect_initial_ms = 0"),
+       "serial.reconnect_initial_ms", "must be in [1, 60000], got 0"},
+      {"SerialBackoffMaxBelowInitial", replace("reconnect_max_ms = 2000", "reconnect_max_ms = 10"),
+       "serial.reconnect_max_ms", "must be >= reconnect_initial_ms (50), got 10"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
 TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
   const Config config = load_config(shipped_config());
   EXPECT_EQ(config.ring.capacity_frames, 4096u);
@@ -572,7 +665,7 @@ TEST(Config, RingAndMonitorAreValidated) {
       {"MonitorStatusPeriodZero", replace("status_period_s = 1.0", "status_period_s = 0"),
        "monitor.status_period_s", "must be in [0.01, 3600]"},
       {"MonitorPublishFramesNotBool", replace("publish_frames = true", "publish_frames = 1"),
-       "monitor.publish_frames", "expected true or false"},
+       "monitor.publish_frames", "expected a boolean"},
       {"MonitorPublishFramesMissing", replace("publish_frames = true\n", ""),
        "monitor.publish_frames", "missing"},
       {"MonitorUnknownKey", replace("[monitor]\n", "[monitor]\nthreads = 2\n"), "monitor.threads",

@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -76,6 +77,35 @@ struct SeedTissueStats {
   double nrmse_pct_sd = 0.0;
 };
 
+/// The check value that ends every insole frame (drivers/PROTOCOL.md).
+enum class CrcKind { None, Crc16CcittFalse, Crc32 };
+
+/// [wire]: the insole frame layout (drivers/PROTOCOL.md) where a bridge or vendor differs from
+/// the project's default framing.
+struct WireSettings {
+  std::vector<std::uint8_t> sync{0xA5, 0x5A};  ///< 1-4 bytes that start every frame
+  CrcKind crc = CrcKind::Crc16CcittFalse;
+  bool crc_big_endian = false;  ///< byte order of the CRC field (the header is little-endian)
+  /// The header's sensor count must equal the session format's count for its insole size;
+  /// false accepts any count from 1 to SensorFrame::kMaxSensors.
+  bool require_size_sensor_count = true;
+};
+
+enum class SerialParity { None, Odd, Even };
+enum class SerialFlowControl { None, Software, Hardware };
+
+/// [serial]: the serial link to an insole (or to a bridge) and how it reconnects.
+struct SerialSettings {
+  std::string device = "/dev/ttyUSB0";
+  unsigned baud = 921600;
+  SerialParity parity = SerialParity::None;
+  int data_bits = 8;  ///< 5-8
+  int stop_bits = 1;  ///< 1 or 2
+  SerialFlowControl flow_control = SerialFlowControl::None;
+  int reconnect_initial_ms = 50;  ///< first wait after a failure; doubles per failure
+  int reconnect_max_ms = 2000;    ///< the longest wait between attempts
+};
+
 /// [ring]: the lock-free ring between the driver thread and the detector thread.
 struct RingSettings {
   std::size_t capacity_frames = 4096;  ///< 20 s of two feet at 100 Hz
@@ -97,7 +127,9 @@ struct Config {
   SegmentationSettings segmentation;
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
-  FitBounds fit_bounds;  ///< [fit] of the main file: the tissue fit's parameter bounds
+  FitBounds fit_bounds;   ///< [fit] of the main file: the tissue fit's parameter bounds
+  WireSettings wire;      ///< [wire]: the insole frame layout
+  SerialSettings serial;  ///< [serial]: the serial driver
   RingSettings ring;
   MonitorSettings monitor;
 
