@@ -22,5 +22,6 @@ Config load_global_config(const GlobalOptions& global);
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);
+void add_spy_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace gaitmon::cli

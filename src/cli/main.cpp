@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
   add_simulate_command(app, global);
   add_segment_command(app, global);
   add_analyze_command(app, global);
+  add_spy_command(app, global);
 
   try {
     app.parse(argc, argv);
