@@ -106,9 +106,7 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
             0)
       << output;
   output.clear();
-  ASSERT_EQ(test::run_command("java -cp " + classpath + " Decode " + log.string() + " 2>/dev/null",
-                              &output),
-            0)
+  ASSERT_EQ(test::run_command("java -cp " + classpath + " Decode " + log.string(), &output), 0)
       << output;
   // lcm.spy's class discovery also prints what it could not load; only our lines count.
   std::vector<std::string> events;
