@@ -24,8 +24,8 @@ namespace gaitmon {
 ///
 /// Failures: a message LCM does not send (a full socket buffer, no route) is counted in
 /// failed_publishes() and otherwise ignored, so the publish functions never throw and never
-/// block longer than the send itself. Nothing is allocated per message once a thread has
-/// published each type once.
+/// block longer than the send itself. LcmPublisher itself allocates nothing per message once a
+/// thread has published each type once.
 class LcmPublisher final : public Publisher {
  public:
   /// Opens its own connection on settings.url.

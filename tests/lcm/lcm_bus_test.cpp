@@ -202,6 +202,7 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   ASSERT_TRUE(lua_listener.warm);
   publish_samples(publisher);
   read_messages(lua_listener, 5);
+  EXPECT_EQ(publisher.failed_publishes(), 0U);
 
   // The Lua client decoded each message with the lcm-gen Lua types.
   std::set<std::string> lua_channels;
