@@ -472,6 +472,63 @@ void read_tissue(const fs::path& path, const std::string& main_file, Config& con
   root.finish();
 }
 
+// [lcm]. The URL's provider is checked here so that a typo fails at load with the key; whether
+// LCM accepts the rest of it is known only when the publisher opens it.
+bool read_boolean(TableReader& table, std::string_view key) {
+  const toml::node& n = table.node(key);
+  const auto* b = n.as_boolean();
+  if (b == nullptr) table.fail(key, expected("a boolean", n));
+  return b->get();
+}
+
+std::string read_channel(TableReader& table, std::string_view key) {
+  // LCM_MAX_CHANNEL_NAME_LENGTH in lcm/lcm.h; LCM would refuse longer names on every publish.
+  constexpr std::size_t kMaxChannelLength = 63;
+  std::string name = table.string(key);
+  if (name.empty()) table.fail(key, "must name a channel");
+  if (name.size() > kMaxChannelLength) {
+    table.fail(
+        key, fmt::format("must be at most {} characters, got {}", kMaxChannelLength, name.size()));
+  }
+  if (std::any_of(name.begin(), name.end(),
+                  [](char c) { return std::isgraph(static_cast<unsigned char>(c)) == 0; })) {
+    table.fail(key, fmt::format("\"{}\" contains a space or a control character", name));
+  }
+  return name;
+}
+
+void read_lcm(TableReader table, LcmSettings& lcm) {
+  lcm.url = table.string("url");
+  const auto scheme_end = lcm.url.find("://");
+  const std::string provider =
+      scheme_end == std::string::npos ? std::string() : lcm.url.substr(0, scheme_end);
+  static const std::set<std::string, std::less<>> kProviders{"udpm", "mpudpm", "memq", "file",
+                                                             "tcpq"};
+  if (!kProviders.contains(provider)) {
+    table.fail("url", fmt::format("\"{}\" is not PROVIDER://...; providers are udpm, mpudpm, "
+                                  "memq, file and tcpq",
+                                  lcm.url));
+  }
+  lcm.raw_enabled = read_boolean(table, "raw_enabled");
+  TableReader channels = table.table("channels");
+  std::map<std::string, std::string> used;  // channel -> key
+  for (auto [key, name] : {std::pair<std::string_view, std::string*>{"frame", &lcm.channels.frame},
+                           {"step", &lcm.channels.step},
+                           {"fit", &lcm.channels.fit},
+                           {"status", &lcm.channels.status},
+                           {"raw", &lcm.channels.raw}}) {
+    *name = read_channel(channels, key);
+    const auto [it, fresh] = used.try_emplace(*name, std::string(key));
+    if (!fresh) {
+      channels.fail(key, fmt::format("\"{}\" is also the {} channel; each message type needs its "
+                                     "own channel",
+                                     *name, it->second));
+    }
+  }
+  channels.finish();
+  table.finish();
+}
+
 fs::path named_file(TableReader& root, std::string_view key, const fs::path& main_file) {
   const std::string name = root.string(key);
   if (name.empty()) root.fail(key, "must name a file");
@@ -598,6 +655,7 @@ Config load_config(const fs::path& main_file) {
   read_serial(root.table("serial"), config.serial);
   read_ring(root.table("ring"), config.ring);
   read_monitor(root.table("monitor"), config.monitor);
+  read_lcm(root.table("lcm"), config.lcm);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

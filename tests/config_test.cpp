@@ -685,5 +685,80 @@ TEST(Config, RingAndMonitorAreValidated) {
   }
 }
 
+TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
+  const LcmSettings lcm = load_config(shipped_config()).lcm;
+  EXPECT_EQ(lcm.url, "udpm://239.255.76.67:7667?ttl=0");
+  EXPECT_FALSE(lcm.raw_enabled);
+  EXPECT_EQ(lcm.channels.frame, "GAITMON_FRAME");
+  EXPECT_EQ(lcm.channels.step, "GAITMON_STEP");
+  EXPECT_EQ(lcm.channels.fit, "GAITMON_FIT");
+  EXPECT_EQ(lcm.channels.status, "GAITMON_STATUS");
+  EXPECT_EQ(lcm.channels.raw, "GAITMON_RAW");
+  // The struct's defaults are the shipped file's, for code that builds settings by hand.
+  const LcmSettings defaults;
+  EXPECT_EQ(defaults.url, lcm.url);
+  EXPECT_EQ(defaults.channels.fit, lcm.channels.fit);
+}
+
+TEST(Config, LcmSettingsAreRead) {
+  const fs::path dir = copy_config("LcmRead");
+  edit_file(dir / kMain, replace("[lcm]", "raw_enabled = false", "raw_enabled = true"));
+  edit_file(dir / kMain, replace("[lcm]", "?ttl=0\"", "?ttl=1\""));
+  edit_file(dir / kMain, replace("[lcm.channels]", "\"GAITMON_FIT\"", "\"LAB2.FIT\""));
+  const LcmSettings lcm = load_config(dir / kMain).lcm;
+  EXPECT_TRUE(lcm.raw_enabled);
+  EXPECT_EQ(lcm.url, "udpm://239.255.76.67:7667?ttl=1");
+  EXPECT_EQ(lcm.channels.fit, "LAB2.FIT");
+  EXPECT_EQ(lcm.channels.step, "GAITMON_STEP");
+}
+
+TEST(Config, LcmSettingsAreValidated) {
+  const std::string too_long(64, 'C');
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"LcmMissingTable", truncate_at("[lcm]\n"), "lcm", "missing"},
+      {"LcmMissingUrl", replace("[lcm]", "url = \"udpm://239.255.76.67:7667?ttl=0\"\n", ""),
+       "lcm.url", "missing"},
+      {"LcmUnknownKey", replace("[lcm]\n", "[lcm]\nttl = 0\n"), "lcm.ttl", "unknown key"},
+      {"LcmUrlNoProvider",
+       replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "\"239.255.76.67\""), "lcm.url",
+       "is not PROVIDER://"},
+      {"LcmUrlUnknownProvider", replace("[lcm]", "\"udpm://", "\"udp://"), "lcm.url",
+       "providers are udpm"},
+      {"LcmUrlNotString", replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "7667"),
+       "lcm.url", "expected a string, got an integer"},
+      {"LcmRawNotBoolean", replace("[lcm]", "raw_enabled = false", "raw_enabled = \"no\""),
+       "lcm.raw_enabled", "expected a boolean, got a string"},
+      {"LcmChannelMissing", replace("[lcm.channels]", "status = \"GAITMON_STATUS\"", ""),
+       "lcm.channels.status", "missing"},
+      {"LcmChannelUnknown", replace("[lcm.channels]\n", "[lcm.channels]\nevents = \"E\"\n"),
+       "lcm.channels.events", "unknown key"},
+      {"LcmChannelEmpty", replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"\""),
+       "lcm.channels.step", "must name a channel"},
+      {"LcmChannelSpace", replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"GAITMON STEP\""),
+       "lcm.channels.step", "space or a control character"},
+      {"LcmChannelTooLong", replace("[lcm.channels]", "\"GAITMON_RAW\"", "\"" + too_long + "\""),
+       "lcm.channels.raw", "at most 63 characters, got 64"},
+      {"LcmChannelTwice", replace("[lcm.channels]", "\"GAITMON_STATUS\"", "\"GAITMON_FIT\""),
+       "lcm.channels.status", "is also the fit channel"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon

@@ -119,6 +119,22 @@ struct MonitorSettings {
   bool publish_frames = true;    ///< per-frame region reports (GAITMON_FRAME)
 };
 
+/// [lcm]: where the live monitor publishes (include/gaitmon/lcm/*.lcm defines the messages).
+struct LcmChannels {
+  std::string frame = "GAITMON_FRAME";    ///< FrameReport, per foot and frame
+  std::string step = "GAITMON_STEP";      ///< StepEvent
+  std::string fit = "GAITMON_FIT";        ///< FitReport, per foot-step
+  std::string status = "GAITMON_STATUS";  ///< StatusReport, 1 Hz
+  std::string raw = "GAITMON_RAW";        ///< RawFrameReport, only when raw_enabled
+};
+
+struct LcmSettings {
+  /// ttl=0 keeps the multicast on this machine, so the default needs no network.
+  std::string url = "udpm://239.255.76.67:7667?ttl=0";
+  LcmChannels channels;
+  bool raw_enabled = false;  ///< GAITMON_RAW repeats what a recording holds: off unless asked
+};
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -132,6 +148,7 @@ struct Config {
   SerialSettings serial;  ///< [serial]: the serial driver
   RingSettings ring;
   MonitorSettings monitor;
+  LcmSettings lcm;  ///< [lcm] of the main file
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {

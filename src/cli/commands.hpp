@@ -23,5 +23,6 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);
 void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
+void add_spy_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace gaitmon::cli
