@@ -24,5 +24,7 @@ void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);
 void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
 void add_spy_command(CLI::App& app, const GlobalOptions& global);
+void add_run_command(CLI::App& app, const GlobalOptions& global);
+void add_replay_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace gaitmon::cli

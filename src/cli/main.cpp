@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   add_analyze_command(app, global);
   add_fake_insole_command(app, global);
   add_spy_command(app, global);
+  add_run_command(app, global);
+  add_replay_command(app, global);
 
   try {
     app.parse(argc, argv);
