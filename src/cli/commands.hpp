@@ -26,5 +26,6 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
 void add_spy_command(CLI::App& app, const GlobalOptions& global);
 void add_run_command(CLI::App& app, const GlobalOptions& global);
 void add_replay_command(CLI::App& app, const GlobalOptions& global);
+void add_record_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace gaitmon::cli

@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   add_spy_command(app, global);
   add_run_command(app, global);
   add_replay_command(app, global);
+  add_record_command(app, global);
 
   try {
     app.parse(argc, argv);
