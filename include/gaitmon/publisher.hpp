@@ -84,7 +84,7 @@ struct StatusReport {
   std::uint64_t step_backlog = 0;
   std::uint64_t step_drops = 0;
   std::uint64_t fits_published = 0;
-  std::uint64_t fits_failed = 0;
+  std::uint64_t fits_failed = 0;  ///< published fits with a region (or the step) fit_failed
   double fit_latency_p50_ms = 0.0;
   double fit_latency_p99_ms = 0.0;
 };

@@ -97,6 +97,8 @@ json to_json(const StatusReport& s) {
           {"reconnects", s.reconnects},
           {"ring_depth", s.ring_depth},
           {"ring_drops", s.ring_drops},
+          {"frames_processed", s.frames_processed},
+          {"frames_rejected", s.frames_rejected},
           {"steps_detected", s.steps_detected},
           {"step_backlog", s.step_backlog},
           {"step_drops", s.step_drops},

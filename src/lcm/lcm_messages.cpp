@@ -100,6 +100,8 @@ void to_lcm(const StatusReport& report, status_t& message) {
   message.reconnects = counter(report.reconnects);
   message.ring_depth = counter(report.ring_depth);
   message.ring_drops = counter(report.ring_drops);
+  message.frames_processed = counter(report.frames_processed);
+  message.frames_rejected = counter(report.frames_rejected);
   message.steps_detected = counter(report.steps_detected);
   message.step_backlog = counter(report.step_backlog);
   message.step_drops = counter(report.step_drops);
@@ -208,6 +210,8 @@ std::optional<StatusReport> from_lcm(const status_t& message) {
                   counter_of(message.reconnects, report.reconnects) &&
                   counter_of(message.ring_depth, report.ring_depth) &&
                   counter_of(message.ring_drops, report.ring_drops) &&
+                  counter_of(message.frames_processed, report.frames_processed) &&
+                  counter_of(message.frames_rejected, report.frames_rejected) &&
                   counter_of(message.steps_detected, report.steps_detected) &&
                   counter_of(message.step_backlog, report.step_backlog) &&
                   counter_of(message.step_drops, report.step_drops) &&

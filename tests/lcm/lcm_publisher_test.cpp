@@ -171,6 +171,8 @@ TEST_F(LcmPublisherMemq, StatusReportArrivesAsStatusT) {
   EXPECT_EQ(m.reconnects, 2);
   EXPECT_EQ(m.ring_depth, 11);
   EXPECT_EQ(m.ring_drops, 13);
+  EXPECT_EQ(m.frames_processed, 98700);
+  EXPECT_EQ(m.frames_rejected, 31);
   EXPECT_EQ(m.steps_detected, 17);
   EXPECT_EQ(m.step_backlog, 19);
   EXPECT_EQ(m.step_drops, 23);

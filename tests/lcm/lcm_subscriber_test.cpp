@@ -118,6 +118,8 @@ void expect_same(const StatusReport& a, const StatusReport& b) {
   EXPECT_EQ(a.reconnects, b.reconnects);
   EXPECT_EQ(a.ring_depth, b.ring_depth);
   EXPECT_EQ(a.ring_drops, b.ring_drops);
+  EXPECT_EQ(a.frames_processed, b.frames_processed);
+  EXPECT_EQ(a.frames_rejected, b.frames_rejected);
   EXPECT_EQ(a.steps_detected, b.steps_detected);
   EXPECT_EQ(a.step_backlog, b.step_backlog);
   EXPECT_EQ(a.step_drops, b.step_drops);

@@ -86,6 +86,8 @@ inline StatusReport sample_status() {
   s.reconnects = 2;
   s.ring_depth = 11;
   s.ring_drops = 13;
+  s.frames_processed = 98700;
+  s.frames_rejected = 31;
   s.steps_detected = 17;
   s.step_backlog = 19;
   s.step_drops = 23;
