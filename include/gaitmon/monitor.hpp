@@ -48,8 +48,8 @@
 // Shutdown, by stop(): (1) stop accepting: offer() and offer_wait() return false from now on;
 // (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
 // recording (its last steps are finalised and queued) and exits; (3) the workers finish every
-// queued step and publish it; (4) the final status is published, with connection "finished"
-// unless the driver callback says otherwise; (5) every thread is joined. The caller must have
+// queued step and publish it; (4) the final status is published, its connection "finished" (the
+// driver callback fills the other driver fields); (5) every thread is joined. The caller must have
 // stopped its driver thread first (offer() may race with stop(), but a frame offered after the
 // drain would be lost); close() alone does step (1), from any thread, to release a driver blocked
 // in offer_wait().
