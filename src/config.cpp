@@ -474,6 +474,63 @@ void read_tissue(const fs::path& path, const std::string& main_file, Config& con
   root.finish();
 }
 
+// [lcm]. The URL's provider is checked here so that a typo fails at load with the key; whether
+// LCM accepts the rest of it is known only when the publisher opens it.
+bool read_boolean(TableReader& table, std::string_view key) {
+  const toml::node& n = table.node(key);
+  const auto* b = n.as_boolean();
+  if (b == nullptr) table.fail(key, expected("a boolean", n));
+  return b->get();
+}
+
+std::string read_channel(TableReader& table, std::string_view key) {
+  // LCM_MAX_CHANNEL_NAME_LENGTH in lcm/lcm.h; LCM would refuse longer names on every publish.
+  constexpr std::size_t kMaxChannelLength = 63;
+  std::string name = table.string(key);
+  if (name.empty()) table.fail(key, "must name a channel");
+  if (name.size() > kMaxChannelLength) {
+    table.fail(
+        key, fmt::format("must be at most {} characters, got {}", kMaxChannelLength, name.size()));
+  }
+  if (std::any_of(name.begin(), name.end(),
+                  [](char c) { return std::isgraph(static_cast<unsigned char>(c)) == 0; })) {
+    table.fail(key, fmt::format("\"{}\" contains a space or a control character", name));
+  }
+  return name;
+}
+
+void read_lcm(TableReader table, LcmSettings& lcm) {
+  lcm.url = table.string("url");
+  const auto scheme_end = lcm.url.find("://");
+  const std::string provider =
+      scheme_end == std::string::npos ? std::string() : lcm.url.substr(0, scheme_end);
+  static const std::set<std::string, std::less<>> kProviders{"udpm", "mpudpm", "memq", "file",
+                                                             "tcpq"};
+  if (!kProviders.contains(provider)) {
+    table.fail("url", fmt::format("\"{}\" is not PROVIDER://...; providers are udpm, mpudpm, "
+                                  "memq, file and tcpq",
+                                  lcm.url));
+  }
+  lcm.raw_enabled = read_boolean(table, "raw_enabled");
+  TableReader channels = table.table("channels");
+  std::map<std::string, std::string> used;  // channel -> key
+  for (auto [key, name] : {std::pair<std::string_view, std::string*>{"frame", &lcm.channels.frame},
+                           {"step", &lcm.channels.step},
+                           {"fit", &lcm.channels.fit},
+                           {"status", &lcm.channels.status},
+                           {"raw", &lcm.channels.raw}}) {
+    *name = read_channel(channels, key);
+    const auto [it, fresh] = used.try_emplace(*name, std::string(key));
+    if (!fresh) {
+      channels.fail(key, fmt::format("\"{}\" is also the {} channel; each message type needs its "
+                                     "own channel",
+                                     *name, it->second));
+    }
+  }
+  channels.finish();
+  table.finish();
+}
+
 fs::path named_file(TableReader& root, std::string_view key, const fs::path& main_file) {
   const std::string name = root.string(key);
   if (name.empty()) root.fail(key, "must name a file");
@@ -499,6 +556,104 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
   table.finish();
 }
 
+// A one-of-several string setting; the reason lists the choices.
+template <typename T, std::size_t N>
+T choice(TableReader& table, std::string_view key,
+         const std::array<std::pair<std::string_view, T>, N>& choices) {
+  const std::string text = table.string(key);
+  std::string names;
+  for (const auto& [name, value] : choices) {
+    if (name == text) return value;
+    names += fmt::format("{}\"{}\"", names.empty() ? "" : ", ", name);
+  }
+  table.fail(key, fmt::format("must be one of {}, got \"{}\"", names, text));
+}
+
+bool boolean(TableReader& table, std::string_view key) {
+  const toml::node& n = table.node(key);
+  const auto* b = n.as_boolean();
+  if (b == nullptr) table.fail(key, expected("a boolean", n));
+  return b->get();
+}
+
+void read_wire(TableReader table, WireSettings& wire) {
+  const toml::array& sync = table.array("sync");
+  // One to four bytes: enough for any framing seen in practice, and a fixed bound lets the
+  // decoder keep the pattern in place.
+  if (sync.empty() || sync.size() > 4) {
+    table.fail("sync", fmt::format("must list 1 to 4 bytes, got {}", sync.size()));
+  }
+  wire.sync.clear();
+  for (std::size_t i = 0; i < sync.size(); ++i) {
+    const toml::node& element = *sync.get(i);
+    const std::string key = fmt::format("{}[{}]", table.key_path("sync"), i);
+    const auto* value = element.as_integer();
+    if (value == nullptr) fail_element(table.file(), key, element, expected("an integer", element));
+    if (value->get() < 0 || value->get() > 255) {
+      fail_element(table.file(), key, element,
+                   fmt::format("must be in [0, 255], got {}", value->get()));
+    }
+    wire.sync.push_back(static_cast<std::uint8_t>(value->get()));
+  }
+  wire.crc =
+      choice(table, "crc",
+             std::array{std::pair{std::string_view("crc16-ccitt-false"), CrcKind::Crc16CcittFalse},
+                        std::pair{std::string_view("crc32"), CrcKind::Crc32},
+                        std::pair{std::string_view("none"), CrcKind::None}});
+  wire.crc_big_endian = choice(table, "crc_byte_order",
+                               std::array{std::pair{std::string_view("little"), false},
+                                          std::pair{std::string_view("big"), true}});
+  wire.require_size_sensor_count = boolean(table, "require_size_sensor_count");
+  table.finish();
+}
+
+void read_serial(TableReader table, SerialSettings& serial) {
+  serial.device = table.string("device");
+  if (serial.device.empty()) table.fail("device", "must not be empty");
+  const std::int64_t baud = table.integer("baud");
+  if (baud < 50 || baud > 4000000) {
+    table.fail("baud", fmt::format("must be in [50, 4000000], got {}", baud));
+  }
+  serial.baud = static_cast<unsigned>(baud);
+  serial.parity = choice(table, "parity",
+                         std::array{std::pair{std::string_view("none"), SerialParity::None},
+                                    std::pair{std::string_view("odd"), SerialParity::Odd},
+                                    std::pair{std::string_view("even"), SerialParity::Even}});
+  serial.data_bits = integer_in(table, "data_bits", 5, 8);
+  serial.stop_bits = integer_in(table, "stop_bits", 1, 2);
+  serial.flow_control =
+      choice(table, "flow_control",
+             std::array{std::pair{std::string_view("none"), SerialFlowControl::None},
+                        std::pair{std::string_view("software"), SerialFlowControl::Software},
+                        std::pair{std::string_view("hardware"), SerialFlowControl::Hardware}});
+  serial.reconnect_initial_ms = integer_in(table, "reconnect_initial_ms", 1, 60000);
+  serial.reconnect_max_ms = integer_in(table, "reconnect_max_ms", 1, 600000);
+  if (serial.reconnect_max_ms < serial.reconnect_initial_ms) {
+    table.fail("reconnect_max_ms",
+               fmt::format("must be >= reconnect_initial_ms ({}), got {}",
+                           serial.reconnect_initial_ms, serial.reconnect_max_ms));
+  }
+  table.finish();
+}
+
+void read_ring(TableReader table, RingSettings& ring) {
+  // 2^24 frames of 184 bytes would already be 3 GB.
+  ring.capacity_frames = static_cast<std::size_t>(integer_in(table, "capacity_frames", 2, 1 << 24));
+  table.finish();
+}
+
+void read_monitor(TableReader table, MonitorSettings& monitor) {
+  monitor.workers = integer_in(table, "workers", 1, 64);
+  monitor.max_step_backlog = integer_in(table, "max_step_backlog", 1, 100000);
+  monitor.status_period_s = table.number("status_period_s");
+  if (!(monitor.status_period_s >= 0.01 && monitor.status_period_s <= 3600.0)) {
+    table.fail("status_period_s",
+               fmt::format("must be in [0.01, 3600], got {}", monitor.status_period_s));
+  }
+  monitor.publish_frames = boolean(table, "publish_frames");
+  table.finish();
+}
+
 }  // namespace
 
 Config load_config(const fs::path& main_file) {
@@ -518,6 +673,11 @@ Config load_config(const fs::path& main_file) {
   read_segmentation(root.table("segmentation"), config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
   read_model(root.table("model"), file, config.model);
+  read_wire(root.table("wire"), config.wire);
+  read_serial(root.table("serial"), config.serial);
+  read_ring(root.table("ring"), config.ring);
+  read_monitor(root.table("monitor"), config.monitor);
+  read_lcm(root.table("lcm"), config.lcm);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

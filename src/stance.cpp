@@ -5,6 +5,43 @@
 
 namespace gaitmon {
 
+std::array<RegionSample, kRegionCount> measure_frame(
+    std::span<const std::uint8_t> raw, std::span<const double> zero, double threshold_bits,
+    const InsoleLayout& layout, const Calibration& calibration, bool first_instant,
+    ContactEllipseCache* cache, FrameScratch& scratch) {
+  const std::size_t sensors = layout.sensor_count();
+  if (raw.size() != sensors || zero.size() != sensors) {
+    throw std::invalid_argument("measure_frame: a frame of " + std::to_string(raw.size()) +
+                                " sensors with a zero of " + std::to_string(zero.size()) +
+                                ", the layout has " + std::to_string(sensors));
+  }
+  const double sensor_area_mm2 = layout.geometry().area_mm2();
+  const double newtons_per_bit = calibration.newtons_per_bit(sensor_area_mm2);
+  const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
+  scratch.zeroed.resize(sensors);
+  scratch.cells.reserve(sensors);
+  zero_and_threshold(raw, zero, threshold_bits, scratch.zeroed);
+  std::array<RegionSample, kRegionCount> samples{};
+  for (Region region : kRegions) {
+    RegionSample& sample = samples[index_of(region)];
+    double bits = 0.0;
+    scratch.cells.clear();
+    for (std::size_t i : layout.region_sensors(region)) {
+      if (scratch.zeroed[i] <= 0.0) continue;
+      bits += scratch.zeroed[i];
+      const Sensor& s = layout.sensor(i);
+      scratch.cells.push_back({s.grid_x_mm, s.grid_y_mm, s.row == layout.outermost_heel_row()});
+    }
+    sample.force_n = bits * newtons_per_bit;
+    sample.active_sensors = static_cast<int>(scratch.cells.size());
+    sample.sensor_area_mm2 = static_cast<double>(scratch.cells.size()) * sensor_area_mm2;
+    sample.ellipse = cache != nullptr
+                         ? cache->fit(scratch.cells, cell, region, first_instant)
+                         : fit_contact_ellipse(scratch.cells, cell, region, first_instant);
+  }
+  return samples;
+}
+
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             const Calibration& calibration, ContactEllipseCache* cache) {
   const std::size_t sensors = layout.sensor_count();
@@ -13,17 +50,11 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                                 std::to_string(step.sensor_zero_bits.size()) +
                                 " sensors, the layout " + std::to_string(sensors));
   }
-  const double sensor_area_mm2 = layout.geometry().area_mm2();
-  const double newtons_per_bit = calibration.newtons_per_bit(sensor_area_mm2);
-  const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
-
   StanceSeries series;
   series.t_s.reserve(step.stance.size());
   series.frames.reserve(step.stance.size());
   series.total_force_n.reserve(step.stance.size());
-  std::vector<double> zeroed(sensors);
-  std::vector<ActiveCell> cells;
-  cells.reserve(sensors);
+  FrameScratch scratch;
   for (std::size_t f = 0; f < step.stance.size(); ++f) {
     const Frame& frame = step.stance[f];
     if (frame.bits.size() != sensors) {
@@ -31,26 +62,11 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                                   std::to_string(frame.bits.size()) + " sensors, the layout " +
                                   std::to_string(sensors));
     }
-    zero_and_threshold(frame.bits, step.sensor_zero_bits, step.adaptive_threshold_bits, zeroed);
-    std::array<RegionSample, kRegionCount> samples{};
+    const auto samples =
+        measure_frame(frame.bits, step.sensor_zero_bits, step.adaptive_threshold_bits, layout,
+                      calibration, f == 0, cache, scratch);
     double total = 0.0;
-    for (Region region : kRegions) {
-      RegionSample& sample = samples[index_of(region)];
-      double bits = 0.0;
-      cells.clear();
-      for (std::size_t i : layout.region_sensors(region)) {
-        if (zeroed[i] <= 0.0) continue;
-        bits += zeroed[i];
-        const Sensor& s = layout.sensor(i);
-        cells.push_back({s.grid_x_mm, s.grid_y_mm, s.row == layout.outermost_heel_row()});
-      }
-      sample.force_n = bits * newtons_per_bit;
-      sample.active_sensors = static_cast<int>(cells.size());
-      sample.sensor_area_mm2 = static_cast<double>(cells.size()) * sensor_area_mm2;
-      sample.ellipse = cache != nullptr ? cache->fit(cells, cell, region, f == 0)
-                                        : fit_contact_ellipse(cells, cell, region, f == 0);
-      total += sample.force_n;
-    }
+    for (const RegionSample& sample : samples) total += sample.force_n;
     series.t_s.push_back(frame.t_s);
     series.frames.push_back(samples);
     series.total_force_n.push_back(total);

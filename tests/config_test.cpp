@@ -542,6 +542,224 @@ TEST(Config, FitBoundsAreValidated) {
   }
 }
 
+TEST(Config, WireAndSerialDefaults) {
+  const Config config = load_config(shipped_config());
+  EXPECT_EQ(config.wire.sync, (std::vector<std::uint8_t>{0xA5, 0x5A}));
+  EXPECT_EQ(config.wire.crc, CrcKind::Crc16CcittFalse);
+  EXPECT_FALSE(config.wire.crc_big_endian);
+  EXPECT_TRUE(config.wire.require_size_sensor_count);
+  EXPECT_EQ(config.serial.device, "/dev/ttyUSB0");
+  EXPECT_EQ(config.serial.baud, 921600U);
+  EXPECT_EQ(config.serial.parity, SerialParity::None);
+  EXPECT_EQ(config.serial.data_bits, 8);
+  EXPECT_EQ(config.serial.stop_bits, 1);
+  EXPECT_EQ(config.serial.flow_control, SerialFlowControl::None);
+  EXPECT_EQ(config.serial.reconnect_initial_ms, 50);
+  EXPECT_EQ(config.serial.reconnect_max_ms, 2000);
+}
+
+TEST(Config, WireAndSerialAcceptTheirAlternatives) {
+  const fs::path dir = copy_config("WireAlternatives");
+  edit_file(dir / kMain, [](std::string& text) {
+    replace("sync = [0xA5, 0x5A]", "sync = [0x7E]")(text);
+    replace("crc = \"crc16-ccitt-false\"", "crc = \"crc32\"")(text);
+    replace("crc_byte_order = \"little\"", "crc_byte_order = \"big\"")(text);
+    replace("require_size_sensor_count = true", "require_size_sensor_count = false")(text);
+    replace("parity = \"none\"", "parity = \"even\"")(text);
+    replace("flow_control = \"none\"", "flow_control = \"hardware\"")(text);
+  });
+  const Config config = load_config(dir / kMain);
+  EXPECT_EQ(config.wire.sync, (std::vector<std::uint8_t>{0x7E}));
+  EXPECT_EQ(config.wire.crc, CrcKind::Crc32);
+  EXPECT_TRUE(config.wire.crc_big_endian);
+  EXPECT_FALSE(config.wire.require_size_sensor_count);
+  EXPECT_EQ(config.serial.parity, SerialParity::Even);
+  EXPECT_EQ(config.serial.flow_control, SerialFlowControl::Hardware);
+}
+
+TEST(Config, WireAndSerialAreValidated) {
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"WireMissing", erase_from_to("[wire]\n", "[serial]\n"), "wire", "missing"},
+      {"WireUnknownKey", replace("[wire]\n", "[wire]\nsink = 1\n"), "wire.sink", "unknown key"},
+      {"WireSyncEmpty", replace("sync = [0xA5, 0x5A]", "sync = []"), "wire.sync",
+       "must list 1 to 4 bytes, got 0"},
+      {"WireSyncTooLong", replace("sync = [0xA5, 0x5A]", "sync = [1, 2, 3, 4, 5]"), "wire.sync",
+       "must list 1 to 4 bytes, got 5"},
+      {"WireSyncByteTooLarge", replace("sync = [0xA5, 0x5A]", "sync = [0xA5, 256]"), "wire.sync[1]",
+       "must be in [0, 255], got 256"},
+      {"WireSyncByteNotInteger", replace("sync = [0xA5, 0x5A]", "sync = [\"A5\"]"), "wire.sync[0]",
+       "expected an integer, got a string"},
+      {"WireUnknownCrc", replace("crc = \"crc16-ccitt-false\"", "crc = \"crc8\""), "wire.crc",
+       "must be one of \"crc16-ccitt-false\", \"crc32\", \"none\", got \"crc8\""},
+      {"WireBadByteOrder", replace("crc_byte_order = \"little\"", "crc_byte_order = \"middle\""),
+       "wire.crc_byte_order", "must be one of"},
+      {"WireCountNotBoolean",
+       replace("require_size_sensor_count = true", "require_size_sensor_count = 1"),
+       "wire.require_size_sensor_count", "expected a boolean, got an integer"},
+      {"SerialMissing", truncate_at("[serial]\n"), "serial", "missing"},
+      {"SerialUnknownKey", replace("[serial]\n", "[serial]\nbaudrate = 9600\n"), "serial.baudrate",
+       "unknown key"},
+      {"SerialEmptyDevice", replace("device = \"/dev/ttyUSB0\"", "device = \"\""), "serial.device",
+       "must not be empty"},
+      {"SerialBaudZero", replace("baud = 921600", "baud = 0"), "serial.baud",
+       "must be in [50, 4000000], got 0"},
+      {"SerialBadParity", replace("parity = \"none\"", "parity = \"mark\""), "serial.parity",
+       "must be one of \"none\", \"odd\", \"even\", got \"mark\""},
+      {"SerialDataBits", replace("data_bits = 8", "data_bits = 9"), "serial.data_bits",
+       "must be in [5, 8], got 9"},
+      {"SerialStopBits", replace("stop_bits = 1", "stop_bits = 3"), "serial.stop_bits",
+       "must be in [1, 2], got 3"},
+      {"SerialBadFlow", replace("flow_control = \"none\"", "flow_control = \"xon\""),
+       "serial.flow_control", "must be one of"},
+      {"SerialBackoffZero", replace("reconnect_initial_ms = 50", "reconnect_initial_ms = 0"),
+       "serial.reconnect_initial_ms", "must be in [1, 60000], got 0"},
+      {"SerialBackoffMaxBelowInitial", replace("reconnect_max_ms = 2000", "reconnect_max_ms = 10"),
+       "serial.reconnect_max_ms", "must be >= reconnect_initial_ms (50), got 10"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
+TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
+  const Config config = load_config(shipped_config());
+  EXPECT_EQ(config.ring.capacity_frames, 4096u);
+  EXPECT_EQ(config.monitor.workers, 2);
+  EXPECT_EQ(config.monitor.max_step_backlog, 32);
+  EXPECT_DOUBLE_EQ(config.monitor.status_period_s, 1.0);
+  EXPECT_TRUE(config.monitor.publish_frames);
+}
+
+TEST(Config, RingAndMonitorAreValidated) {
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"RingMissing", erase_from_to("[ring]", "[monitor]"), "ring", "missing"},
+      {"RingCapacityOne", replace("capacity_frames = 4096", "capacity_frames = 1"),
+       "ring.capacity_frames", "must be in [2, 16777216]"},
+      {"RingCapacityFloat", replace("capacity_frames = 4096", "capacity_frames = 4096.0"),
+       "ring.capacity_frames", "expected an integer"},
+      {"RingUnknownKey", replace("[ring]\n", "[ring]\npolicy = \"drop\"\n"), "ring.policy",
+       "unknown key"},
+      {"MonitorWorkersZero", replace("workers = 2", "workers = 0"), "monitor.workers",
+       "must be in [1, 64]"},
+      {"MonitorBacklogZero", replace("max_step_backlog = 32", "max_step_backlog = 0"),
+       "monitor.max_step_backlog", "must be in [1, 100000]"},
+      {"MonitorStatusPeriodZero", replace("status_period_s = 1.0", "status_period_s = 0"),
+       "monitor.status_period_s", "must be in [0.01, 3600]"},
+      {"MonitorPublishFramesNotBool", replace("publish_frames = true", "publish_frames = 1"),
+       "monitor.publish_frames", "expected a boolean"},
+      {"MonitorPublishFramesMissing", replace("publish_frames = true\n", ""),
+       "monitor.publish_frames", "missing"},
+      {"MonitorUnknownKey", replace("[monitor]\n", "[monitor]\nthreads = 2\n"), "monitor.threads",
+       "unknown key"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
+TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
+  const LcmSettings lcm = load_config(shipped_config()).lcm;
+  EXPECT_EQ(lcm.url, "udpm://239.255.76.67:7667?ttl=0");
+  EXPECT_FALSE(lcm.raw_enabled);
+  EXPECT_EQ(lcm.channels.frame, "GAITMON_FRAME");
+  EXPECT_EQ(lcm.channels.step, "GAITMON_STEP");
+  EXPECT_EQ(lcm.channels.fit, "GAITMON_FIT");
+  EXPECT_EQ(lcm.channels.status, "GAITMON_STATUS");
+  EXPECT_EQ(lcm.channels.raw, "GAITMON_RAW");
+  // The struct's defaults are the shipped file's, for code that builds settings by hand.
+  const LcmSettings defaults;
+  EXPECT_EQ(defaults.url, lcm.url);
+  EXPECT_EQ(defaults.channels.fit, lcm.channels.fit);
+}
+
+TEST(Config, LcmSettingsAreRead) {
+  const fs::path dir = copy_config("LcmRead");
+  edit_file(dir / kMain, replace("[lcm]", "raw_enabled = false", "raw_enabled = true"));
+  edit_file(dir / kMain, replace("[lcm]", "?ttl=0\"", "?ttl=1\""));
+  edit_file(dir / kMain, replace("[lcm.channels]", "\"GAITMON_FIT\"", "\"LAB2.FIT\""));
+  const LcmSettings lcm = load_config(dir / kMain).lcm;
+  EXPECT_TRUE(lcm.raw_enabled);
+  EXPECT_EQ(lcm.url, "udpm://239.255.76.67:7667?ttl=1");
+  EXPECT_EQ(lcm.channels.fit, "LAB2.FIT");
+  EXPECT_EQ(lcm.channels.step, "GAITMON_STEP");
+}
+
+TEST(Config, LcmSettingsAreValidated) {
+  const std::string too_long(64, 'C');
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"LcmMissingTable", truncate_at("[lcm]\n"), "lcm", "missing"},
+      {"LcmMissingUrl", replace("[lcm]", "url = \"udpm://239.255.76.67:7667?ttl=0\"\n", ""),
+       "lcm.url", "missing"},
+      {"LcmUnknownKey", replace("[lcm]\n", "[lcm]\nttl = 0\n"), "lcm.ttl", "unknown key"},
+      {"LcmUrlNoProvider",
+       replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "\"239.255.76.67\""), "lcm.url",
+       "is not PROVIDER://"},
+      {"LcmUrlUnknownProvider", replace("[lcm]", "\"udpm://", "\"udp://"), "lcm.url",
+       "providers are udpm"},
+      {"LcmUrlNotString", replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "7667"),
+       "lcm.url", "expected a string, got an integer"},
+      {"LcmRawNotBoolean", replace("[lcm]", "raw_enabled = false", "raw_enabled = \"no\""),
+       "lcm.raw_enabled", "expected a boolean, got a string"},
+      {"LcmChannelMissing", replace("[lcm.channels]", "status = \"GAITMON_STATUS\"", ""),
+       "lcm.channels.status", "missing"},
+      {"LcmChannelUnknown", replace("[lcm.channels]\n", "[lcm.channels]\nevents = \"E\"\n"),
+       "lcm.channels.events", "unknown key"},
+      {"LcmChannelEmpty", replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"\""),
+       "lcm.channels.step", "must name a channel"},
+      {"LcmChannelSpace", replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"GAITMON STEP\""),
+       "lcm.channels.step", "space or a control character"},
+      {"LcmChannelTooLong", replace("[lcm.channels]", "\"GAITMON_RAW\"", "\"" + too_long + "\""),
+       "lcm.channels.raw", "at most 63 characters, got 64"},
+      {"LcmChannelTwice", replace("[lcm.channels]", "\"GAITMON_STATUS\"", "\"GAITMON_FIT\""),
+       "lcm.channels.status", "is also the fit channel"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon
 

@@ -7,6 +7,8 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -82,6 +84,64 @@ struct ModelSettings {
   std::vector<std::string> effects;
 };
 
+/// The check value that ends every insole frame (drivers/PROTOCOL.md).
+enum class CrcKind { None, Crc16CcittFalse, Crc32 };
+
+/// [wire]: the insole frame layout (drivers/PROTOCOL.md) where a bridge or vendor differs from
+/// the project's default framing.
+struct WireSettings {
+  std::vector<std::uint8_t> sync{0xA5, 0x5A};  ///< 1-4 bytes that start every frame
+  CrcKind crc = CrcKind::Crc16CcittFalse;
+  bool crc_big_endian = false;  ///< byte order of the CRC field (the header is little-endian)
+  /// The header's sensor count must equal the session format's count for its insole size;
+  /// false accepts any count from 1 to SensorFrame::kMaxSensors.
+  bool require_size_sensor_count = true;
+};
+
+enum class SerialParity { None, Odd, Even };
+enum class SerialFlowControl { None, Software, Hardware };
+
+/// [serial]: the serial link to an insole (or to a bridge) and how it reconnects.
+struct SerialSettings {
+  std::string device = "/dev/ttyUSB0";
+  unsigned baud = 921600;
+  SerialParity parity = SerialParity::None;
+  int data_bits = 8;  ///< 5-8
+  int stop_bits = 1;  ///< 1 or 2
+  SerialFlowControl flow_control = SerialFlowControl::None;
+  int reconnect_initial_ms = 50;  ///< first wait after a failure; doubles per failure
+  int reconnect_max_ms = 2000;    ///< the longest wait between attempts
+};
+
+/// [ring]: the lock-free ring between the driver thread and the detector thread.
+struct RingSettings {
+  std::size_t capacity_frames = 4096;  ///< 20 s of two feet at 100 Hz
+};
+
+/// [monitor]: the live monitor's detector thread, step workers and status.
+struct MonitorSettings {
+  int workers = 2;               ///< threads fitting steps
+  int max_step_backlog = 32;     ///< finalised steps waiting for a worker; beyond, oldest dropped
+  double status_period_s = 1.0;  ///< between two status reports
+  bool publish_frames = true;    ///< per-frame region reports (GAITMON_FRAME)
+};
+
+/// [lcm]: where the live monitor publishes (include/gaitmon/lcm/*.lcm defines the messages).
+struct LcmChannels {
+  std::string frame = "GAITMON_FRAME";    ///< FrameReport, per foot and frame
+  std::string step = "GAITMON_STEP";      ///< StepEvent
+  std::string fit = "GAITMON_FIT";        ///< FitReport, per foot-step
+  std::string status = "GAITMON_STATUS";  ///< StatusReport, 1 Hz
+  std::string raw = "GAITMON_RAW";        ///< RawFrameReport, only when raw_enabled
+};
+
+struct LcmSettings {
+  /// ttl=0 keeps the multicast on this machine, so the default needs no network.
+  std::string url = "udpm://239.255.76.67:7667?ttl=0";
+  LcmChannels channels;
+  bool raw_enabled = false;  ///< GAITMON_RAW repeats what a recording holds: off unless asked
+};
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -92,6 +152,11 @@ struct Config {
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
   FitBounds fit_bounds;  ///< [fit] of the main file: the tissue fit's parameter bounds
   ModelSettings model;   ///< [model] of the main file
+  WireSettings wire;      ///< [wire]: the insole frame layout
+  SerialSettings serial;  ///< [serial]: the serial driver
+  RingSettings ring;
+  MonitorSettings monitor;
+  LcmSettings lcm;  ///< [lcm] of the main file
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {

@@ -78,11 +78,13 @@ struct StatusReport {
   std::uint64_t reconnects = 0;
   std::uint64_t ring_depth = 0;
   std::uint64_t ring_drops = 0;
+  std::uint64_t frames_processed = 0;  ///< taken from the ring and segmented
+  std::uint64_t frames_rejected = 0;   ///< taken from the ring but unusable (see Monitor)
   std::uint64_t steps_detected = 0;
   std::uint64_t step_backlog = 0;
   std::uint64_t step_drops = 0;
   std::uint64_t fits_published = 0;
-  std::uint64_t fits_failed = 0;
+  std::uint64_t fits_failed = 0;  ///< published fits with a region (or the step) fit_failed
   double fit_latency_p50_ms = 0.0;
   double fit_latency_p99_ms = 0.0;
 };

@@ -3,6 +3,8 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
+#include <span>
 #include <vector>
 
 #include "gaitmon/config.hpp"
@@ -32,6 +34,21 @@ struct StanceSeries {
     return frames[frame][index_of(region)];
   }
 };
+
+/// Buffers measure_frame reuses, so measuring a frame allocates nothing once they have grown.
+struct FrameScratch {
+  std::vector<double> zeroed;
+  std::vector<ActiveCell> cells;
+};
+
+/// One frame: zeroes the raw bits with `zero`, applies the adaptive threshold and measures every
+/// region (force, active-sensor area, contact ellipse). `first_instant` is Case 1's first instant
+/// of a stance. The live monitor calls it per frame; measure_stance per stance frame. Throws
+/// std::invalid_argument if `raw` or `zero` does not have the layout's sensor count.
+std::array<RegionSample, kRegionCount> measure_frame(
+    std::span<const std::uint8_t> raw, std::span<const double> zero, double threshold_bits,
+    const InsoleLayout& layout, const Calibration& calibration, bool first_instant,
+    ContactEllipseCache* cache, FrameScratch& scratch);
 
 /// Zeroes each stance frame with the step's per-sensor zero, applies its adaptive threshold, and
 /// measures every region. The first frame of the stance is the "first instant" of Case 1.

@@ -23,5 +23,10 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);
 void add_discrepancy_command(CLI::App& app, const GlobalOptions& global);
+void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
+void add_spy_command(CLI::App& app, const GlobalOptions& global);
+void add_run_command(CLI::App& app, const GlobalOptions& global);
+void add_replay_command(CLI::App& app, const GlobalOptions& global);
+void add_record_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace gaitmon::cli

@@ -1,0 +1,137 @@
+// The live monitor: decoded frames in, per-frame region reports, step events, per-step tissue
+// fits and status out, through a Publisher.
+//
+// Threads and queues:
+//  - The driver thread (the caller's) hands frames to offer() or offer_wait(). They go into a
+//    FrameRing of config.ring.capacity_frames frames. offer() never waits: when the ring is full
+//    the frame is dropped and counted (ring_drops). offer_wait() is for replays, which must not
+//    skip frames: it waits for room instead.
+//  - The detector thread (owned here) takes frames from the ring, one StepSegmenter per foot
+//    (the algorithm of `gaitmon segment`, so the same frames give the same steps). Per frame it
+//    publishes a FrameReport, and a RawFrameReport if enabled; per finalised step a HeelStrike
+//    and a ToeOff StepEvent, and it queues Ok steps for the workers. It also publishes the
+//    status every config.monitor.status_period_s.
+//  - The step backlog holds at most config.monitor.max_step_backlog finalised steps waiting for
+//    a worker. With BacklogOverflow::DropOldest (live runs) a step beyond it drops the OLDEST
+//    waiting step, counted (step_drops), logged at most once a second and reported in the
+//    status; nothing is published for a dropped step. With BacklogOverflow::Wait (replays) the
+//    detector thread waits for room instead, so backpressure reaches offer_wait().
+//  - config.monitor.workers threads (a Boost.Asio thread_pool) run analyse_step. Results are
+//    published in step order per foot (a reorder buffer holds those that finish early), each
+//    with latency_ms = publication time - the time the detector finalised the step.
+//
+// Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
+// wrap, divided by 1e6 (for replays that is the session's t_s, which the drivers encode as
+// round(t_s x 1e6)). A frame whose device time does not advance is rejected; a device clock that
+// jumps back (the device restarted) ends that foot's segmentation as at the end of a recording
+// and starts a new one, with frame and step numbers continuing and session time continuing one
+// sample period after the last frame.
+//
+// Rejected frames (counted in frames_rejected, logged at most once a second): an insole size or
+// sensor count other than that foot's first frame's or the config's layout's, and a device time
+// that does not advance.
+//
+// Per-frame reports use the latest bias known for the foot: the per-sensor zero and adaptive
+// threshold of its last finalised Ok step (the mean of the swings around that step); before the
+// first one, no zeroing and a threshold of 0. Case 1's first-instant exception is not applied
+// (the live stream does not know yet which frame starts a stance). The fits use the step's own
+// bias, exactly as `gaitmon analyze`.
+//
+// Latency: a step is final when its post-swing midpoint is known, about one swing plus
+// debounce_frames - 1 frames after its toe off (~0.45 s at 100 Hz in walking; segmentation.hpp).
+// The fit's latency_ms is measured from then.
+//
+// Errors: exceptions never cross threads. A step whose analysis throws is published with every
+// region's status fit_failed:<reason>; a frame that cannot be processed is rejected and counted;
+// a Publisher that throws is logged (rate-limited) and the message is lost.
+//
+// Shutdown, by stop(): (1) stop accepting: offer() and offer_wait() return false from now on;
+// (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
+// recording (its last steps are finalised and queued) and exits; (3) the workers finish every
+// queued step and publish it; (4) the final status is published, its connection "finished" (the
+// driver callback fills the other driver fields); (5) every thread is joined. The caller must have
+// stopped its driver thread first (offer() may race with stop(), but a frame offered after the
+// drain would be lost); close() alone does step (1), from any thread, to release a driver blocked
+// in offer_wait().
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/config.hpp"
+#include "gaitmon/publisher.hpp"
+#include "gaitmon/sensor_frame.hpp"
+
+namespace gaitmon {
+
+enum class BacklogOverflow : std::uint8_t { DropOldest, Wait };
+
+/// What a command decides at run time, beside the config.
+struct MonitorOptions {
+  /// The stream's frame rate, for the segmenter's memory bounds (segmenter_limits) and the time
+  /// step after a device clock reset. Replays pass the session's.
+  double sample_rate_hz = 100.0;
+  AnalysisSettings analysis;
+  BacklogOverflow backlog_overflow = BacklogOverflow::DropOldest;
+  /// Also publish every frame as a RawFrameReport (the commands follow [lcm] raw_enabled).
+  bool publish_raw = false;
+  /// Fills the driver's fields of each status report (bytes_received, frames_decoded,
+  /// crc_errors, resyncs, frames_lost_sequence, reconnects, connection). Called on the detector
+  /// thread, and on the thread calling stop() for the final report: it must be thread-safe and
+  /// must not block.
+  std::function<void(StatusReport&)> driver_status;
+};
+
+/// Totals since start; readable from any thread.
+struct MonitorCounters {
+  std::uint64_t frames_offered = 0;  ///< offers accepted into the ring or dropped
+  std::uint64_t ring_drops = 0;
+  std::uint64_t ring_depth = 0;
+  std::uint64_t frames_processed = 0;
+  std::uint64_t frames_rejected = 0;
+  std::uint64_t steps_detected = 0;  ///< finalised steps, Ok and incomplete
+  std::uint64_t steps_queued = 0;    ///< Ok steps handed to the backlog
+  std::uint64_t step_backlog = 0;    ///< waiting for a worker now
+  std::uint64_t step_drops = 0;
+  std::uint64_t fits_published = 0;
+  std::uint64_t fits_failed = 0;  ///< published steps whose analysis threw or a region failed
+};
+
+class Monitor {
+ public:
+  /// Starts the detector thread and the workers. Throws std::invalid_argument if the sample
+  /// rate is not positive or a setting is out of its range (load_config has checked those).
+  /// The publisher must outlive the monitor.
+  Monitor(const Config& config, MonitorOptions options, Publisher& publisher);
+  /// Calls stop().
+  ~Monitor();
+  Monitor(const Monitor&) = delete;
+  Monitor& operator=(const Monitor&) = delete;
+
+  /// Driver thread only. Queues the frame, or drops and counts it when the ring is full. Never
+  /// waits. False if dropped or the monitor is closed.
+  [[nodiscard]] bool offer(const SensorFrame& frame);
+
+  /// Driver thread only. Queues the frame, waiting while the ring is full. False once the
+  /// monitor is closed (the frame is then not queued).
+  [[nodiscard]] bool offer_wait(const SensorFrame& frame);
+
+  /// Stop accepting frames. Any thread; idempotent.
+  void close();
+
+  /// The shutdown sequence described above. Any thread but the driver's, once that has stopped
+  /// offering; idempotent, later calls return at once.
+  void stop();
+
+  MonitorCounters counters() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace gaitmon

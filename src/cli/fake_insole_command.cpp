@@ -1,0 +1,303 @@
+// `gaitmon fake-insole`: a fake insole device. Streams a session CSV v1 in the project's wire
+// format through a pseudo-terminal (or stdout), paced like the recording, with optional
+// deterministic link faults for tests.
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <sys/ioctl.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <array>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+#include <thread>
+#include <vector>
+
+#include "commands.hpp"
+#include "drivers/wire_format.hpp"
+#include "replay/fault_injector.hpp"
+#include "replay/pacer.hpp"
+#include "replay/session_byte_source.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+std::atomic<bool> g_stop{false};
+
+extern "C" void on_stop_signal(int) {
+  g_stop.store(true);
+}
+
+struct FakeInsoleArgs {
+  fs::path session;
+  std::string speed = "1";
+  bool pty = false;
+  fs::path link;
+  replay::FaultOptions faults;
+  double reopen_after_s = 0.0;
+  int reopen_gap_ms = 200;
+  bool hold = false;
+  fs::path summary;
+};
+
+[[noreturn]] void fail_errno(const std::string& what) {
+  throw std::system_error(errno, std::generic_category(), what);
+}
+
+// A pseudo-terminal in raw mode. This end also keeps the slave open, so that bytes written
+// before a reader opens it wait in the pty, and its input queue can be watched for draining.
+class Pty {
+ public:
+  Pty() {
+    master_ = posix_openpt(O_RDWR | O_NOCTTY);
+    if (master_ < 0) fail_errno("posix_openpt");
+    if (grantpt(master_) != 0) fail_errno("grantpt");
+    if (unlockpt(master_) != 0) fail_errno("unlockpt");
+    std::array<char, 128> name{};
+    if (ptsname_r(master_, name.data(), name.size()) != 0) fail_errno("ptsname_r");
+    path_ = name.data();
+    slave_ = ::open(path_.c_str(), O_RDWR | O_NOCTTY);
+    if (slave_ < 0) fail_errno("open " + path_);
+    termios tio{};
+    if (tcgetattr(slave_, &tio) != 0) fail_errno("tcgetattr");
+    cfmakeraw(&tio);
+    if (tcsetattr(slave_, TCSANOW, &tio) != 0) fail_errno("tcsetattr");
+  }
+  ~Pty() {
+    ::close(master_);
+    ::close(slave_);
+  }
+  Pty(const Pty&) = delete;
+  Pty& operator=(const Pty&) = delete;
+
+  int fd() const { return master_; }
+  const std::string& path() const { return path_; }
+  /// Bytes written but not yet read by the other side.
+  int unread() const {
+    int n = 0;
+    return ioctl(slave_, FIONREAD, &n) == 0 ? n : 0;
+  }
+
+ private:
+  int master_ = -1;
+  int slave_ = -1;
+  std::string path_;
+};
+
+// Replaced by rename, so a reader never sees the link missing or half-written.
+void point_link(const fs::path& link, const std::string& target) {
+  const fs::path tmp = link.string() + ".tmp";
+  fs::remove(tmp);
+  fs::create_symlink(target, tmp);
+  fs::rename(tmp, link);
+}
+
+// False when interrupted by a stop signal.
+bool write_all(int fd, std::span<const std::uint8_t> bytes) {
+  while (!bytes.empty()) {
+    const ssize_t n = ::write(fd, bytes.data(), bytes.size());
+    if (n < 0) {
+      if (errno == EINTR) {
+        if (g_stop.load()) return false;
+        continue;
+      }
+      fail_errno("write");
+    }
+    bytes = bytes.subspan(static_cast<std::size_t>(n));
+  }
+  return true;
+}
+
+double parse_speed(const std::string& text) {
+  if (text == "max") return replay::kMaxSpeed;
+  std::size_t used = 0;
+  double speed = 0.0;
+  try {
+    speed = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != text.size() || !(speed > 0.0) || !std::isfinite(speed)) {
+    throw std::invalid_argument("--speed must be a number > 0 or \"max\", got \"" + text + "\"");
+  }
+  return speed;
+}
+
+void announce(const std::string& path) {
+  std::fputs((path + "\n").c_str(), stdout);
+  std::fflush(stdout);
+}
+
+// Waits until the reader has taken everything written (three empty checks in a row, since
+// bytes pass through the pty's flip buffer first), at most 10 s. Returns the bytes left.
+int drain(const Pty& pty) {
+  const auto give_up = std::chrono::steady_clock::now() + 10s;
+  int empty_checks = 0;
+  while (empty_checks < 3 && std::chrono::steady_clock::now() < give_up && !g_stop.load()) {
+    empty_checks = pty.unread() == 0 ? empty_checks + 1 : 0;
+    std::this_thread::sleep_for(20ms);
+  }
+  return pty.unread();
+}
+
+void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
+  const Config config = load_global_config(global);
+  const double speed = parse_speed(args.speed);
+  if (args.reopen_after_s > 0.0 && (!args.pty || args.link.empty())) {
+    throw std::invalid_argument(
+        "--reopen-after needs --pty and --link (the new pty's path differs)");
+  }
+  if ((!args.link.empty() || args.hold) && !args.pty) {
+    throw std::invalid_argument("--link and --hold need --pty");
+  }
+  const drivers::WireFormat format(config.wire);
+  SessionReader reader(args.session);
+  replay::SessionEncoder encoder(format, reader.header().insole_size);
+  replay::FaultInjector injector(args.faults, format);
+
+  struct sigaction action {};
+  action.sa_handler = on_stop_signal;  // no SA_RESTART: a blocked write returns EINTR
+  sigaction(SIGINT, &action, nullptr);
+  sigaction(SIGTERM, &action, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+
+  std::unique_ptr<Pty> pty;
+  std::vector<std::string> paths;
+  const auto open_pty = [&] {
+    pty = std::make_unique<Pty>();
+    paths.push_back(pty->path());
+    if (!args.link.empty()) point_link(args.link, pty->path());
+    announce(pty->path());
+  };
+  if (args.pty) open_pty();
+
+  replay::Pacer pacer(speed, g_stop);
+  const auto start = std::chrono::steady_clock::now();
+  bool reopen_pending = args.reopen_after_s > 0.0;
+  int reopens = 0;
+  std::vector<std::uint8_t> batch;
+  std::vector<std::uint8_t> wire;
+  const auto flush = [&] {
+    const bool ok = write_all(pty ? pty->fd() : STDOUT_FILENO, batch);
+    batch.clear();
+    return ok;
+  };
+  Frame frame;
+  bool stopped = false;
+  while (!stopped && reader.next(frame)) {
+    if (!pacer.due(frame.t_s) && (!flush() || !pacer.wait(frame.t_s))) break;
+    if (reopen_pending && std::chrono::steady_clock::now() - start >=
+                              std::chrono::duration<double>(args.reopen_after_s)) {
+      reopen_pending = false;
+      if (!flush()) break;
+      pty.reset();  // the device disappears: the reader sees EIO
+      std::this_thread::sleep_for(std::chrono::milliseconds(args.reopen_gap_ms));
+      open_pty();
+      ++reopens;
+    }
+    const SensorFrame& sent = encoder.next(frame);
+    wire.clear();
+    encoder.append_wire(wire);
+    injector.append(wire, sent.foot, sent.sequence, batch);
+    if (batch.size() >= 64 * 1024 || !std::isinf(speed)) stopped = !flush();
+  }
+  if (!stopped) stopped = !flush();
+  const int unread = pty ? drain(*pty) : 0;
+  while (args.hold && !g_stop.load()) std::this_thread::sleep_for(50ms);
+  pty.reset();
+
+  const replay::FaultCounts& counts = injector.counts();
+  nlohmann::json summary{
+      {"frames", counts.frames},
+      {"garbage_bursts", counts.garbage_bursts},
+      {"garbage_bytes", counts.garbage_bytes},
+      {"crc_corrupted", counts.crc_corrupted},
+      {"truncated", counts.truncated},
+      {"dropped_bytes", counts.dropped_bytes},
+      {"reopens", reopens},
+      {"unread_bytes_at_exit", unread},
+      {"stopped_early", g_stop.load()},
+      {"paths", paths},
+      {"faulted_sequences",
+       {{"L", counts.faulted_sequences[0]}, {"R", counts.faulted_sequences[1]}}}};
+  if (!args.summary.empty()) {
+    std::ofstream out(args.summary);
+    out << summary.dump(2) << '\n';
+    if (!out) throw std::runtime_error("cannot write " + args.summary.string());
+  }
+  fmt::print(stderr,
+             "fake-insole: {} frames sent; injected {} garbage bursts ({} bytes), {} CRC "
+             "corruptions, {} truncations ({} bytes dropped), {} reopens; {} bytes unread\n",
+             counts.frames, counts.garbage_bursts, counts.garbage_bytes, counts.crc_corrupted,
+             counts.truncated, counts.dropped_bytes, reopens, unread);
+}
+
+}  // namespace
+
+void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
+  auto args = std::make_shared<FakeInsoleArgs>();
+  CLI::App* sub = app.add_subcommand(
+      "fake-insole",
+      "A fake insole: streams a session CSV v1 in the project's wire format (drivers/PROTOCOL.md) "
+      "through a pseudo-terminal (--pty; its path is the first line on stdout) or to stdout");
+  sub->add_option("session", args->session, "Session CSV v1 to play")
+      ->required()
+      ->check(CLI::ExistingFile);
+  sub->add_option("--speed", args->speed, "Playback speed: x real time, or max")
+      ->capture_default_str();
+  sub->add_flag("--pty", args->pty, "Create a pseudo-terminal and print its path");
+  sub->add_option("--link", args->link,
+                  "Keep a symlink at this path pointing to the current pty (a reopened pty gets "
+                  "a new path)");
+  sub->add_flag("--hold", args->hold,
+                "Keep the pty open after the session until SIGINT or SIGTERM");
+  sub->add_option("--seed", args->faults.seed, "Seed of the fault injection")
+      ->capture_default_str();
+  sub->add_option("--garbage-rate", args->faults.garbage_rate,
+                  "Probability of a garbage burst before a frame (bytes never equal the first "
+                  "sync byte)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  sub->add_option("--garbage-max-bytes", args->faults.garbage_max_bytes,
+                  "Longest garbage burst, bytes")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  sub->add_option("--crc-rate", args->faults.crc_rate,
+                  "Probability that a frame has one bit flipped after its header")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  sub->add_option("--truncate-rate", args->faults.truncate_rate,
+                  "Probability that a frame loses 1..N+C bytes from its end")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  sub->add_option("--reopen-after", args->reopen_after_s,
+                  "Close the pty this many seconds after the start and open a new one (needs "
+                  "--link); bytes not yet read are lost, as with a real unplug")
+      ->check(CLI::Range(0.0, 86400.0));
+  sub->add_option("--reopen-gap-ms", args->reopen_gap_ms, "Time without a pty when reopening, ms")
+      ->check(CLI::Range(0, 60000))
+      ->capture_default_str();
+  sub->add_option("--summary", args->summary,
+                  "Write what was sent and injected as JSON (a fault summary also goes to "
+                  "stderr)");
+  sub->callback([&global, args] { run_fake_insole(global, *args); });
+}
+
+}  // namespace gaitmon::cli

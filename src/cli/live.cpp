@@ -1,0 +1,119 @@
+// The live commands' shared pieces: link status, the per-step console line, signal handling.
+#include "live.hpp"
+
+#include <fmt/format.h>
+#include <signal.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <string>
+#include <system_error>
+
+#include "replay/pacer.hpp"
+
+namespace gaitmon::cli {
+
+double parse_speed(const std::string& text) {
+  if (text == "max") return replay::kMaxSpeed;
+  std::size_t used = 0;
+  double speed = 0.0;
+  try {
+    speed = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != text.size() || !(speed > 0.0) || !std::isfinite(speed)) {
+    throw CLI::ValidationError("--speed", "must be a number > 0 or max, got " + text);
+  }
+  return speed;
+}
+
+void LinkStatus::on_state(drivers::LinkState state, std::string_view detail) {
+  state_.store(state);
+  if (state == drivers::LinkState::Connected) {
+    connections_.fetch_add(1);
+    spdlog::info("link connected: {}", detail);
+  } else if (state == drivers::LinkState::Disconnected) {
+    spdlog::warn("link disconnected: {}", detail);
+  } else {
+    spdlog::info("link connecting: {}", detail);
+  }
+}
+
+void LinkStatus::fill(StatusReport& status, const drivers::FrameDecoder& decoder) const {
+  const drivers::DecoderCounters c = decoder.counters();
+  status.connection = std::string(drivers::link_state_name(state_.load()));
+  status.bytes_received = c.bytes;
+  status.frames_decoded = c.frames;
+  status.crc_errors = c.crc_errors;
+  status.resyncs = c.resyncs;
+  status.frames_lost_sequence = c.lost_frames_total();
+  const std::uint64_t connections = connections_.load();
+  status.reconnects = connections > 0 ? connections - 1 : 0;
+}
+
+void StepPrinter::publish(const FitReport& report) {
+  next_.publish(report);
+  std::string line = fmt::format(
+      "{} step {:>4}  stance {:.3f} s  kbar N/mm3 | cbar Ns/mm3:", foot_name(report.foot),
+      report.step, report.t_toe_off_s - report.t_heel_strike_s);
+  for (const RegionFitReport& r : report.regions) {
+    if (r.status == "ok") {
+      fmt::format_to(std::back_inserter(line), "  {} {:.4f}|{:.5f}", region_name(r.region),
+                     r.kbar_n_per_mm3, r.cbar_ns_per_mm3);
+    } else {
+      fmt::format_to(std::back_inserter(line), "  {} {}", region_name(r.region), r.status);
+    }
+  }
+  line += '\n';
+  const std::lock_guard lock(print_mutex_);
+  std::fputs(line.c_str(), stdout);
+  std::fflush(stdout);
+}
+
+namespace {
+
+sigset_t stop_signals() {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  return set;
+}
+
+}  // namespace
+
+StopOnSignal::StopOnSignal(std::function<void(int)> on_signal) : on_signal_(std::move(on_signal)) {
+  const sigset_t set = stop_signals();
+  if (const int rc = pthread_sigmask(SIG_BLOCK, &set, nullptr); rc != 0) {
+    throw std::system_error(rc, std::generic_category(), "pthread_sigmask");
+  }
+  watcher_ = std::thread([this, set] {
+    // Wakes every 100 ms to notice the end of the command.
+    const timespec period{0, 100'000'000};
+    while (!done_.load()) {
+      const int signal = sigtimedwait(&set, nullptr, &period);
+      if (signal <= 0 || received_.load() != 0) continue;
+      received_.store(signal);
+      spdlog::info("{}: stopping (the driver, then the ring, the fits and a final status)",
+                   signal == SIGINT ? "SIGINT" : "SIGTERM");
+      try {
+        on_signal_(signal);
+      } catch (const std::exception& e) {
+        spdlog::error("stopping failed: {}", e.what());
+      }
+    }
+  });
+}
+
+// The signals stay blocked: unblocking would let a second Ctrl-C, pending meanwhile, kill a
+// command that is about to exit 0.
+StopOnSignal::~StopOnSignal() {
+  done_.store(true);
+  watcher_.join();
+}
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,76 @@
+// What the live commands (run, replay, record) share: the link's state for the status, the
+// console line per fitted step, and stopping cleanly on SIGINT or SIGTERM.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <thread>
+
+#include "drivers/byte_source.hpp"
+#include "drivers/frame_decoder.hpp"
+#include "gaitmon/publisher.hpp"
+
+namespace gaitmon::cli {
+
+/// "max" (replay::kMaxSpeed) or a number > 0. Throws CLI::ValidationError otherwise.
+double parse_speed(const std::string& text);
+
+/// The link's state and reconnections, written by the driver thread's state handler and read by
+/// the status (any thread).
+class LinkStatus {
+ public:
+  /// The ByteSource's state handler: logs every change and counts reconnections (a Connected
+  /// after the first).
+  void on_state(drivers::LinkState state, std::string_view detail);
+  /// Fills the driver's fields of a status report from this and the decoder's counters.
+  void fill(StatusReport& status, const drivers::FrameDecoder& decoder) const;
+  drivers::LinkState state() const { return state_.load(); }
+
+ private:
+  std::atomic<drivers::LinkState> state_{drivers::LinkState::Connecting};
+  std::atomic<std::uint64_t> connections_{0};
+};
+
+/// Forwards every message to `next` and prints one line per fitted step on stdout: the foot,
+/// the step, the stance time and every region's kbar and cbar. Thread-safe.
+class StepPrinter final : public Publisher {
+ public:
+  explicit StepPrinter(Publisher& next) : next_(next) {}
+  void publish(const FrameReport& report) override { next_.publish(report); }
+  void publish(const StepEvent& event) override { next_.publish(event); }
+  void publish(const FitReport& report) override;
+  void publish(const StatusReport& report) override { next_.publish(report); }
+  void publish(const RawFrameReport& report) override { next_.publish(report); }
+
+ private:
+  Publisher& next_;
+  std::mutex print_mutex_;
+};
+
+/// From its construction on, SIGINT and SIGTERM do not kill the process: while it lives the
+/// first one calls `on_signal` (on a thread of its own) and later ones are ignored; they stay
+/// blocked after it ends, as the command is then finishing. Construct it before starting any
+/// other thread: it blocks both signals in the calling thread, and threads started later
+/// inherit that.
+class StopOnSignal {
+ public:
+  explicit StopOnSignal(std::function<void(int signal)> on_signal);
+  ~StopOnSignal();
+  StopOnSignal(const StopOnSignal&) = delete;
+  StopOnSignal& operator=(const StopOnSignal&) = delete;
+
+  /// The signal received, 0 if none.
+  int received() const { return received_.load(); }
+
+ private:
+  std::function<void(int)> on_signal_;
+  std::atomic<int> received_{0};
+  std::atomic<bool> done_{false};
+  std::thread watcher_;
+};
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,182 @@
+// `gaitmon record`: what the driver receives, written as a session CSV v1.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <ctime>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "commands.hpp"
+#include "drivers/frame_decoder.hpp"
+#include "drivers/serial_source.hpp"
+#include "gaitmon/device_clock.hpp"
+#include "gaitmon/frame_ring.hpp"
+#include "gaitmon/log_throttle.hpp"
+#include "gaitmon/session.hpp"
+#include "live.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+struct RecordArgs {
+  std::filesystem::path out;
+  std::string serial;
+};
+
+std::string utc_now_iso8601() {
+  const std::time_t now = std::time(nullptr);
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  std::array<char, 32> text{};
+  std::strftime(text.data(), text.size(), "%Y-%m-%dT%H:%M:%SZ", &utc);
+  return text.data();
+}
+
+/// The writer thread's side: frames from the ring into the session file, which is created at
+/// the first frame (its insole size and sensor count fix the header).
+class SessionRecorder {
+ public:
+  SessionRecorder(std::filesystem::path partial, double sample_rate_hz, std::string source)
+      : partial_(std::move(partial)), rate_hz_(sample_rate_hz), source_(std::move(source)) {}
+
+  void write(const SensorFrame& in) {
+    if (!writer_) open(in);
+    if (in.size != header_.insole_size || in.sensor_count != header_.sensors) {
+      skip(fmt::format("foot {}: a {} insole with {} sensors in a {} recording", foot_name(in.foot),
+                       insole_size_name(in.size), in.sensor_count,
+                       insole_size_name(header_.insole_size)));
+      return;
+    }
+    auto& clock = clocks_[static_cast<std::size_t>(in.foot)];
+    if (!clock) clock.emplace(rate_hz_);
+    if (clock->advance(in.device_time_us) == DeviceClock::Tick::Repeated) {
+      skip(fmt::format("foot {}: device time {} us repeated", foot_name(in.foot),
+                       in.device_time_us));
+      return;
+    }
+    frame_.t_s = clock->t_s();
+    frame_.foot = in.foot;
+    frame_.bits.assign(in.bits.begin(), in.bits.begin() + in.sensor_count);
+    writer_->write(frame_);
+    ++written_;
+  }
+
+  /// Closes the file; false if nothing was recorded.
+  bool close() {
+    if (!writer_) return false;
+    writer_->close();
+    return true;
+  }
+  std::uint64_t written() const { return written_; }
+  std::uint64_t skipped() const { return skipped_; }
+
+ private:
+  void open(const SensorFrame& first) {
+    header_.insole_size = first.size;
+    header_.sample_rate_hz = rate_hz_;
+    header_.sensors = first.sensor_count;
+    header_.recorded_at = utc_now_iso8601();
+    header_.note = "recorded by gaitmon record from " + source_;
+    writer_ = std::make_unique<SessionWriter>(partial_, header_);
+  }
+  void skip(const std::string& why) {
+    ++skipped_;
+    if (auto held = skip_log_.allow()) {
+      spdlog::warn("record: frame skipped: {} ({} similar suppressed)", why, *held);
+    }
+  }
+
+  std::filesystem::path partial_;
+  double rate_hz_;
+  std::string source_;
+  SessionHeader header_;
+  std::unique_ptr<SessionWriter> writer_;
+  std::array<std::optional<DeviceClock>, 2> clocks_;
+  Frame frame_;
+  std::uint64_t written_ = 0;
+  std::uint64_t skipped_ = 0;
+  LogThrottle skip_log_;
+};
+
+void run_record(const GlobalOptions& global, const RecordArgs& args) {
+  Config config = load_global_config(global);
+  if (!args.serial.empty()) config.serial.device = args.serial;
+  const std::filesystem::path partial = args.out.string() + ".partial";
+
+  drivers::SerialSource source(config.serial);
+  // Signals first: every thread started below inherits the blocked mask.
+  StopOnSignal on_signal([&](int) { source.stop(); });
+
+  // The driver thread never waits on the disk: frames go through a ring to a writer thread, and
+  // a full ring drops (and counts) them as in `gaitmon run`.
+  FrameRing ring(config.ring.capacity_frames);
+  drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
+  LinkStatus link;
+  SessionRecorder recorder(partial, config.sample_rate_hz, config.serial.device);
+  std::atomic<bool> driver_done{false};
+  std::exception_ptr writer_error;
+  std::thread writer([&] {
+    try {
+      SensorFrame frame;
+      for (;;) {
+        if (ring.try_pop(frame)) {
+          recorder.write(frame);
+        } else if (driver_done.load(std::memory_order_acquire)) {
+          while (ring.try_pop(frame)) recorder.write(frame);
+          return;
+        } else {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+      }
+    } catch (...) {
+      writer_error = std::current_exception();
+      source.stop();
+    }
+  });
+  spdlog::info("record: {} -> {}", config.serial.device, args.out.string());
+  source.run(
+      [&](std::span<const std::uint8_t> bytes) {
+        decoder.feed(bytes, [&](const SensorFrame& frame) { (void)ring.try_push(frame); });
+      },
+      [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+  driver_done.store(true, std::memory_order_release);
+  writer.join();
+  if (writer_error) {
+    std::error_code ignored;
+    std::filesystem::remove(partial, ignored);
+    std::rethrow_exception(writer_error);
+  }
+  if (!recorder.close()) {
+    throw std::runtime_error("no frame was received from " + config.serial.device +
+                             "; nothing written");
+  }
+  std::filesystem::rename(partial, args.out);
+  const drivers::DecoderCounters c = decoder.counters();
+  fmt::print(
+      "wrote {} ({} frames); {} skipped, {} dropped (ring full); decoder: {} bytes, {} CRC "
+      "errors, {} resyncs, {} frames lost to sequence gaps\n",
+      args.out.string(), recorder.written(), recorder.skipped(), ring.drops(), c.bytes,
+      c.crc_errors, c.resyncs, c.lost_frames_total());
+}
+
+}  // namespace
+
+void add_record_command(CLI::App& app, const GlobalOptions& global) {
+  auto args = std::make_shared<RecordArgs>();
+  CLI::App* sub = app.add_subcommand(
+      "record",
+      "Records what the insole link delivers as a session CSV v1 (times from the device "
+      "clock); Ctrl-C ends the recording");
+  sub->add_option("--out,-o", args->out, "Session CSV to write")->required();
+  sub->add_option("--serial", args->serial,
+                  "Serial device (default: [serial] device of the config)");
+  sub->callback([&global, args] { run_record(global, *args); });
+}
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,74 @@
+// LcmPublisher: encodes into per-thread buffers and hands the bytes to LCM's C API, which
+// serialises the sends; lcm::LCM::publish would allocate a buffer per message.
+#include "gaitmon/lcm_publisher.hpp"
+
+#include <lcm/lcm-cpp.hpp>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include "gaitmon/lcm_connection.hpp"
+#include "lcm_messages.hpp"
+
+namespace gaitmon {
+
+LcmPublisher::LcmPublisher(const LcmSettings& settings)
+    : LcmPublisher(open_lcm(settings.url), settings) {}
+
+LcmPublisher::LcmPublisher(std::shared_ptr<lcm::LCM> lcm, const LcmSettings& settings)
+    : lcm_(std::move(lcm)), settings_(settings) {
+  if (!lcm_) throw std::invalid_argument("LcmPublisher: no LCM connection");
+}
+
+LcmPublisher::~LcmPublisher() = default;
+
+template <typename Report, typename Message>
+void LcmPublisher::send(const std::string& channel, const Report& report,
+                        Message& message) noexcept {
+  thread_local std::vector<std::uint8_t> buffer;
+  try {
+    lcm_messages::to_lcm(report, message);
+    const int size = message.getEncodedSize();
+    if (buffer.size() < static_cast<std::size_t>(size)) {
+      buffer.resize(static_cast<std::size_t>(size));
+    }
+    if (message.encode(buffer.data(), 0, size) != size ||
+        lcm_publish(lcm_->getUnderlyingLCM(), channel.c_str(), buffer.data(), size) != 0) {
+      failed_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+  } catch (const std::bad_alloc&) {
+    failed_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  published_.fetch_add(1, std::memory_order_relaxed);
+}
+
+// One message object per thread and type, so that its strings and vectors keep their storage.
+void LcmPublisher::publish(const FrameReport& report) {
+  thread_local frame_t message;
+  send(settings_.channels.frame, report, message);
+}
+
+void LcmPublisher::publish(const StepEvent& event) {
+  thread_local step_t message;
+  send(settings_.channels.step, event, message);
+}
+
+void LcmPublisher::publish(const FitReport& report) {
+  thread_local fit_t message;
+  send(settings_.channels.fit, report, message);
+}
+
+void LcmPublisher::publish(const StatusReport& report) {
+  thread_local status_t message;
+  send(settings_.channels.status, report, message);
+}
+
+void LcmPublisher::publish(const RawFrameReport& report) {
+  if (!settings_.raw_enabled) return;
+  thread_local raw_t message;
+  send(settings_.channels.raw, report, message);
+}
+
+}  // namespace gaitmon

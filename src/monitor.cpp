@@ -1,0 +1,618 @@
+// The live monitor's machinery: the detector loop, the bounded step backlog and its workers, the
+// per-foot reorder buffer and the status. The threading contract is in monitor.hpp.
+#include "gaitmon/monitor.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <array>
+#include <boost/asio/post.hpp>
+#include <boost/asio/thread_pool.hpp>
+#include <cmath>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "gaitmon/batch.hpp"
+#include "gaitmon/device_clock.hpp"
+#include "gaitmon/frame_ring.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/log_throttle.hpp"
+#include "gaitmon/segmentation.hpp"
+#include "gaitmon/stance.hpp"
+
+namespace gaitmon {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// How long the detector sleeps when the ring is empty: at 200 frames/s it wakes about every
+// frame, and the delay it adds to a step's latency stays far below the 20 ms budget.
+constexpr auto kIdlePoll = std::chrono::microseconds(500);
+// Fit latencies kept for the status percentiles: the latest ones, about 8 minutes of walking.
+constexpr std::size_t kLatencyWindow = 1024;
+
+double ms_between(Clock::time_point from, Clock::time_point to) {
+  return std::chrono::duration<double, std::milli>(to - from).count();
+}
+
+std::string region_status(const RegionFit& fit) {
+  std::string status(fit_status_name(fit.status));
+  if (fit.status == FitStatus::Failed) status += ":" + fit.reason;
+  return status;
+}
+
+FitReport fit_report(const StepAnalysis& analysis, bool& failed) {
+  FitReport report;
+  report.foot = analysis.foot;
+  report.step = analysis.step;
+  report.t_heel_strike_s = analysis.t_heel_strike_s;
+  report.t_toe_off_s = analysis.t_toe_off_s;
+  report.nrmse_total_pct = analysis.nrmse_total_pct;
+  failed = false;
+  for (const RegionAnalysis& r : analysis.regions) {
+    RegionFitReport& out = report.regions[index_of(r.region)];
+    const RegionFit& f = r.fit;
+    out.region = r.region;
+    out.status = region_status(f);
+    failed = failed || f.status == FitStatus::Failed;
+    if (f.status != FitStatus::Ok) continue;  // parameters stay 0 unless the fit is usable
+    out.kbar_n_per_mm3 = f.kbar_n_per_mm3.value;
+    out.n = f.n.value;
+    out.cbar_ns_per_mm3 = f.cbar_ns_per_mm3.value;
+    out.m = f.m.value;
+    out.se_kbar = f.kbar_n_per_mm3.se;
+    out.se_n = f.n.se;
+    out.se_cbar = f.cbar_ns_per_mm3.se;
+    out.se_m = f.m.se;
+    out.A_mm = f.A_mm.value;
+    out.B_mm = f.B_mm.value;
+    out.C_mm = f.C_mm.value;
+    out.d0_mm = f.d0_mm.value;
+    out.nrmse_pct = f.nrmse_pct;
+  }
+  return report;
+}
+
+FitReport failed_report(const Step& step, const std::string& reason) {
+  FitReport report;
+  report.foot = step.foot;
+  report.step = step.index;
+  report.t_heel_strike_s = step.t_heel_strike_s;
+  report.t_toe_off_s = step.t_toe_off_s;
+  for (Region region : kRegions) {
+    report.regions[index_of(region)].region = region;
+    report.regions[index_of(region)].status =
+        std::string(fit_status_name(FitStatus::Failed)) + ":" + reason;
+  }
+  return report;
+}
+
+// Nearest rank: the smallest value with at least p of the values at or below it.
+double percentile(std::vector<double>& values, double p) {
+  if (values.empty()) return 0.0;
+  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(values.size())));
+  const auto at = values.begin() + static_cast<std::ptrdiff_t>(std::max<std::size_t>(rank, 1) - 1);
+  std::nth_element(values.begin(), at, values.end());
+  return *at;
+}
+
+}  // namespace
+
+struct Monitor::Impl {
+  struct Job {
+    Foot foot = Foot::Left;
+    std::uint64_t seq = 0;  ///< per foot, in step order: the reorder buffer's key
+    Step step;
+    std::shared_ptr<const InsoleLayout> layout;
+    Clock::time_point finalised;
+  };
+  struct Ready {
+    FitReport report;
+    Clock::time_point finalised;
+    bool failed = false;
+  };
+  /// Per foot: results that finished before an earlier step's. nullopt marks a dropped step.
+  struct Reorder {
+    std::uint64_t next = 0;
+    bool draining = false;  ///< a thread is publishing from this buffer
+    std::map<std::uint64_t, std::optional<Ready>> pending;
+  };
+  /// Detector-thread state of one foot.
+  struct FootState {
+    bool started = false;
+    InsoleSize size = InsoleSize::S37_38;
+    std::shared_ptr<const InsoleLayout> layout;
+    std::optional<StepSegmenter> segmenter;
+    Frame frame;  ///< reused: its bits keep their capacity
+    std::optional<DeviceClock> clock;
+    std::uint32_t last_device_us = 0;  ///< for the log of a clock reset
+    std::int64_t frame_base = 0;       ///< frames of the segmenters before a clock reset
+    int step_base = 0;                 ///< steps of the segmenters before a clock reset
+    int steps_emitted = 0;             ///< by the current segmenter
+    std::uint64_t next_seq = 0;
+    std::vector<double> zero;     ///< latest known per-sensor bias
+    double threshold_bits = 0.0;  ///< latest known adaptive threshold
+  };
+
+  Impl(const Config& config_in, MonitorOptions options_in, Publisher& publisher_in)
+      : config(config_in),
+        options(std::move(options_in)),
+        publisher(publisher_in),
+        ring(config.ring.capacity_frames),
+        status_period(std::chrono::duration_cast<Clock::duration>(
+            std::chrono::duration<double>(config.monitor.status_period_s))),
+        pool(static_cast<std::size_t>(config.monitor.workers)) {
+    latencies.reserve(kLatencyWindow);
+    detector = std::thread([this] { detector_main(); });
+  }
+
+  // ---- detector thread ----
+
+  void detector_main() {
+    try {
+      SensorFrame frame;
+      next_status = Clock::now() + status_period;
+      for (;;) {
+        bool any = false;
+        while (ring.try_pop(frame)) {
+          any = true;
+          handle(frame);
+          maybe_status();
+        }
+        if (input_done.load(std::memory_order_acquire)) {
+          while (ring.try_pop(frame)) handle(frame);
+          break;
+        }
+        maybe_status();
+        if (!any) std::this_thread::sleep_for(kIdlePoll);
+      }
+      for (FootState& foot : feet) {
+        if (!foot.started) continue;
+        finalised.clear();
+        foot.segmenter->finish(finalised);
+        deliver(foot);
+      }
+    } catch (const std::exception& e) {
+      // Only resource exhaustion gets here (handle() contains per-frame errors). Refuse further
+      // frames so that a replay waiting for room does not wait forever.
+      closed.store(true);
+      spdlog::error("monitor: the detector thread stopped: {}", e.what());
+    }
+  }
+
+  void handle(const SensorFrame& in) {
+    try {
+      if (in.foot != Foot::Left && in.foot != Foot::Right) {
+        reject("a frame names no known foot");
+        return;
+      }
+      FootState& foot = feet[static_cast<std::size_t>(in.foot)];
+      if (!foot.started) start(foot, in);
+      if (in.size != foot.size) {
+        reject(fmt::format("foot {}: insole size {} after {}", foot_name(in.foot),
+                           insole_size_name(in.size), insole_size_name(foot.size)));
+        return;
+      }
+      if (in.sensor_count != foot.layout->sensor_count()) {
+        reject(fmt::format("foot {}: {} sensors, the {} layout has {}", foot_name(in.foot),
+                           in.sensor_count, insole_size_name(foot.size),
+                           foot.layout->sensor_count()));
+        return;
+      }
+      if (!advance_time(foot, in)) return;
+      foot.frame.t_s = foot.clock->t_s();
+      foot.frame.foot = in.foot;
+      foot.frame.bits.assign(in.bits.begin(), in.bits.begin() + in.sensor_count);
+      finalised.clear();
+      foot.segmenter->push(foot.frame, finalised);
+      processed.fetch_add(1, std::memory_order_relaxed);
+      const std::int64_t index = foot.frame_base + foot.segmenter->frames() - 1;
+      if (config.monitor.publish_frames) publish_frame(foot, index);
+      if (options.publish_raw) publish_raw(in);
+      deliver(foot);
+    } catch (const std::exception& e) {
+      reject(e.what());
+    }
+  }
+
+  void start(FootState& foot, const SensorFrame& in) {
+    if (index_of(in.size) >= kInsoleSizeCount) throw std::invalid_argument("unknown insole size");
+    const InsoleSpec& spec = config.insole(in.size);
+    foot.size = in.size;
+    foot.layout = std::make_shared<const InsoleLayout>(spec, config.sensor);
+    foot.zero.assign(foot.layout->sensor_count(), 0.0);
+    foot.threshold_bits = 0.0;
+    foot.clock.emplace(options.sample_rate_hz);
+    new_segmenter(foot, in.foot);
+    foot.started = true;
+    spdlog::info("monitor: foot {} is a {} insole with {} sensors", foot_name(in.foot),
+                 insole_size_name(in.size), foot.layout->sensor_count());
+  }
+
+  void new_segmenter(FootState& foot, Foot which) {
+    const InsoleSpec& spec = config.insole(foot.size);
+    foot.segmenter.emplace(which, foot.layout->sensor_count(), config.segmentation,
+                           spec.adaptive_threshold_pct,
+                           config.calibration.newtons_per_bit(config.sensor.area_mm2()),
+                           segmenter_limits(options.sample_rate_hz));
+  }
+
+  /// Unwraps the 32-bit device clock; false (rejected) if it did not advance.
+  bool advance_time(FootState& foot, const SensorFrame& in) {
+    const std::uint32_t previous_us = foot.last_device_us;
+    switch (foot.clock->advance(in.device_time_us)) {
+      case DeviceClock::Tick::Repeated:
+        reject(fmt::format("foot {}: device time {} us did not advance", foot_name(in.foot),
+                           in.device_time_us));
+        return false;
+      case DeviceClock::Tick::WentBack:
+        restart(foot, in, previous_us);
+        break;
+      case DeviceClock::Tick::First:
+      case DeviceClock::Tick::Forward:
+        break;
+    }
+    foot.last_device_us = in.device_time_us;
+    return true;
+  }
+
+  /// The device clock went back: end this foot's segmentation as at the end of a recording.
+  void restart(FootState& foot, const SensorFrame& in, std::uint32_t previous_us) {
+    spdlog::warn("monitor: foot {}: device clock went back from {} to {} us; segmentation restarts",
+                 foot_name(in.foot), previous_us, in.device_time_us);
+    finalised.clear();
+    foot.segmenter->finish(finalised);
+    deliver(foot);
+    foot.frame_base += foot.segmenter->frames();
+    foot.step_base += foot.steps_emitted;
+    foot.steps_emitted = 0;
+    new_segmenter(foot, in.foot);
+  }
+
+  void reject(const std::string& why) {
+    rejected.fetch_add(1, std::memory_order_relaxed);
+    if (auto held = reject_log.allow()) {
+      spdlog::warn("monitor: frame rejected: {} ({} similar suppressed)", why, *held);
+    }
+  }
+
+  void publish_frame(const FootState& foot, std::int64_t index) {
+    const auto samples = measure_frame(foot.frame.bits, foot.zero, foot.threshold_bits,
+                                       *foot.layout, config.calibration, false, &ellipses, scratch);
+    frame_report.utime = now_utime();
+    frame_report.foot = foot.frame.foot;
+    frame_report.frame = index;
+    frame_report.t_s = foot.frame.t_s;
+    for (Region region : kRegions) {
+      const RegionSample& s = samples[index_of(region)];
+      RegionFrameReport& r = frame_report.regions[index_of(region)];
+      r.force_n = s.force_n;
+      r.active_area_mm2 = s.sensor_area_mm2;
+      r.ellipse_case = static_cast<std::uint8_t>(s.ellipse.kase);
+      r.centre_x_mm = s.ellipse.cx_mm;
+      r.centre_y_mm = s.ellipse.cy_mm;
+      r.ra_mm = s.ellipse.ra_mm;
+      r.rb_mm = s.ellipse.rb_mm;
+      r.angle_rad = s.ellipse.angle_rad;
+      r.ellipse_area_mm2 = s.ellipse.area_mm2;
+    }
+    send(frame_report);
+  }
+
+  void publish_raw(const SensorFrame& in) {
+    raw_report.utime = now_utime();
+    raw_report.foot = in.foot;
+    raw_report.sequence = in.sequence;
+    raw_report.device_time_us = in.device_time_us;
+    raw_report.bits.assign(in.bits.begin(), in.bits.begin() + in.sensor_count);
+    send(raw_report);
+  }
+
+  /// Publishes the steps in `finalised` (from foot's segmenter) and queues the Ok ones.
+  void deliver(FootState& foot) {
+    for (Step& step : finalised) {
+      foot.steps_emitted = std::max(foot.steps_emitted, step.index + 1);
+      step.index += foot.step_base;
+      step.heel_strike_frame += foot.frame_base;
+      step.toe_off_frame += foot.frame_base;
+      steps_detected.fetch_add(1, std::memory_order_relaxed);
+      StepEvent event;
+      event.utime = now_utime();
+      event.foot = step.foot;
+      event.step = step.index;
+      event.kind = StepEvent::Kind::HeelStrike;
+      event.frame = step.heel_strike_frame;
+      event.t_s = step.t_heel_strike_s;
+      send(event);
+      event.kind = StepEvent::Kind::ToeOff;
+      event.frame = step.toe_off_frame;
+      event.t_s = step.t_toe_off_s;
+      send(event);
+      if (step.status != StepStatus::Ok) continue;
+      foot.zero = step.sensor_zero_bits;
+      foot.threshold_bits = step.adaptive_threshold_bits;
+      enqueue(Job{step.foot, foot.next_seq++, std::move(step), foot.layout, Clock::now()});
+    }
+    finalised.clear();
+  }
+
+  void enqueue(Job job) {
+    const auto max_backlog = static_cast<std::size_t>(config.monitor.max_step_backlog);
+    std::optional<Job> dropped;
+    {
+      std::unique_lock lock(jobs_mutex);
+      if (options.backlog_overflow == BacklogOverflow::Wait) {
+        room.wait(lock, [&] { return jobs.size() < max_backlog; });
+      }
+      jobs.push_back(std::move(job));
+      steps_queued.fetch_add(1, std::memory_order_relaxed);
+      if (jobs.size() > max_backlog) {
+        dropped.emplace(std::move(jobs.front()));
+        jobs.pop_front();
+      }
+      backlog.store(jobs.size(), std::memory_order_relaxed);
+      if (runners < config.monitor.workers) {
+        ++runners;
+        boost::asio::post(pool, [this] { run_jobs(); });
+      }
+    }
+    if (dropped) {
+      const std::uint64_t drops = step_drops.fetch_add(1, std::memory_order_relaxed) + 1;
+      if (auto held = step_drop_log.allow()) {
+        spdlog::warn(
+            "monitor: step backlog full ({} steps): dropped foot {} step {}; {} dropped "
+            "so far ({} similar messages suppressed)",
+            max_backlog, foot_name(dropped->foot), dropped->step.index, drops, *held);
+      }
+      complete(dropped->foot, dropped->seq, std::nullopt);
+    }
+  }
+
+  void maybe_status() {
+    const auto now = Clock::now();
+    if (now < next_status) return;
+    next_status = now + status_period;
+    const std::uint64_t drops = ring.drops();
+    if (drops > ring_drops_logged) {
+      spdlog::warn("monitor: ring full: {} frames dropped in the last {:.1f} s, {} in all",
+                   drops - ring_drops_logged, config.monitor.status_period_s, drops);
+      ring_drops_logged = drops;
+    }
+    send(status(false));
+  }
+
+  // ---- workers ----
+
+  /// One runner per worker at most: each takes the oldest waiting step until none is left.
+  void run_jobs() {
+    static thread_local ContactEllipseCache cache;
+    for (;;) {
+      std::optional<Job> job;
+      {
+        const std::lock_guard lock(jobs_mutex);
+        if (jobs.empty()) {
+          --runners;
+          return;
+        }
+        job.emplace(std::move(jobs.front()));
+        jobs.pop_front();
+        backlog.store(jobs.size(), std::memory_order_relaxed);
+      }
+      room.notify_one();
+      try {
+        Ready ready{{}, job->finalised, false};
+        try {
+          const StepAnalysis analysis =
+              analyse_step(job->step, *job->layout, config, options.analysis, &cache);
+          ready.report = fit_report(analysis, ready.failed);
+        } catch (const std::exception& e) {
+          ready.report = failed_report(job->step, e.what());
+          ready.failed = true;
+          if (auto held = fit_log.allow()) {
+            spdlog::warn("monitor: foot {} step {}: analysis failed: {} ({} similar suppressed)",
+                         foot_name(job->foot), job->step.index, e.what(), *held);
+          }
+        }
+        complete(job->foot, job->seq, std::move(ready));
+      } catch (const std::exception& e) {
+        spdlog::error("monitor: foot {} step {} lost: {}", foot_name(job->foot), job->step.index,
+                      e.what());
+        complete(job->foot, job->seq, std::nullopt);
+      }
+    }
+  }
+
+  /// Files one outcome (nullopt: dropped) and publishes every result now in order. One thread
+  /// at a time drains a foot's buffer, publishing outside the lock, so neither the detector
+  /// (filing a dropped step) nor another worker ever waits for a slow publisher.
+  void complete(Foot foot, std::uint64_t seq, std::optional<Ready> ready) {
+    std::unique_lock lock(publish_mutex);
+    Reorder& r = reorder[static_cast<std::size_t>(foot)];
+    r.pending.emplace(seq, std::move(ready));
+    if (r.draining) return;
+    r.draining = true;
+    while (!r.pending.empty() && r.pending.begin()->first == r.next) {
+      auto node = r.pending.extract(r.pending.begin());
+      ++r.next;
+      if (!node.mapped()) continue;
+      Ready& done = *node.mapped();
+      lock.unlock();
+      done.report.utime = now_utime();
+      done.report.latency_ms = ms_between(done.finalised, Clock::now());
+      send(done.report);
+      lock.lock();
+      if (latencies.size() < kLatencyWindow) {
+        latencies.push_back(done.report.latency_ms);
+      } else {
+        latencies[latency_next] = done.report.latency_ms;
+      }
+      latency_next = (latency_next + 1) % kLatencyWindow;
+      fits_published.fetch_add(1, std::memory_order_relaxed);
+      if (done.failed) fits_failed.fetch_add(1, std::memory_order_relaxed);
+    }
+    r.draining = false;
+  }
+
+  // ---- any thread ----
+
+  template <typename Message>
+  void send(const Message& message) {
+    try {
+      publisher.publish(message);
+    } catch (const std::exception& e) {
+      if (auto held = publish_log.allow()) {
+        spdlog::warn("monitor: publishing failed: {} ({} similar suppressed)", e.what(), *held);
+      }
+    }
+  }
+
+  MonitorCounters counters() const {
+    MonitorCounters c;
+    c.ring_drops = ring.drops();
+    c.frames_offered = ring.pushed() + c.ring_drops;
+    c.ring_depth = ring.depth();
+    c.frames_processed = processed.load(std::memory_order_relaxed);
+    c.frames_rejected = rejected.load(std::memory_order_relaxed);
+    c.steps_detected = steps_detected.load(std::memory_order_relaxed);
+    c.steps_queued = steps_queued.load(std::memory_order_relaxed);
+    c.step_backlog = backlog.load(std::memory_order_relaxed);
+    c.step_drops = step_drops.load(std::memory_order_relaxed);
+    c.fits_published = fits_published.load(std::memory_order_relaxed);
+    c.fits_failed = fits_failed.load(std::memory_order_relaxed);
+    return c;
+  }
+
+  StatusReport status(bool final) {
+    StatusReport s;
+    s.connection = "connected";
+    if (options.driver_status) {
+      try {
+        options.driver_status(s);
+      } catch (const std::exception& e) {
+        spdlog::warn("monitor: the driver's status failed: {}", e.what());
+      }
+    }
+    if (final) s.connection = "finished";
+    const MonitorCounters c = counters();
+    s.utime = now_utime();
+    s.ring_depth = c.ring_depth;
+    s.ring_drops = c.ring_drops;
+    s.frames_processed = c.frames_processed;
+    s.frames_rejected = c.frames_rejected;
+    s.steps_detected = c.steps_detected;
+    s.step_backlog = c.step_backlog;
+    s.step_drops = c.step_drops;
+    s.fits_published = c.fits_published;
+    s.fits_failed = c.fits_failed;
+    std::vector<double> window;
+    {
+      const std::lock_guard lock(publish_mutex);
+      window = latencies;
+    }
+    s.fit_latency_p50_ms = percentile(window, 0.50);
+    s.fit_latency_p99_ms = percentile(window, 0.99);
+    return s;
+  }
+
+  void stop() {
+    const std::lock_guard lock(stop_mutex);
+    if (stopped) return;
+    closed.store(true);
+    input_done.store(true, std::memory_order_release);
+    if (detector.joinable()) detector.join();
+    pool.join();
+    send(status(true));
+    stopped = true;
+  }
+
+  const Config config;
+  const MonitorOptions options;
+  Publisher& publisher;
+  FrameRing ring;
+  const Clock::duration status_period;
+  std::atomic<bool> closed{false};
+  std::atomic<bool> input_done{false};
+  std::mutex stop_mutex;
+  bool stopped = false;
+
+  // Detector thread only.
+  std::array<FootState, 2> feet;
+  ContactEllipseCache ellipses;
+  FrameScratch scratch;
+  std::vector<Step> finalised;
+  FrameReport frame_report;
+  RawFrameReport raw_report;
+  Clock::time_point next_status;
+  std::uint64_t ring_drops_logged = 0;
+
+  std::atomic<std::uint64_t> processed{0}, rejected{0}, steps_detected{0}, steps_queued{0},
+      backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0};
+
+  // The backlog, shared by the detector and the workers.
+  std::mutex jobs_mutex;
+  std::condition_variable room;
+  std::deque<Job> jobs;
+  int runners = 0;
+
+  // Publication of fits, shared by the workers (and the detector for dropped steps).
+  std::mutex publish_mutex;
+  std::array<Reorder, 2> reorder;
+  std::vector<double> latencies;
+  std::size_t latency_next = 0;
+
+  LogThrottle reject_log, step_drop_log, fit_log, publish_log;
+
+  boost::asio::thread_pool pool;
+  std::thread detector;
+};
+
+Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publisher) {
+  if (!(options.sample_rate_hz > 0.0) || !std::isfinite(options.sample_rate_hz)) {
+    throw std::invalid_argument("Monitor: the sample rate must be positive");
+  }
+  if (config.monitor.workers < 1 || config.monitor.max_step_backlog < 1 ||
+      !(config.monitor.status_period_s > 0.0)) {
+    throw std::invalid_argument(
+        "Monitor: workers, max_step_backlog and status_period_s must be "
+        "positive");
+  }
+  impl_ = std::make_unique<Impl>(config, std::move(options), publisher);
+}
+
+Monitor::~Monitor() {
+  stop();
+}
+
+bool Monitor::offer(const SensorFrame& frame) {
+  if (impl_->closed.load(std::memory_order_relaxed)) return false;
+  return impl_->ring.try_push(frame);
+}
+
+bool Monitor::offer_wait(const SensorFrame& frame) {
+  if (impl_->closed.load(std::memory_order_relaxed)) return false;
+  return impl_->ring.push_wait(frame, impl_->closed);
+}
+
+void Monitor::close() {
+  impl_->closed.store(true);
+}
+
+void Monitor::stop() {
+  impl_->stop();
+}
+
+MonitorCounters Monitor::counters() const {
+  return impl_->counters();
+}
+
+}  // namespace gaitmon

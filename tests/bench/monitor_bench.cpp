@@ -1,0 +1,173 @@
+// The live monitor's speed: the frame ring between two threads (target >= 10 M frames/s), a
+// 10-minute two-foot session replayed through the monitor as fast as it goes, with fitting
+// (target >= 300 x real time), and the end-of-step to publication latency when frames arrive at
+// real time (target p99 <= 20 ms).
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gaitmon/frame_ring.hpp"
+#include "gaitmon/monitor.hpp"
+#include "gaitmon/simulator.hpp"
+#include "monitor_support.hpp"
+#include "test_support.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+const gaitmon::Config& config() {
+  static const gaitmon::Config c = gaitmon::load_config(gaitmon::default_config_path());
+  return c;
+}
+
+std::vector<gaitmon::SensorFrame> ten_minute_session() {
+  const fs::path dir = gaitmon::test::scratch_dir("monitor_bench");
+  gaitmon::SimulationOptions options;
+  options.duration_s = 600.0;
+  options.seed = 7;
+  gaitmon::simulate_session(config(), options, dir / "ten.csv", dir / "ten.truth.json");
+  return gaitmon::test::session_frames(dir / "ten.csv");
+}
+
+/// Keeps only what the benchmarks report: the fits' latencies.
+class LatencyPublisher : public gaitmon::Publisher {
+ public:
+  void publish(const gaitmon::FrameReport&) override {}
+  void publish(const gaitmon::StepEvent&) override {}
+  void publish(const gaitmon::StatusReport&) override {}
+  void publish(const gaitmon::RawFrameReport&) override {}
+  void publish(const gaitmon::FitReport& r) override {
+    const std::lock_guard lock(mutex_);
+    latencies_ms_.push_back(r.latency_ms);
+  }
+  std::vector<double> latencies_ms() const {
+    const std::lock_guard lock(mutex_);
+    return latencies_ms_;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<double> latencies_ms_;
+};
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size())));
+  return v[std::max<std::size_t>(rank, 1) - 1];
+}
+
+// One producer and one consumer thread moving frames through the ring; each yields its core
+// when the ring is full or empty (on a shared 2-core machine a spinning thread would starve the
+// other).
+void BM_FrameRingThroughput(benchmark::State& state) {
+  constexpr std::uint64_t kFrames = 2'000'000;
+  gaitmon::FrameRing ring(static_cast<std::size_t>(state.range(0)));
+  gaitmon::SensorFrame frame;
+  frame.sensor_count = 107;
+  for (auto _ : state) {
+    std::thread consumer([&] {
+      gaitmon::SensorFrame out;
+      for (std::uint64_t i = 0; i < kFrames; ++i) {
+        while (!ring.try_pop(out)) std::this_thread::yield();
+        benchmark::DoNotOptimize(out.sequence);
+      }
+    });
+    for (std::uint64_t i = 0; i < kFrames; ++i) {
+      frame.sequence = static_cast<std::uint32_t>(i);
+      while (!ring.try_push(frame)) std::this_thread::yield();
+    }
+    consumer.join();
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kFrames));
+}
+BENCHMARK(BM_FrameRingThroughput)->Arg(4096)->UseRealTime()->Unit(benchmark::kMillisecond);
+
+// The ring's own cost without scheduling: one thread pushes a batch and pops it again. On a
+// loaded machine the two-thread figure above measures the scheduler as much as the ring.
+void BM_FrameRingPushPopOneThread(benchmark::State& state) {
+  const auto batch = static_cast<std::size_t>(state.range(0));
+  gaitmon::FrameRing ring(batch);
+  gaitmon::SensorFrame frame;
+  frame.sensor_count = 107;
+  gaitmon::SensorFrame out;
+  for (auto _ : state) {
+    for (std::size_t i = 0; i < batch; ++i) {
+      frame.sequence = static_cast<std::uint32_t>(i);
+      benchmark::DoNotOptimize(ring.try_push(frame));
+    }
+    for (std::size_t i = 0; i < batch; ++i) benchmark::DoNotOptimize(ring.try_pop(out));
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * batch));
+}
+BENCHMARK(BM_FrameRingPushPopOneThread)->Arg(256);
+
+// The replay path without the wire: frames offered with offer_wait, steps waiting for a worker
+// rather than dropped, full fits, frame reports on. Reports the speed as a multiple of the 600 s.
+void BM_MonitorReplayTenMinutes(benchmark::State& state) {
+  static const std::vector<gaitmon::SensorFrame> frames = ten_minute_session();
+  gaitmon::Config c = config();
+  c.monitor.publish_frames = state.range(0) != 0;
+  double seconds = 0.0;
+  for (auto _ : state) {
+    LatencyPublisher publisher;
+    gaitmon::MonitorOptions options;
+    options.backlog_overflow = gaitmon::BacklogOverflow::Wait;
+    const auto start = Clock::now();
+    gaitmon::Monitor monitor(c, options, publisher);
+    for (const auto& frame : frames) {
+      if (!monitor.offer_wait(frame)) state.SkipWithError("the monitor refused a frame");
+    }
+    monitor.stop();
+    seconds += std::chrono::duration<double>(Clock::now() - start).count();
+    state.counters["fits"] = static_cast<double>(monitor.counters().fits_published);
+  }
+  state.counters["x_real_time"] = 600.0 * static_cast<double>(state.iterations()) / seconds;
+}
+BENCHMARK(BM_MonitorReplayTenMinutes)
+    ->ArgName("publish_frames")
+    ->Arg(1)
+    ->Arg(0)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->Unit(benchmark::kSecond);
+
+// Frames of the bundled 60 s demo offered at their own pace (as a live insole delivers them);
+// the latency of each fit from the step's finalisation to its publication.
+void BM_MonitorLatencyRealTime(benchmark::State& state) {
+  static const std::vector<gaitmon::SensorFrame> frames = gaitmon::test::session_frames(
+      gaitmon::test::source_dir() / "replay" / "demo-simulated-37-38.csv");
+  std::vector<double> latencies;
+  for (auto _ : state) {
+    LatencyPublisher publisher;
+    gaitmon::Monitor monitor(config(), gaitmon::MonitorOptions{}, publisher);
+    const auto start = Clock::now();
+    const std::uint32_t t0 = frames.front().device_time_us;
+    for (const auto& frame : frames) {
+      std::this_thread::sleep_until(start + std::chrono::microseconds(frame.device_time_us - t0));
+      if (!monitor.offer(frame)) state.SkipWithError("a frame was dropped at real time");
+    }
+    monitor.stop();
+    const auto l = publisher.latencies_ms();
+    latencies.insert(latencies.end(), l.begin(), l.end());
+  }
+  state.counters["fits"] = static_cast<double>(latencies.size());
+  state.counters["p50_ms"] = percentile(latencies, 0.50);
+  state.counters["p99_ms"] = percentile(latencies, 0.99);
+  state.counters["max_ms"] = percentile(latencies, 1.0);
+}
+BENCHMARK(BM_MonitorLatencyRealTime)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,155 @@
+// `gaitmon replay` end to end through the in-process fake driver, the wire format, the real
+// decoder, the monitor and LCM (the file:// provider writes an LCM log): the fits equal
+// `gaitmon analyze` on the same session, and SIGINT stops it cleanly within 2 s.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <gaitmon/fit_t.hpp>
+#include <gaitmon/status_t.hpp>
+#include <map>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "lcm/bus_support.hpp"
+#include "monitor_support.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+fs::path demo_30s(const fs::path& dir) {
+  return test::cut_session(test::source_dir() / "replay" / "demo-simulated-37-38.csv",
+                           dir / "demo30.csv", 30.0);
+}
+
+template <typename Message>
+std::vector<Message> decode(const std::vector<test::LogEvent>& events, const std::string& channel) {
+  std::vector<Message> out;
+  for (const test::LogEvent& e : events) {
+    if (e.channel != channel) continue;
+    Message m;
+    if (m.decode(e.data.data(), 0, static_cast<int>(e.data.size())) < 0) {
+      ADD_FAILURE() << "undecodable message on " << channel;
+      continue;
+    }
+    out.push_back(m);
+  }
+  return out;
+}
+
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> fields;
+  std::stringstream in(line);
+  std::string field;
+  while (std::getline(in, field, ',')) fields.push_back(field);
+  if (!line.empty() && line.back() == ',') fields.emplace_back();
+  return fields;
+}
+
+// regions.csv of `gaitmon analyze`, keyed by foot, step and region.
+std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>>
+read_regions_csv(const fs::path& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  const std::vector<std::string> columns = split(line);
+  std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>> rows;
+  while (std::getline(in, line)) {
+    const std::vector<std::string> fields = split(line);
+    std::map<std::string, std::string> row;
+    for (std::size_t i = 0; i < columns.size() && i < fields.size(); ++i) {
+      row[columns[i]] = fields[i];
+    }
+    rows[{row["foot"], std::stoi(row["step"]), row["region"]}] = row;
+  }
+  return rows;
+}
+
+// analyze prints 4-6 significant digits; the replay's values are full doubles.
+void expect_printed(double value, const std::string& printed, const std::string& what) {
+  const double expected = std::stod(printed);
+  EXPECT_NEAR(value, expected, 1e-3 * std::abs(expected) + 1e-12) << what;
+}
+
+TEST(ReplayCommand, FitsEqualAnalyzeOnTheSameSession) {
+  const fs::path dir = test::scratch_dir("replay-vs-analyze");
+  const fs::path session = demo_30s(dir);
+  const fs::path log = dir / "replay.lcmlog";
+  std::string output;
+  ASSERT_EQ(test::run_command(test::gaitmon_binary().string() + " --log-level warn replay " +
+                                  session.string() + " --speed max --lcm-url 'file://" +
+                                  log.string() + "?mode=w'",
+                              &output),
+            0)
+      << output;
+  ASSERT_EQ(test::run_command(test::gaitmon_binary().string() + " analyze " + session.string() +
+                                  " --out " + (dir / "analyze").string(),
+                              &output),
+            0)
+      << output;
+  const auto expected = read_regions_csv(dir / "analyze" / "regions.csv");
+  const auto events = test::read_lcm_log(log);
+  const auto fits = decode<gaitmon::fit_t>(events, "GAITMON_FIT");
+  ASSERT_GT(fits.size(), 20u);
+  EXPECT_EQ(fits.size() * kRegionCount, expected.size()) << "one fit per analysed step";
+  for (const gaitmon::fit_t& fit : fits) {
+    for (const gaitmon::region_fit_t& r : fit.regions) {
+      const std::string foot = fit.foot == 0 ? "L" : "R";
+      const std::string where = foot + " step " + std::to_string(fit.step) + " " + r.region_name;
+      const auto it = expected.find({foot, fit.step, r.region_name});
+      ASSERT_NE(it, expected.end()) << where;
+      const auto& row = it->second;
+      const std::string status = r.status.substr(0, r.status.find(':'));
+      EXPECT_EQ(row.at("status").substr(0, row.at("status").find(':')), status) << where;
+      if (r.status != "ok") continue;
+      expect_printed(r.kbar_n_per_mm3, row.at("kbar_n_per_mm3"), where + " kbar");
+      expect_printed(r.n, row.at("n"), where + " n");
+      expect_printed(r.cbar_ns_per_mm3, row.at("cbar_ns_per_mm3"), where + " cbar");
+      expect_printed(r.m, row.at("m"), where + " m");
+      expect_printed(r.A_mm, row.at("A_mm"), where + " A");
+      expect_printed(r.B_mm, row.at("B_mm"), where + " B");
+      expect_printed(r.nrmse_pct, row.at("nrmse_pct"), where + " nrmse");
+    }
+  }
+  const auto statuses = decode<gaitmon::status_t>(events, "GAITMON_STATUS");
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().connection, "finished");
+  EXPECT_EQ(statuses.back().ring_drops, 0);
+  EXPECT_EQ(statuses.back().step_drops, 0);
+  EXPECT_EQ(statuses.back().fits_published, static_cast<std::int64_t>(fits.size()));
+  EXPECT_EQ(statuses.back().frames_decoded,
+            static_cast<std::int64_t>(test::session_frames(session).size()));
+}
+
+TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {
+  const fs::path dir = test::scratch_dir("replay-sigint");
+  const fs::path log = dir / "replay.lcmlog";
+  test::ChildProcess replay({test::gaitmon_binary().string(), "replay", "--speed", "1", "--lcm-url",
+                             "file://" + log.string() + "?mode=w"});
+  // The first fitted step is printed about 1.5 s in.
+  const auto first = replay.read_until(test::ChildProcess::Stdout, "stance",
+                                       Clock::now() + std::chrono::seconds(60));
+  ASSERT_FALSE(first.empty()) << "no step line from gaitmon replay";
+  const auto sent = Clock::now();
+  replay.signal(SIGINT);
+  const auto status = replay.wait(sent + std::chrono::seconds(10));
+  const double took_s = std::chrono::duration<double>(Clock::now() - sent).count();
+  ASSERT_TRUE(status.has_value()) << "still running 10 s after SIGINT";
+  EXPECT_EQ(*status, 0);
+  EXPECT_LT(took_s, 2.0);
+  const auto statuses = decode<gaitmon::status_t>(test::read_lcm_log(log), "GAITMON_STATUS");
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().connection, "finished");
+  EXPECT_GT(statuses.back().frames_decoded, 0);
+}
+
+}  // namespace
+}  // namespace gaitmon

@@ -1,0 +1,252 @@
+// The serial driver against real pseudo-terminals made here: frames written to the master
+// arrive decoded; a pty that closes and comes back under the same link path is reconnected.
+#include "drivers/serial_source.hpp"
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <pty.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <filesystem>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "drivers/frame_decoder.hpp"
+#include "gaitmon/session.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon::drivers {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+// One pseudo-terminal in raw mode. The test keeps its slave end open too, so bytes written
+// before the driver opens the slave wait in the pty instead of being lost.
+class Pty {
+ public:
+  Pty() {
+    if (openpty(&master_, &slave_, nullptr, nullptr, nullptr) != 0)
+      throw std::runtime_error("openpty");
+    termios tio{};
+    tcgetattr(slave_, &tio);
+    cfmakeraw(&tio);
+    tcsetattr(slave_, TCSANOW, &tio);
+    path_ = ttyname(slave_);
+  }
+  ~Pty() { close(); }
+  Pty(const Pty&) = delete;
+  Pty& operator=(const Pty&) = delete;
+
+  const std::string& path() const { return path_; }
+  void write_all(const std::vector<std::uint8_t>& bytes) {
+    std::size_t at = 0;
+    while (at < bytes.size()) {
+      const ssize_t n = ::write(master_, bytes.data() + at, bytes.size() - at);
+      if (n <= 0) throw std::runtime_error("write to pty master");
+      at += static_cast<std::size_t>(n);
+    }
+  }
+  void close() {
+    if (master_ >= 0) ::close(master_);
+    if (slave_ >= 0) ::close(slave_);
+    master_ = slave_ = -1;
+  }
+
+ private:
+  int master_ = -1;
+  int slave_ = -1;
+  std::string path_;
+};
+
+// Replaces `link` atomically, as fake-insole does.
+void point_link(const fs::path& link, const std::string& target) {
+  const fs::path tmp = link.string() + ".tmp";
+  fs::remove(tmp);
+  fs::create_symlink(target, tmp);
+  fs::rename(tmp, link);
+}
+
+std::vector<std::uint8_t> frames_bytes(Foot foot, std::uint32_t first, std::uint32_t count) {
+  const WireFormat format;
+  std::vector<std::uint8_t> out;
+  for (std::uint32_t seq = first; seq < first + count; ++seq) {
+    SensorFrame frame;
+    frame.foot = foot;
+    frame.size = InsoleSize::S37_38;
+    frame.sensor_count = 107;
+    frame.sequence = seq;
+    frame.device_time_us = seq * 10000;
+    for (std::size_t i = 0; i < 107; ++i) frame.bits[i] = static_cast<std::uint8_t>(seq + i);
+    std::vector<std::uint8_t> one(format.frame_bytes(107));
+    encode_frame(format, frame, one);
+    out.insert(out.end(), one.begin(), one.end());
+  }
+  return out;
+}
+
+// The driver on its own thread, feeding a decoder; what it delivers, guarded for the test.
+class Harness {
+ public:
+  explicit Harness(SerialSettings settings) : source_(std::move(settings)) {
+    thread_ = std::thread([this] {
+      source_.run(
+          [this](std::span<const std::uint8_t> bytes) {
+            decoder_.feed(bytes, [this](const SensorFrame& frame) {
+              std::lock_guard lock(mutex_);
+              sequences_.push_back(frame.sequence);
+              bits_ok_ = bits_ok_ && frame.bits[5] == static_cast<std::uint8_t>(frame.sequence + 5);
+              changed_.notify_all();
+            });
+          },
+          [this](LinkState state, std::string_view detail) {
+            if (state == LinkState::Disconnected) decoder_.reset();
+            std::lock_guard lock(mutex_);
+            states_.emplace_back(state, std::string(detail));
+            changed_.notify_all();
+          });
+    });
+  }
+  ~Harness() { stop(); }
+
+  void stop() {
+    source_.stop();
+    if (thread_.joinable()) thread_.join();
+  }
+  bool wait_frames(std::size_t n) {
+    std::unique_lock lock(mutex_);
+    return changed_.wait_for(lock, 10s, [&] { return sequences_.size() >= n; });
+  }
+  bool wait_states(std::size_t n) {
+    std::unique_lock lock(mutex_);
+    return changed_.wait_for(lock, 10s, [&] { return states_.size() >= n; });
+  }
+  std::vector<std::uint32_t> sequences() {
+    std::lock_guard lock(mutex_);
+    return sequences_;
+  }
+  std::vector<std::pair<LinkState, std::string>> states() {
+    std::lock_guard lock(mutex_);
+    return states_;
+  }
+  bool bits_ok() {
+    std::lock_guard lock(mutex_);
+    return bits_ok_;
+  }
+  DecoderCounters counters() const { return decoder_.counters(); }
+
+ private:
+  SerialSource source_;
+  FrameDecoder decoder_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<std::uint32_t> sequences_;
+  std::vector<std::pair<LinkState, std::string>> states_;
+  bool bits_ok_ = true;
+  std::thread thread_;
+};
+
+SerialSettings settings_for(const fs::path& device) {
+  SerialSettings settings;
+  settings.device = device.string();
+  settings.baud = 115200;
+  settings.reconnect_initial_ms = 20;
+  settings.reconnect_max_ms = 200;
+  return settings;
+}
+
+TEST(SerialSource, DeliversFramesWrittenToAPty) {
+  Pty pty;
+  Harness harness(settings_for(pty.path()));
+  pty.write_all(frames_bytes(Foot::Left, 0, 300));
+  ASSERT_TRUE(harness.wait_frames(300));
+  const auto sequences = harness.sequences();
+  for (std::uint32_t i = 0; i < 300; ++i) ASSERT_EQ(sequences[i], i);
+  EXPECT_TRUE(harness.bits_ok());
+  harness.stop();
+  const auto states = harness.states();
+  ASSERT_EQ(states.size(), 3U);
+  EXPECT_EQ(states[0].first, LinkState::Connecting);
+  EXPECT_EQ(states[1].first, LinkState::Connected);
+  EXPECT_EQ(states[2].first, LinkState::Disconnected);
+  EXPECT_EQ(harness.counters().garbage_bytes, 0U);
+}
+
+TEST(SerialSource, ReconnectsWhenThePtyComesBackUnderTheLink) {
+  const fs::path link = test::scratch_dir("serial-reconnect") / "insole";
+  auto first = std::make_unique<Pty>();
+  point_link(link, first->path());
+  Harness harness(settings_for(link));
+  first->write_all(frames_bytes(Foot::Right, 0, 50));
+  ASSERT_TRUE(harness.wait_frames(50));
+
+  first->close();  // the device disappears
+  ASSERT_TRUE(harness.wait_states(3));
+  EXPECT_EQ(harness.states()[2].first, LinkState::Disconnected);
+  std::this_thread::sleep_for(100ms);  // a few failed reopen attempts
+  auto second = std::make_unique<Pty>();
+  point_link(link, second->path());
+  second->write_all(frames_bytes(Foot::Right, 50, 50));
+  ASSERT_TRUE(harness.wait_frames(100));
+  const auto sequences = harness.sequences();
+  for (std::uint32_t i = 0; i < 100; ++i) ASSERT_EQ(sequences[i], i);
+  harness.stop();
+
+  const auto states = harness.states();
+  ASSERT_GE(states.size(), 5U);
+  EXPECT_EQ(states[0].first, LinkState::Connecting);
+  EXPECT_EQ(states[1].first, LinkState::Connected);
+  EXPECT_EQ(states[2].first, LinkState::Disconnected);
+  EXPECT_NE(states[2].second.find(link.string()), std::string::npos) << states[2].second;
+  EXPECT_EQ(states[3].first, LinkState::Connecting);
+  EXPECT_EQ(states[4].first, LinkState::Connected);
+  EXPECT_EQ(harness.counters().lost_frames_total(), 0U);
+  EXPECT_EQ(harness.counters().frames, 100U);
+}
+
+TEST(SerialSource, WaitsForAMissingDeviceAndStopsCleanly) {
+  const fs::path link = test::scratch_dir("serial-missing") / "not-yet";
+  Harness harness(settings_for(link));
+  ASSERT_TRUE(harness.wait_states(1));
+  std::this_thread::sleep_for(150ms);
+  auto states = harness.states();
+  ASSERT_EQ(states.size(), 1U);  // failed attempts are not reported again and again
+  EXPECT_EQ(states[0].first, LinkState::Connecting);
+
+  Pty pty;  // the device appears late
+  point_link(link, pty.path());
+  pty.write_all(frames_bytes(Foot::Left, 0, 10));
+  ASSERT_TRUE(harness.wait_frames(10));
+
+  const auto before = std::chrono::steady_clock::now();
+  harness.stop();
+  EXPECT_LT(std::chrono::steady_clock::now() - before, 1s);
+  states = harness.states();
+  ASSERT_EQ(states.size(), 3U);
+  EXPECT_EQ(states[1].first, LinkState::Connected);
+  EXPECT_EQ(states[2].first, LinkState::Disconnected);
+}
+
+TEST(SerialSource, StopBeforeRunReturnsAtOnce) {
+  SerialSource source(settings_for("/nonexistent/tty"));
+  source.stop();
+  int calls = 0;
+  source.run([&](std::span<const std::uint8_t>) { ++calls; },
+             [&](LinkState, std::string_view) { ++calls; });
+  EXPECT_EQ(calls, 0);
+}
+
+TEST(ByteSource, NamesTheLinkStates) {
+  EXPECT_EQ(link_state_name(LinkState::Connecting), "connecting");
+  EXPECT_EQ(link_state_name(LinkState::Connected), "connected");
+  EXPECT_EQ(link_state_name(LinkState::Disconnected), "disconnected");
+}
+
+}  // namespace
+}  // namespace gaitmon::drivers

@@ -1,0 +1,111 @@
+// Reports with a distinct, hand-picked value in every field, so that a field mapped to the wrong
+// place or lost on the way shows up; shared by the tests in tests/lcm/.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "gaitmon/publisher.hpp"
+
+namespace gaitmon::test {
+
+inline FrameReport sample_frame() {
+  FrameReport r;
+  r.utime = 1763737200123456;
+  r.foot = Foot::Right;
+  r.frame = 4242;
+  r.t_s = 42.42;
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    const double k = static_cast<double>(i);
+    RegionFrameReport& g = r.regions[i];
+    g.force_n = 100.25 + k;
+    g.active_area_mm2 = 225.5 + k;
+    g.ellipse_case = static_cast<std::uint8_t>(i % 6);
+    g.centre_x_mm = -10.125 - k;
+    g.centre_y_mm = 150.0625 + k;
+    g.ra_mm = 20.5 + k;
+    g.rb_mm = 10.75 + k;
+    g.angle_rad = 0.3 + 0.01 * k;
+    g.ellipse_area_mm2 = 700.125 + k;
+  }
+  return r;
+}
+
+inline StepEvent sample_step() {
+  StepEvent e;
+  e.utime = 1763737200223456;
+  e.foot = Foot::Left;
+  e.step = 17;
+  e.kind = StepEvent::Kind::ToeOff;
+  e.frame = 1234;
+  e.t_s = 12.34;
+  return e;
+}
+
+inline FitReport sample_fit() {
+  FitReport r;
+  r.utime = 1763737200323456;
+  r.foot = Foot::Right;
+  r.step = 23;
+  r.t_heel_strike_s = 30.125;
+  r.t_toe_off_s = 30.75;
+  r.nrmse_total_pct = 4.5;
+  r.latency_ms = 1.875;
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    const double k = static_cast<double>(i);
+    RegionFitReport& g = r.regions[i];
+    g.region = kRegions[i];
+    g.status = i == 6 ? "fit_failed:no convergence" : (i == 7 ? "no_contact" : "ok");
+    g.kbar_n_per_mm3 = 0.117 + 0.001 * k;
+    g.n = 0.5 + 0.01 * k;
+    g.cbar_ns_per_mm3 = 0.02 + 0.001 * k;
+    g.m = 1.1 + 0.01 * k;
+    g.se_kbar = 0.003 + 0.0001 * k;
+    g.se_n = 0.02 + 0.001 * k;
+    g.se_cbar = 0.002 + 0.0001 * k;
+    g.se_m = 0.05 + 0.001 * k;
+    g.A_mm = 40.5 + k;
+    g.B_mm = 30.25 + k;
+    g.C_mm = 60.125 + k;
+    g.d0_mm = 10.5 + k;
+    g.nrmse_pct = 3.25 + k;
+  }
+  return r;
+}
+
+inline StatusReport sample_status() {
+  StatusReport s;
+  s.utime = 1763737200423456;
+  s.connection = "connected";
+  s.bytes_received = 123456789;
+  s.frames_decoded = 98765;
+  s.crc_errors = 3;
+  s.resyncs = 5;
+  s.frames_lost_sequence = 7;
+  s.reconnects = 2;
+  s.ring_depth = 11;
+  s.ring_drops = 13;
+  s.frames_processed = 98700;
+  s.frames_rejected = 31;
+  s.steps_detected = 17;
+  s.step_backlog = 19;
+  s.step_drops = 23;
+  s.fits_published = 29;
+  s.fits_failed = 31;
+  s.fit_latency_p50_ms = 1.5;
+  s.fit_latency_p99_ms = 12.25;
+  return s;
+}
+
+inline RawFrameReport sample_raw() {
+  RawFrameReport r;
+  r.utime = 1763737200523456;
+  r.foot = Foot::Left;
+  r.sequence = 4000000000U;  // above INT32_MAX: the unsigned range must survive
+  r.device_time_us = 3999999999U;
+  for (int i = 0; i < 161; ++i) r.bits.push_back(static_cast<std::uint8_t>((i * 37) % 256));
+  return r;
+}
+
+}  // namespace gaitmon::test

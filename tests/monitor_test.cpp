@@ -1,0 +1,475 @@
+// The live monitor against the batch pipeline: the same steps as segment_session, the same fits
+// as analyse_step, and the overflow, drop, rejection and shutdown rules of monitor.hpp.
+#include "gaitmon/monitor.hpp"
+
+#include <fmt/format.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/batch.hpp"
+#include "gaitmon/insole.hpp"
+#include "monitor_support.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+using test::RecordingPublisher;
+
+Config shipped_config() {
+  return load_config(test::source_dir() / "config" / "gaitmon.toml");
+}
+
+fs::path demo_session() {
+  return test::source_dir() / "replay" / "demo-simulated-37-38.csv";
+}
+
+// The first 30 s of the bundled demo: about 50 analysed steps, enough for every rule and short
+// enough for the sanitizer builds.
+fs::path demo_30s() {
+  static const fs::path path =
+      test::cut_session(demo_session(), test::scratch_dir("monitor-demo") / "demo30.csv", 30.0);
+  return path;
+}
+
+std::vector<Step> batch_steps(const fs::path& session, const Config& config) {
+  std::vector<Step> steps;
+  segment_session(session, config, [&](Step&& step) { steps.push_back(std::move(step)); });
+  return steps;
+}
+
+// Fits cut short (one start, five iterations): for tests about the plumbing, not the numbers.
+AnalysisSettings quick_fits() {
+  AnalysisSettings settings;
+  settings.fit.starts = 1;
+  settings.fit.max_iterations = 5;
+  return settings;
+}
+
+// Polls `done` every millisecond for up to 60 s.
+bool wait_until(const std::function<bool()>& done) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return true;
+}
+
+std::string expected_status(const RegionFit& fit) {
+  std::string s(fit_status_name(fit.status));
+  if (fit.status == FitStatus::Failed) s += ":" + fit.reason;
+  return s;
+}
+
+void expect_close(double actual, double expected, const std::string& what) {
+  if (!std::isfinite(expected)) {  // an undetermined standard error is infinite
+    EXPECT_EQ(actual, expected) << what;
+    return;
+  }
+  EXPECT_NEAR(actual, expected, 1e-9 * std::max(1.0, std::abs(expected))) << what;
+}
+
+using StepKey = std::pair<Foot, int>;
+
+TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
+  const Config config = shipped_config();
+  const std::vector<Step> steps = batch_steps(demo_30s(), config);
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.sample_rate_hz = header.sample_rate_hz;
+  options.backlog_overflow = BacklogOverflow::Wait;
+  MonitorCounters counters;
+  {
+    Monitor monitor(config, options, publisher);
+    for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
+    monitor.stop();
+    counters = monitor.counters();
+    EXPECT_FALSE(monitor.offer(frames.front())) << "a stopped monitor accepts nothing";
+  }
+
+  // Steps: a heel strike and a toe off per step, per foot in step order.
+  const auto events = publisher.events();
+  std::map<StepKey, std::pair<StepEvent, StepEvent>> by_step;
+  std::map<Foot, int> last_step{{Foot::Left, -1}, {Foot::Right, -1}};
+  for (std::size_t i = 0; i + 1 < events.size(); i += 2) {
+    const StepEvent& hs = events[i];
+    const StepEvent& to = events[i + 1];
+    ASSERT_EQ(hs.kind, StepEvent::Kind::HeelStrike);
+    ASSERT_EQ(to.kind, StepEvent::Kind::ToeOff);
+    ASSERT_EQ(hs.foot, to.foot);
+    ASSERT_EQ(hs.step, to.step);
+    EXPECT_EQ(hs.step, last_step[hs.foot] + 1);
+    last_step[hs.foot] = hs.step;
+    by_step[{hs.foot, hs.step}] = {hs, to};
+  }
+  ASSERT_EQ(events.size(), 2 * steps.size());
+  ASSERT_EQ(by_step.size(), steps.size());
+  std::size_t ok_steps = 0;
+  for (const Step& step : steps) {
+    const auto it = by_step.find({step.foot, step.index});
+    ASSERT_NE(it, by_step.end()) << foot_name(step.foot) << step.index;
+    const auto& [hs, to] = it->second;
+    EXPECT_EQ(hs.frame, step.heel_strike_frame);
+    EXPECT_EQ(to.frame, step.toe_off_frame);
+    // round(t_s x 1e6) / 1e6 gives back the file's t_s exactly (times have at most 6 decimals).
+    EXPECT_EQ(hs.t_s, step.t_heel_strike_s);
+    EXPECT_EQ(to.t_s, step.t_toe_off_s);
+    if (step.status == StepStatus::Ok) ++ok_steps;
+  }
+  ASSERT_GT(ok_steps, 20u);
+
+  // Fits: one per Ok step, per foot in step order, equal to analyse_step run directly.
+  const auto fits = publisher.fits();
+  ASSERT_EQ(fits.size(), ok_steps);
+  std::map<Foot, int> last_fit{{Foot::Left, -1}, {Foot::Right, -1}};
+  std::map<StepKey, FitReport> fit_of;
+  for (const FitReport& fit : fits) {
+    EXPECT_GT(fit.step, last_fit[fit.foot]) << "fits out of step order";
+    last_fit[fit.foot] = fit.step;
+    EXPECT_GE(fit.latency_ms, 0.0);
+    fit_of[{fit.foot, fit.step}] = fit;
+  }
+  const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+  for (const Step& step : steps) {
+    if (step.status != StepStatus::Ok) continue;
+    const StepAnalysis expected = analyse_step(step, layout, config, options.analysis);
+    const auto it = fit_of.find({step.foot, step.index});
+    ASSERT_NE(it, fit_of.end());
+    const FitReport& got = it->second;
+    const std::string at = fmt::format("{} step {}", foot_name(step.foot), step.index);
+    EXPECT_EQ(got.t_heel_strike_s, expected.t_heel_strike_s) << at;
+    EXPECT_EQ(got.t_toe_off_s, expected.t_toe_off_s) << at;
+    expect_close(got.nrmse_total_pct, expected.nrmse_total_pct, at + " nrmse_total");
+    for (const RegionAnalysis& r : expected.regions) {
+      const RegionFitReport& g = got.regions[index_of(r.region)];
+      const std::string where = at + " " + std::string(region_name(r.region));
+      EXPECT_EQ(g.region, r.region) << where;
+      EXPECT_EQ(g.status, expected_status(r.fit)) << where;
+      if (r.fit.status != FitStatus::Ok) continue;
+      expect_close(g.kbar_n_per_mm3, r.fit.kbar_n_per_mm3.value, where + " kbar");
+      expect_close(g.n, r.fit.n.value, where + " n");
+      expect_close(g.cbar_ns_per_mm3, r.fit.cbar_ns_per_mm3.value, where + " cbar");
+      expect_close(g.m, r.fit.m.value, where + " m");
+      expect_close(g.se_kbar, r.fit.kbar_n_per_mm3.se, where + " se_kbar");
+      expect_close(g.se_m, r.fit.m.se, where + " se_m");
+      expect_close(g.A_mm, r.fit.A_mm.value, where + " A");
+      expect_close(g.B_mm, r.fit.B_mm.value, where + " B");
+      expect_close(g.C_mm, r.fit.C_mm.value, where + " C");
+      expect_close(g.d0_mm, r.fit.d0_mm.value, where + " d0");
+      expect_close(g.nrmse_pct, r.fit.nrmse_pct, where + " nrmse");
+    }
+  }
+
+  // Frames: one report per frame, numbered per foot, at the file's times.
+  const auto reports = publisher.frames();
+  ASSERT_EQ(reports.size(), frames.size());
+  std::map<Foot, std::int64_t> next_frame{{Foot::Left, 0}, {Foot::Right, 0}};
+  for (std::size_t i = 0; i < reports.size(); ++i) {
+    ASSERT_EQ(reports[i].foot, frames[i].foot);
+    ASSERT_EQ(reports[i].frame, next_frame[reports[i].foot]++);
+    ASSERT_DOUBLE_EQ(reports[i].t_s, frames[i].device_time_us / 1e6);
+  }
+  // Before a foot's first step there is no bias: the heel's force is its raw bits x 0.28235 N.
+  int heel_bits = 0;
+  for (std::size_t s : layout.region_sensors(Region::Heel)) heel_bits += frames[0].bits[s];
+  EXPECT_NEAR(reports[0].regions[index_of(Region::Heel)].force_n, heel_bits * 0.282353, 1e-3);
+  EXPECT_DOUBLE_EQ(reports[0].regions[index_of(Region::Heel)].active_area_mm2,
+                   112.5 * static_cast<double>([&] {
+                     int active = 0;
+                     for (std::size_t s : layout.region_sensors(Region::Heel)) {
+                       active += frames[0].bits[s] > 0;
+                     }
+                     return active;
+                   }()));
+
+  // Counters, and the final status as the last message.
+  EXPECT_EQ(counters.frames_offered, frames.size());
+  EXPECT_EQ(counters.frames_processed, frames.size());
+  EXPECT_EQ(counters.frames_rejected, 0u);
+  EXPECT_EQ(counters.ring_drops, 0u);
+  EXPECT_EQ(counters.steps_detected, steps.size());
+  EXPECT_EQ(counters.steps_queued, ok_steps);
+  EXPECT_EQ(counters.step_drops, 0u);
+  EXPECT_EQ(counters.fits_published, ok_steps);
+  const auto order = publisher.order();
+  ASSERT_FALSE(order.empty());
+  EXPECT_EQ(order.back(), RecordingPublisher::Kind::Status);
+  const StatusReport last = publisher.statuses().back();
+  EXPECT_EQ(last.connection, "finished");
+  EXPECT_EQ(last.frames_processed, frames.size());
+  EXPECT_EQ(last.fits_published, ok_steps);
+  EXPECT_EQ(last.steps_detected, steps.size());
+  EXPECT_EQ(last.step_backlog, 0u);
+  EXPECT_GT(last.fit_latency_p99_ms, 0.0);
+  EXPECT_GE(last.fit_latency_p99_ms, last.fit_latency_p50_ms);
+}
+
+// Holds the first fit inside publish() until released, so the single worker is busy while the
+// detector queues more steps than the backlog holds.
+class GatedPublisher : public RecordingPublisher {
+ public:
+  void publish(const FitReport& r) override {
+    if (entered_.fetch_add(1) == 0) {
+      std::unique_lock lock(mutex_);
+      open_cv_.wait(lock, [&] { return open_; });
+    }
+    RecordingPublisher::publish(r);
+  }
+  using RecordingPublisher::publish;
+  int entered() const { return entered_.load(); }
+  void release() {
+    {
+      const std::lock_guard lock(mutex_);
+      open_ = true;
+    }
+    open_cv_.notify_all();
+  }
+
+ private:
+  std::atomic<int> entered_{0};
+  std::mutex mutex_;
+  std::condition_variable open_cv_;
+  bool open_ = false;
+};
+
+TEST(Monitor, BacklogOverflowDropsTheOldestWaitingSteps) {
+  Config config = shipped_config();
+  config.monitor.workers = 1;
+  config.monitor.max_step_backlog = 2;
+  config.monitor.publish_frames = false;
+  std::vector<StepKey> ok_order;  // the order in which the detector finalises Ok steps
+  for (const Step& step : batch_steps(demo_30s(), config)) {
+    if (step.status == StepStatus::Ok) ok_order.emplace_back(step.foot, step.index);
+  }
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  GatedPublisher publisher;
+  Monitor monitor(config, MonitorOptions{}, publisher);
+
+  // Feed frame by frame until the first step is queued, and let the worker take it.
+  std::size_t fed = 0;
+  while (monitor.counters().steps_queued == 0) {
+    ASSERT_LT(fed, frames.size());
+    ASSERT_TRUE(monitor.offer_wait(frames[fed++]));
+    ASSERT_TRUE(wait_until([&] { return monitor.counters().frames_processed == fed; }));
+  }
+  ASSERT_TRUE(wait_until([&] { return publisher.entered() == 1; }));
+  EXPECT_EQ(monitor.counters().step_backlog, 0u);
+
+  // The worker is stuck publishing step 0: every later step but the newest two is dropped,
+  // including those that stop() finalises at the end of the stream.
+  while (fed < frames.size()) ASSERT_TRUE(monitor.offer_wait(frames[fed++]));
+  std::thread stopper([&] { monitor.stop(); });
+  const std::size_t queued = ok_order.size();
+  ASSERT_GE(queued, 10u);
+  ASSERT_TRUE(wait_until([&] { return monitor.counters().steps_queued == queued; }));
+  const MonitorCounters held = monitor.counters();
+  EXPECT_EQ(held.step_backlog, 2u);
+  EXPECT_EQ(held.step_drops, queued - 3);
+  EXPECT_EQ(held.fits_published, 0u);
+  publisher.release();
+  stopper.join();
+
+  const MonitorCounters end = monitor.counters();
+  EXPECT_EQ(end.step_drops, queued - 3);
+  EXPECT_EQ(end.fits_published, 3u);
+  EXPECT_EQ(publisher.statuses().back().step_drops, queued - 3);
+  std::vector<StepKey> published;
+  for (const FitReport& fit : publisher.fits()) published.emplace_back(fit.foot, fit.step);
+  std::vector<StepKey> expected{ok_order[0], ok_order[queued - 2], ok_order[queued - 1]};
+  std::sort(published.begin(), published.end());
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(published, expected);
+}
+
+TEST(Monitor, FullRingDropsAndCountsFrames) {
+  Config config = shipped_config();
+  config.ring.capacity_frames = 8;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  options.publish_raw = true;
+  Monitor monitor(config, options, publisher);
+  std::uint64_t refused = 0;
+  for (const SensorFrame& frame : frames) refused += monitor.offer(frame) ? 0 : 1;
+  monitor.stop();
+  const MonitorCounters c = monitor.counters();
+  ASSERT_GT(refused, 0u) << "the detector kept up with an 8-frame ring; nothing was exercised";
+  EXPECT_EQ(c.ring_drops, refused);
+  EXPECT_EQ(c.frames_offered, frames.size());
+  EXPECT_EQ(c.frames_processed + c.ring_drops, frames.size());
+  EXPECT_EQ(c.frames_rejected, 0u);
+  EXPECT_EQ(publisher.frames().size(), c.frames_processed);
+  const auto raws = publisher.raws();
+  ASSERT_EQ(raws.size(), c.frames_processed);
+  // The ring was empty when the first frame came, so it is the first one out.
+  EXPECT_EQ(raws[0].sequence, frames[0].sequence);
+  EXPECT_EQ(raws[0].device_time_us, frames[0].device_time_us);
+  EXPECT_TRUE(std::equal(raws[0].bits.begin(), raws[0].bits.end(), frames[0].bits.begin()));
+  EXPECT_EQ(raws[0].bits.size(), frames[0].sensor_count);
+  const StatusReport last = publisher.statuses().back();
+  EXPECT_EQ(last.ring_drops, refused);
+  EXPECT_EQ(last.frames_processed, frames.size() - refused);
+}
+
+TEST(Monitor, StopDrainsTheRingFinishesTheFitsAndPublishesAFinalStatus) {
+  const Config config = shipped_config();
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  const std::size_t n = std::min<std::size_t>(frames.size(), config.ring.capacity_frames);
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  Monitor monitor(config, options, publisher);
+  for (std::size_t i = 0; i < n; ++i) ASSERT_TRUE(monitor.offer(frames[i]));
+  monitor.stop();
+  const MonitorCounters c = monitor.counters();
+  EXPECT_EQ(c.frames_processed, n);
+  EXPECT_EQ(c.ring_depth, 0u);
+  EXPECT_GT(c.steps_queued, 0u);
+  EXPECT_EQ(c.fits_published + c.step_drops, c.steps_queued);
+  EXPECT_EQ(publisher.fits().size(), c.fits_published);
+  ASSERT_EQ(publisher.order().back(), RecordingPublisher::Kind::Status);
+  EXPECT_EQ(publisher.statuses().back().connection, "finished");
+  EXPECT_EQ(publisher.statuses().back().frames_processed, n);
+  EXPECT_FALSE(monitor.offer(frames[0]));
+  monitor.stop();  // idempotent: no second final status
+  const auto order = publisher.order();
+  EXPECT_EQ(std::count(order.begin(), order.end(), RecordingPublisher::Kind::Status),
+            static_cast<std::ptrdiff_t>(publisher.statuses().size()));
+  const auto statuses = publisher.statuses();
+  EXPECT_EQ(std::count_if(statuses.begin(), statuses.end(),
+                          [](const StatusReport& s) { return s.connection == "finished"; }),
+            1);
+}
+
+TEST(Monitor, StatusIsPeriodicAndCarriesTheDriverCounters) {
+  Config config = shipped_config();
+  config.monitor.status_period_s = 0.02;
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.driver_status = [](StatusReport& s) {
+    s.bytes_received = 12345;
+    s.crc_errors = 7;
+    s.connection = "disconnected";
+  };
+  {
+    Monitor monitor(config, options, publisher);
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  const auto statuses = publisher.statuses();
+  ASSERT_GE(statuses.size(), 4u) << "a 20 ms period over 200 ms";
+  for (std::size_t i = 0; i + 1 < statuses.size(); ++i) {
+    EXPECT_EQ(statuses[i].connection, "disconnected");
+    EXPECT_EQ(statuses[i].bytes_received, 12345u);
+    EXPECT_EQ(statuses[i].crc_errors, 7u);
+  }
+  EXPECT_EQ(statuses.back().connection, "finished");
+  EXPECT_EQ(statuses.back().bytes_received, 12345u);
+  EXPECT_EQ(statuses.back().frames_processed, 0u);
+}
+
+TEST(Monitor, AFailedAnalysisIsPublishedWithItsStatus) {
+  const Config config = shipped_config();
+  MonitorOptions options;
+  options.analysis.fit.max_iterations = 0;  // analyse_step refuses these settings
+  options.backlog_overflow = BacklogOverflow::Wait;
+  RecordingPublisher publisher;
+  {
+    Monitor monitor(config, options, publisher);
+    for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+      ASSERT_TRUE(monitor.offer_wait(frame));
+    }
+  }
+  const auto fits = publisher.fits();
+  ASSERT_FALSE(fits.empty());
+  for (const FitReport& fit : fits) {
+    for (const RegionFitReport& r : fit.regions) {
+      EXPECT_EQ(r.status, "fit_failed:max_iterations must be >= 1");
+      EXPECT_EQ(r.kbar_n_per_mm3, 0.0);
+    }
+  }
+  EXPECT_EQ(publisher.statuses().back().fits_failed, fits.size());
+}
+
+TEST(Monitor, RejectsBadFramesAndRestartsWhenTheDeviceClockGoesBack) {
+  const Config config = shipped_config();
+  const std::vector<Step> steps = batch_steps(demo_30s(), config);
+  const std::vector<SensorFrame> once = test::session_frames(demo_30s());
+  std::map<Foot, std::int64_t> frames_per_foot;
+  std::map<Foot, int> steps_per_foot;
+  for (const SensorFrame& f : once) ++frames_per_foot[f.foot];
+  for (const Step& s : steps) ++steps_per_foot[s.foot];
+
+  // The session twice (the device restarted), with three bad frames in the first pass.
+  std::vector<SensorFrame> feed(once.begin(), once.begin() + 100);
+  SensorFrame bad = once[99];
+  feed.push_back(bad);  // same device time again
+  bad.sensor_count = 50;
+  feed.push_back(bad);
+  bad = once[99];
+  bad.size = InsoleSize::S41_42;
+  bad.device_time_us += 1;
+  feed.push_back(bad);
+  feed.insert(feed.end(), once.begin() + 100, once.end());
+  feed.insert(feed.end(), once.begin(), once.end());
+
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.backlog_overflow = BacklogOverflow::Wait;
+  options.analysis = quick_fits();
+  Config quiet = config;
+  quiet.monitor.publish_frames = false;
+  {
+    Monitor monitor(quiet, options, publisher);
+    for (const SensorFrame& frame : feed) ASSERT_TRUE(monitor.offer_wait(frame));
+    monitor.stop();
+    EXPECT_EQ(monitor.counters().frames_rejected, 3u);
+    EXPECT_EQ(monitor.counters().frames_processed, 2 * once.size());
+  }
+  std::map<StepKey, StepEvent> heel_strikes;
+  for (const StepEvent& e : publisher.events()) {
+    if (e.kind == StepEvent::Kind::HeelStrike) heel_strikes[{e.foot, e.step}] = e;
+  }
+  ASSERT_EQ(heel_strikes.size(), 2 * steps.size());
+  for (const Step& s : steps) {
+    const StepEvent& first = heel_strikes.at({s.foot, s.index});
+    EXPECT_EQ(first.frame, s.heel_strike_frame);
+    EXPECT_EQ(first.t_s, s.t_heel_strike_s);
+    // The second pass continues the numbering, and its clock one sample after the first pass.
+    const StepEvent& second = heel_strikes.at({s.foot, s.index + steps_per_foot[s.foot]});
+    EXPECT_EQ(second.frame, s.heel_strike_frame + frames_per_foot[s.foot]);
+    double foot_first_t = -1.0;
+    double last_t = 0.0;
+    for (const SensorFrame& f : once) {
+      if (f.foot != s.foot) continue;
+      if (foot_first_t < 0.0) foot_first_t = f.device_time_us / 1e6;
+      last_t = f.device_time_us / 1e6;
+    }
+    EXPECT_NEAR(second.t_s, s.t_heel_strike_s - foot_first_t + last_t + 0.01, 1e-9);
+  }
+  EXPECT_EQ(publisher.fits().size(),
+            2 * static_cast<std::size_t>(std::count_if(steps.begin(), steps.end(), [](auto& s) {
+              return s.status == StepStatus::Ok;
+            })));
+}
+
+}  // namespace
+}  // namespace gaitmon
