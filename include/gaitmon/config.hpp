@@ -105,6 +105,18 @@ struct SerialSettings {
   int reconnect_max_ms = 2000;    ///< the longest wait between attempts
 };
 
+/// [usb]: an insole (or bridge) read over USB bulk transfers, and how it reconnects.
+struct UsbSettings {
+  std::uint16_t vendor_id = 0;
+  std::uint16_t product_id = 0;
+  int interface = 0;
+  std::uint8_t endpoint = 0x81;  ///< a bulk IN endpoint address (bit 7 set)
+  int transfers = 4;             ///< bulk transfers kept in flight
+  int transfer_bytes = 16384;    ///< size of each transfer's buffer
+  int reconnect_initial_ms = 50;
+  int reconnect_max_ms = 2000;
+};
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -116,6 +128,7 @@ struct Config {
   FitBounds fit_bounds;   ///< [fit] of the main file: the tissue fit's parameter bounds
   WireSettings wire;      ///< [wire]: the insole frame layout
   SerialSettings serial;  ///< [serial]: the serial driver
+  UsbSettings usb;        ///< [usb]: the USB driver
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {
