@@ -654,6 +654,28 @@ void read_monitor(TableReader table, MonitorSettings& monitor) {
   table.finish();
 }
 
+void read_usb(TableReader table, UsbSettings& usb) {
+  usb.vendor_id = static_cast<std::uint16_t>(integer_in(table, "vendor_id", 0, 0xFFFF));
+  usb.product_id = static_cast<std::uint16_t>(integer_in(table, "product_id", 0, 0xFFFF));
+  usb.interface = integer_in(table, "interface", 0, 255);
+  const int endpoint = integer_in(table, "endpoint", 0, 255);
+  // Bit 7 marks an IN endpoint; the driver only reads.
+  if ((endpoint & 0x80) == 0 || (endpoint & 0x70) != 0 || (endpoint & 0x0F) == 0) {
+    table.fail("endpoint",
+               fmt::format("must be an IN endpoint address 0x81-0x8F, got {:#04x}", endpoint));
+  }
+  usb.endpoint = static_cast<std::uint8_t>(endpoint);
+  usb.transfers = integer_in(table, "transfers", 1, 64);
+  usb.transfer_bytes = integer_in(table, "transfer_bytes", 64, 1 << 20);
+  usb.reconnect_initial_ms = integer_in(table, "reconnect_initial_ms", 1, 60000);
+  usb.reconnect_max_ms = integer_in(table, "reconnect_max_ms", 1, 600000);
+  if (usb.reconnect_max_ms < usb.reconnect_initial_ms) {
+    table.fail("reconnect_max_ms", fmt::format("must be >= reconnect_initial_ms ({}), got {}",
+                                               usb.reconnect_initial_ms, usb.reconnect_max_ms));
+  }
+  table.finish();
+}
+
 }  // namespace
 
 Config load_config(const fs::path& main_file) {
@@ -678,6 +700,7 @@ Config load_config(const fs::path& main_file) {
   read_ring(root.table("ring"), config.ring);
   read_monitor(root.table("monitor"), config.monitor);
   read_lcm(root.table("lcm"), config.lcm);
+  read_usb(root.table("usb"), config.usb);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

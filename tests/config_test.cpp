@@ -556,6 +556,14 @@ TEST(Config, WireAndSerialDefaults) {
   EXPECT_EQ(config.serial.flow_control, SerialFlowControl::None);
   EXPECT_EQ(config.serial.reconnect_initial_ms, 50);
   EXPECT_EQ(config.serial.reconnect_max_ms, 2000);
+  EXPECT_EQ(config.usb.vendor_id, 0);
+  EXPECT_EQ(config.usb.product_id, 0);
+  EXPECT_EQ(config.usb.interface, 0);
+  EXPECT_EQ(config.usb.endpoint, 0x81);
+  EXPECT_EQ(config.usb.transfers, 4);
+  EXPECT_EQ(config.usb.transfer_bytes, 16384);
+  EXPECT_EQ(config.usb.reconnect_initial_ms, 50);
+  EXPECT_EQ(config.usb.reconnect_max_ms, 2000);
 }
 
 TEST(Config, WireAndSerialAcceptTheirAlternatives) {
@@ -601,7 +609,7 @@ TEST(Config, WireAndSerialAreValidated) {
       {"WireCountNotBoolean",
        replace("require_size_sensor_count = true", "require_size_sensor_count = 1"),
        "wire.require_size_sensor_count", "expected a boolean, got an integer"},
-      {"SerialMissing", truncate_at("[serial]\n"), "serial", "missing"},
+      {"SerialMissing", erase_from_to("[serial]\n", "[usb]\n"), "serial", "missing"},
       {"SerialUnknownKey", replace("[serial]\n", "[serial]\nbaudrate = 9600\n"), "serial.baudrate",
        "unknown key"},
       {"SerialEmptyDevice", replace("device = \"/dev/ttyUSB0\"", "device = \"\""), "serial.device",
@@ -620,6 +628,20 @@ TEST(Config, WireAndSerialAreValidated) {
        "serial.reconnect_initial_ms", "must be in [1, 60000], got 0"},
       {"SerialBackoffMaxBelowInitial", replace("reconnect_max_ms = 2000", "reconnect_max_ms = 10"),
        "serial.reconnect_max_ms", "must be >= reconnect_initial_ms (50), got 10"},
+      {"UsbMissing", truncate_at("[usb]\n"), "usb", "missing"},
+      {"UsbUnknownKey", replace("[usb]\n", "[usb]\nserial_number = 1\n"), "usb.serial_number",
+       "unknown key"},
+      {"UsbVendorTooLarge", replace("vendor_id = 0x0000", "vendor_id = 0x10000"), "usb.vendor_id",
+       "must be in [0, 65535], got 65536"},
+      {"UsbOutEndpoint", replace("endpoint = 0x81", "endpoint = 0x01"), "usb.endpoint",
+       "must be an IN endpoint address 0x81-0x8F, got 0x01"},
+      {"UsbTransfersZero", replace("transfers = 4", "transfers = 0"), "usb.transfers",
+       "must be in [1, 64], got 0"},
+      {"UsbTransferBytes", replace("transfer_bytes = 16384", "transfer_bytes = 8"),
+       "usb.transfer_bytes", "must be in [64, 1048576], got 8"},
+      {"UsbBackoffMaxBelowInitial",
+       replace("[usb]", "reconnect_max_ms = 2000", "reconnect_max_ms = 1"), "usb.reconnect_max_ms",
+       "must be >= reconnect_initial_ms (50), got 1"},
   };
   for (const auto& c : cases) {
     const fs::path dir = copy_config(c.name);

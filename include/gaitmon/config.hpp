@@ -142,6 +142,18 @@ struct LcmSettings {
   bool raw_enabled = false;  ///< GAITMON_RAW repeats what a recording holds: off unless asked
 };
 
+/// [usb]: an insole (or bridge) read over USB bulk transfers, and how it reconnects.
+struct UsbSettings {
+  std::uint16_t vendor_id = 0;
+  std::uint16_t product_id = 0;
+  int interface = 0;
+  std::uint8_t endpoint = 0x81;  ///< a bulk IN endpoint address (bit 7 set)
+  int transfers = 4;             ///< bulk transfers kept in flight
+  int transfer_bytes = 16384;    ///< size of each transfer's buffer
+  int reconnect_initial_ms = 50;
+  int reconnect_max_ms = 2000;
+};
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -157,6 +169,7 @@ struct Config {
   RingSettings ring;
   MonitorSettings monitor;
   LcmSettings lcm;  ///< [lcm] of the main file
+  UsbSettings usb;        ///< [usb]: the USB driver
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {

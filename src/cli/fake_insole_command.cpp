@@ -20,7 +20,7 @@
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <system_error>

@@ -218,7 +218,11 @@ TEST(FakeInsole, APtyClosedAndReopenedIsReconnectedThroughTheLink) {
   const std::vector<LinkState> want{LinkState::Connecting,   LinkState::Connected,
                                     LinkState::Disconnected, LinkState::Connecting,
                                     LinkState::Connected,    LinkState::Disconnected};
-  EXPECT_EQ(receiver.states(), want);
+  // After the last Disconnected the driver may already be trying again before stop().
+  ASSERT_GE(receiver.states().size(), want.size());
+  EXPECT_EQ(std::vector<LinkState>(receiver.states().begin(),
+                                   receiver.states().begin() + static_cast<long>(want.size())),
+            want);
   const std::vector<Frame> file = read_all(demo_session());
   const DecoderCounters c = receiver.counters();
   // Bytes still in the old pty at the close are lost, as with an unplug; the sequence
