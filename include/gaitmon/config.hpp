@@ -162,14 +162,14 @@ struct Config {
   SegmentationSettings segmentation;
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
-  FitBounds fit_bounds;  ///< [fit] of the main file: the tissue fit's parameter bounds
-  ModelSettings model;   ///< [model] of the main file
+  FitBounds fit_bounds;   ///< [fit] of the main file: the tissue fit's parameter bounds
+  ModelSettings model;    ///< [model] of the main file
   WireSettings wire;      ///< [wire]: the insole frame layout
   SerialSettings serial;  ///< [serial]: the serial driver
   RingSettings ring;
   MonitorSettings monitor;
   LcmSettings lcm;  ///< [lcm] of the main file
-  UsbSettings usb;        ///< [usb]: the USB driver
+  UsbSettings usb;  ///< [usb]: the USB driver
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {
