@@ -1007,6 +1007,12 @@ void check_discrepancy_effect(std::string_view name) {
   throw std::invalid_argument("unknown effect '" + std::string(name) + "' (known: " + known + ")");
 }
 
+AnalysisSettings discrepancy_analysis_settings() {
+  AnalysisSettings settings;
+  settings.fit.smoothing = Smoothing::None;
+  return settings;
+}
+
 DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,
                                            const Config& config, const AnalysisSettings& settings) {
   std::vector<Step> ok;

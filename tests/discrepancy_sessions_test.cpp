@@ -57,7 +57,8 @@ DiscrepancyResult run(const SessionCase& c, const std::filesystem::path& dir) {
   std::vector<Step> steps;
   segment_session(csv, config, [&](Step&& s) { steps.push_back(std::move(s)); });
   const InsoleLayout layout(config.insole(c.size), config.sensor);
-  return find_discrepancy(prepare_discrepancy_input(steps, layout, config, AnalysisSettings{}));
+  return find_discrepancy(
+      prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings()));
 }
 
 TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {

@@ -107,7 +107,8 @@ DiscrepancyInput clean_session(const CleanCase& c, int steps, unsigned seed) {
       }
       ra.aspect = p.A_mm / p.B_mm;
       ra.declared = declared_params(seed_stats, ra.aspect);
-      ra.fit = fit_region(ra.series, ra.declared, config.fit_bounds, FitSettings{});
+      ra.fit = fit_region(ra.series, ra.declared, config.fit_bounds,
+                          discrepancy_analysis_settings().fit);
     }
     input.steps.push_back(std::move(ds));
     t0 += 1.1;

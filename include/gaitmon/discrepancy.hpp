@@ -75,6 +75,12 @@ struct DiscrepancyInput {
   double newtons_per_bit = 0.2824;
 };
 
+/// The analysis settings of the workflow's baseline: the raw series (Smoothing::None), because
+/// the residuals it studies are those of the measured force itself, and a polynomial fitted to
+/// the force first would smooth away the very structure (an impact spike, a flat saturated top)
+/// the workflow looks for.
+AnalysisSettings discrepancy_analysis_settings();
+
 /// Segmented steps -> analysed steps with saturated-cell counts. Only Ok steps are analysed; they
 /// are analysed on all cores and the result does not depend on it.
 DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const InsoleLayout& layout,

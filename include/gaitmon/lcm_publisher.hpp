@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 
 #include "gaitmon/config.hpp"
 #include "gaitmon/publisher.hpp"
@@ -20,7 +21,7 @@ namespace gaitmon {
 /// utime included; feet become 0 = left, 1 = right.
 ///
 /// Thread safety: the publish functions may be called from any number of threads at once; each
-/// thread encodes into its own buffer and LCM serialises the sends.
+/// thread encodes into its own buffer, and a mutex serialises the sends.
 ///
 /// Failures: a message LCM does not send (a full socket buffer, no route) is counted in
 /// failed_publishes() and otherwise ignored, so the publish functions never throw and never
@@ -58,6 +59,7 @@ class LcmPublisher final : public Publisher {
 
   std::shared_ptr<lcm::LCM> lcm_;
   LcmSettings settings_;
+  std::mutex send_mutex_;
   std::atomic<std::uint64_t> published_{0};
   std::atomic<std::uint64_t> failed_{0};
 };

@@ -147,7 +147,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
           if (step.status == StepStatus::Ok) steps.push_back(std::move(step));
         },
         [&](double fraction) { progress.update(0.1 * fraction); });
-    input = prepare_discrepancy_input(steps, layout, config, AnalysisSettings{});
+    input = prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
     progress.update(0.6);
   }
   const DiscrepancyResult result = find_discrepancy(input, args.settings);

@@ -9,6 +9,7 @@
 #include "commands.hpp"
 #include "drivers/frame_decoder.hpp"
 #include "drivers/serial_source.hpp"
+#include "drivers/usb_source.hpp"
 #include "gaitmon/lcm_publisher.hpp"
 #include "gaitmon/monitor.hpp"
 #include "live.hpp"
@@ -18,6 +19,7 @@ namespace {
 
 struct RunArgs {
   std::string serial;
+  bool usb = false;
   std::string lcm_url;
 };
 
@@ -26,13 +28,21 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   if (!args.serial.empty()) config.serial.device = args.serial;
   if (!args.lcm_url.empty()) config.lcm.url = args.lcm_url;
 
-  // Signals first: every thread started below inherits the blocked mask.
-  drivers::SerialSource source(config.serial);
+  // Signals first: every thread started below inherits the blocked mask, those libusb starts
+  // inside UsbSource's constructor included.
+  std::unique_ptr<drivers::ByteSource> source;
+  std::atomic<drivers::ByteSource*> live_source{nullptr};
   std::atomic<Monitor*> running{nullptr};
   StopOnSignal on_signal([&](int) {
     if (Monitor* m = running.load()) m->close();
-    source.stop();
+    if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
+  if (args.usb) {
+    source = std::make_unique<drivers::UsbSource>(config.usb);
+  } else {
+    source = std::make_unique<drivers::SerialSource>(config.serial);
+  }
+  live_source.store(source.get());
 
   LcmPublisher lcm(config.lcm);
   StepPrinter printer(lcm);
@@ -45,15 +55,22 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   options.driver_status = [&](StatusReport& status) { link.fill(status, decoder); };
   Monitor monitor(config, options, printer);
   running.store(&monitor);
-  spdlog::info("run: {} -> LCM {}", config.serial.device, config.lcm.url);
+  spdlog::info("run: {} -> LCM {}",
+               args.usb
+                   ? fmt::format("USB {:04x}:{:04x}", config.usb.vendor_id, config.usb.product_id)
+                   : config.serial.device,
+               config.lcm.url);
 
   // The driver thread is this one: bytes -> decoder -> ring. offer() never waits; a full ring
   // drops the frame and counts it.
-  source.run(
-      [&](std::span<const std::uint8_t> bytes) {
-        decoder.feed(bytes, [&](const SensorFrame& frame) { (void)monitor.offer(frame); });
-      },
-      [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+  // A signal that came before live_source was set found nothing to stop.
+  if (on_signal.received() == 0) {
+    source->run(
+        [&](std::span<const std::uint8_t> bytes) {
+          decoder.feed(bytes, [&](const SensorFrame& frame) { (void)monitor.offer(frame); });
+        },
+        [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+  }
   running.store(nullptr);
   monitor.stop();
   const MonitorCounters c = monitor.counters();
@@ -72,9 +89,12 @@ void add_run_command(CLI::App& app, const GlobalOptions& global) {
       "run",
       "The live monitor: reads an insole link, segments steps, fits every step and publishes "
       "over LCM; one line per fitted step. Ctrl-C stops it cleanly");
-  sub->add_option("--serial", args->serial,
-                  "Serial device (default: [serial] device of the config), e.g. the pty "
-                  "`gaitmon fake-insole --pty` prints");
+  CLI::Option* serial =
+      sub->add_option("--serial", args->serial,
+                      "Serial device (default: [serial] device of the config), e.g. the pty "
+                      "`gaitmon fake-insole --pty` prints");
+  sub->add_flag("--usb", args->usb, "Read the insole over USB ([usb] of the config)")
+      ->excludes(serial);
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->callback([&global, args] { run_live(global, *args); });
 }

@@ -1,8 +1,10 @@
-// LcmPublisher: encodes into per-thread buffers and hands the bytes to LCM's C API, which
-// serialises the sends; lcm::LCM::publish would allocate a buffer per message.
+// LcmPublisher: encodes into per-thread buffers (lcm::LCM::publish would allocate one per
+// message) and hands the bytes to LCM's C API under a mutex: not every provider serialises its
+// sends (file:// interleaves concurrent writes and corrupts the log).
 #include "gaitmon/lcm_publisher.hpp"
 
 #include <lcm/lcm-cpp.hpp>
+#include <mutex>
 #include <stdexcept>
 #include <utility>
 #include <vector>
@@ -32,8 +34,12 @@ void LcmPublisher::send(const std::string& channel, const Report& report,
     if (buffer.size() < static_cast<std::size_t>(size)) {
       buffer.resize(static_cast<std::size_t>(size));
     }
-    if (message.encode(buffer.data(), 0, size) != size ||
-        lcm_publish(lcm_->getUnderlyingLCM(), channel.c_str(), buffer.data(), size) != 0) {
+    if (message.encode(buffer.data(), 0, size) != size) {
+      failed_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+    const std::lock_guard lock(send_mutex_);
+    if (lcm_publish(lcm_->getUnderlyingLCM(), channel.c_str(), buffer.data(), size) != 0) {
       failed_.fetch_add(1, std::memory_order_relaxed);
       return;
     }

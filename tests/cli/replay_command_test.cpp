@@ -151,5 +151,28 @@ TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {
   EXPECT_GT(statuses.back().frames_decoded, 0);
 }
 
+// With no USB device present `run --usb` keeps trying to connect, and SIGINT still stops it
+// cleanly; --usb and --serial together are refused.
+TEST(RunCommand, UsbWithoutADeviceWaitsAndStopsOnSigint) {
+  const fs::path dir = test::scratch_dir("run-usb");
+  const fs::path log = dir / "run.lcmlog";
+  test::ChildProcess run({test::gaitmon_binary().string(), "run", "--usb", "--lcm-url",
+                          "file://" + log.string() + "?mode=w"});
+  const auto started = run.read_until(test::ChildProcess::Stdout, "USB 0000:0000",
+                                      Clock::now() + std::chrono::seconds(30));
+  ASSERT_FALSE(started.empty()) << "gaitmon run --usb did not start";
+  run.signal(SIGINT);
+  const auto status = run.wait(Clock::now() + std::chrono::seconds(10));
+  ASSERT_TRUE(status.has_value()) << "still running 10 s after SIGINT";
+  EXPECT_EQ(*status, 0);
+
+  int refused = -1;
+  std::string out;
+  refused = test::run_command(
+      test::gaitmon_binary().string() + " run --usb --serial /dev/null 2>&1", &out);
+  EXPECT_NE(refused, 0);
+  EXPECT_NE(out.find("excludes"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace gaitmon
