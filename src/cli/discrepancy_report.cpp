@@ -10,31 +10,10 @@
 #include <iterator>
 #include <string>
 
+#include "html.hpp"
+
 namespace gaitmon::cli {
 namespace {
-
-std::string escape(const std::string& text) {
-  std::string out;
-  for (char c : text) {
-    switch (c) {
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '&':
-        out += "&amp;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
 
 // Residual RMS / noise floor: 1 (white) is noise, 3 and above is saturated red.
 std::string ratio_colour(double ratio) {

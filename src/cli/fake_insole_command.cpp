@@ -29,6 +29,7 @@
 
 #include "commands.hpp"
 #include "drivers/wire_format.hpp"
+#include "live.hpp"
 #include "replay/fault_injector.hpp"
 #include "replay/pacer.hpp"
 #include "replay/session_byte_source.hpp"
@@ -123,21 +124,6 @@ bool write_all(int fd, std::span<const std::uint8_t> bytes) {
     bytes = bytes.subspan(static_cast<std::size_t>(n));
   }
   return true;
-}
-
-double parse_speed(const std::string& text) {
-  if (text == "max") return replay::kMaxSpeed;
-  std::size_t used = 0;
-  double speed = 0.0;
-  try {
-    speed = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != text.size() || !(speed > 0.0) || !std::isfinite(speed)) {
-    throw std::invalid_argument("--speed must be a number > 0 or \"max\", got \"" + text + "\"");
-  }
-  return speed;
 }
 
 void announce(const std::string& path) {

@@ -9,31 +9,10 @@
 #include <string_view>
 #include <vector>
 
+#include "html.hpp"
+
 namespace gaitmon::cli {
 namespace {
-
-std::string escape(std::string_view text) {
-  std::string out;
-  for (char c : text) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
 
 /// A tick spacing of 1, 2 or 5 x 10^k giving about `count` ticks over the range.
 double nice_step(double range, int count) {
