@@ -21,6 +21,24 @@ double median_of(std::vector<double> values) {
 
 }  // namespace
 
+std::string_view area_source_name(AreaSource source) {
+  return source == AreaSource::Ellipse ? "ellipse" : "footprint";
+}
+
+std::optional<AreaSource> parse_area_source(std::string_view text) {
+  if (text == "ellipse") return AreaSource::Ellipse;
+  if (text == "footprint") return AreaSource::Footprint;
+  return std::nullopt;
+}
+
+double fit_area_mm2(const RegionSample& sample, AreaSource source) {
+  const double ellipse = sample.ellipse.area_mm2;
+  if (source == AreaSource::Footprint && ellipse > 0.0 && sample.footprint_area_mm2) {
+    return *sample.footprint_area_mm2;
+  }
+  return ellipse;
+}
+
 Spread spread_of(std::vector<double> values) {
   Spread s;
   if (values.empty()) return s;
@@ -72,10 +90,10 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
     aspects.clear();
     for (std::size_t f = 0; f < frames; ++f) {
       const RegionSample& s = stance.at(f, region);
-      r.series.area_mm2[f] = s.ellipse.area_mm2;
+      r.series.area_mm2[f] = fit_area_mm2(s, settings.area);
       r.series.force_n[f] = s.force_n;
       r.peak_force_n = std::max(r.peak_force_n, s.force_n);
-      r.peak_area_mm2 = std::max(r.peak_area_mm2, s.ellipse.area_mm2);
+      r.peak_area_mm2 = std::max(r.peak_area_mm2, r.series.area_mm2[f]);
       out.measured_total_force_n[f] += s.force_n;
       if (s.ellipse.kase != EllipseCase::None && s.ellipse.rb_mm > 0.0) {
         ++r.frames;

@@ -20,17 +20,20 @@ std::array<RegionSample, kRegionCount> measure_frame(
   const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
   scratch.zeroed.resize(sensors);
   scratch.cells.reserve(sensors);
+  scratch.loaded.reserve(sensors);
   zero_and_threshold(raw, zero, threshold_bits, scratch.zeroed);
   std::array<RegionSample, kRegionCount> samples{};
   for (Region region : kRegions) {
     RegionSample& sample = samples[index_of(region)];
     double bits = 0.0;
     scratch.cells.clear();
+    scratch.loaded.clear();
     for (std::size_t i : layout.region_sensors(region)) {
       if (scratch.zeroed[i] <= 0.0) continue;
       bits += scratch.zeroed[i];
       const Sensor& s = layout.sensor(i);
       scratch.cells.push_back({s.grid_x_mm, s.grid_y_mm, s.row == layout.outermost_heel_row()});
+      scratch.loaded.push_back({s.grid_x_mm, s.grid_y_mm, scratch.zeroed[i]});
     }
     sample.force_n = bits * newtons_per_bit;
     sample.active_sensors = static_cast<int>(scratch.cells.size());
@@ -38,6 +41,7 @@ std::array<RegionSample, kRegionCount> measure_frame(
     sample.ellipse = cache != nullptr
                          ? cache->fit(scratch.cells, cell, region, first_instant)
                          : fit_contact_ellipse(scratch.cells, cell, region, first_instant);
+    sample.footprint_area_mm2 = footprint_area_mm2(scratch.loaded, cell);
   }
   return samples;
 }

@@ -128,6 +128,7 @@ TEST(AnalyzeCommand, WritesTheSessionLevelFitsAsJson) {
   const auto j = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
   EXPECT_EQ(j.at("settings").at("model"), "correct");
   EXPECT_EQ(j.at("settings").at("fit"), "identifiable");
+  EXPECT_EQ(j.at("settings").at("area"), "footprint");
   EXPECT_NE(j.at("note").get<std::string>().find("declared"), std::string::npos);
   for (const char* region : {"heel", "midfoot_posterior", "midfoot_anterior", "met1_2", "met3_5",
                              "toe1", "toe2", "toes3_5"}) {
@@ -169,6 +170,38 @@ TEST(AnalyzeCommand, PrintsASummaryPerRegion) {
   }
   EXPECT_NE(a.output.find("NRMSE"), std::string::npos) << a.output;
   EXPECT_EQ(a.output.find("warning"), std::string::npos) << a.output;
+}
+
+// --area ellipse gives the fit the seed's contact ellipse: the heel's peak contact areas differ
+// from the default footprint's, and the setting is recorded.
+TEST(AnalyzeCommand, AreaEllipseUsesTheContactEllipse) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  int status = -1;
+  const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                  (a.dir / "ellipse").string() + " --area ellipse",
+                              &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("area ellipse"), std::string::npos) << out;
+  const auto j = nlohmann::json::parse(read_all(a.dir / "ellipse" / "session.json"));
+  EXPECT_EQ(j.at("settings").at("area"), "ellipse");
+  const auto heel_peak_areas = [](const fs::path& csv) {
+    std::vector<std::string> areas;
+    for (const std::string& line : lines_of(csv)) {
+      const auto f = fields(line);
+      if (f.size() > 6 && f[2] == "heel") areas.push_back(f[6]);
+    }
+    return areas;
+  };
+  const auto footprint = heel_peak_areas(a.dir / "out" / "regions.csv");
+  const auto ellipse = heel_peak_areas(a.dir / "ellipse" / "regions.csv");
+  ASSERT_EQ(footprint.size(), ellipse.size());
+  ASSERT_FALSE(footprint.empty());
+  EXPECT_NE(footprint, ellipse);
+  std::string bad_status_out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                       (a.dir / "bad").string() + " --area cells",
+                                   &status);
+  EXPECT_NE(status, 0) << bad_status_out;
 }
 
 TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {

@@ -5,12 +5,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/config.hpp"
 #include "gaitmon/insole.hpp"
@@ -26,11 +28,17 @@ const Config& config() {
   return c;
 }
 
-// One region over one measured stance, with the parameters the simulator used.
+// One region over one measured stance, with both contact areas and the parameters the simulator
+// used.
 struct RegionStep {
-  RegionSeries series;
+  RegionSeries ellipse;    ///< the seed's contact-ellipse area
+  RegionSeries footprint;  ///< the load-fitted footprint where determined (AreaSource::Footprint)
   EllipsoidParams truth;
+  Region region = Region::Heel;
   int contact_frames = 0;
+  const RegionSeries& series(AreaSource area) const {
+    return area == AreaSource::Ellipse ? ellipse : footprint;
+  }
 };
 
 std::vector<RegionStep> simulated_region_steps(InsoleSize size, std::uint64_t seed,
@@ -53,11 +61,15 @@ std::vector<RegionStep> simulated_region_steps(InsoleSize size, std::uint64_t se
     for (Region region : kRegions) {
       RegionStep rs;
       rs.truth = truth.regions[index_of(region)].params;
+      rs.region = region;
       for (std::size_t f = 0; f < stance.size(); ++f) {
         const RegionSample& s = stance.at(f, region);
-        rs.series.t_s.push_back(stance.t_s[f]);
-        rs.series.area_mm2.push_back(s.ellipse.area_mm2);
-        rs.series.force_n.push_back(s.force_n);
+        for (RegionSeries* series : {&rs.ellipse, &rs.footprint}) {
+          series->t_s.push_back(stance.t_s[f]);
+          series->force_n.push_back(s.force_n);
+        }
+        rs.ellipse.area_mm2.push_back(s.ellipse.area_mm2);
+        rs.footprint.area_mm2.push_back(fit_area_mm2(s, AreaSource::Footprint));
         if (s.ellipse.area_mm2 > 0.0) ++rs.contact_frames;
       }
       out.push_back(std::move(rs));
@@ -100,14 +112,17 @@ struct Recovery {
   std::size_t fits = 0;
 };
 
-Recovery recover(Smoothing smoothing) {
+Recovery recover(Smoothing smoothing, AreaSource area) {
   FitSettings settings;
   settings.smoothing = smoothing;
   std::vector<double> ek, en, ec, em, nrmse;
+  // Per region: the relative errors of kbar, n, cbar, m and the NRMSE, printed for diagnosis.
+  std::array<std::array<std::vector<double>, 5>, kRegionCount> per_region;
   Recovery r;
   int ok = 0;
   for (const RegionStep& rs : recovery_data()) {
-    const RegionFit fit = fit_region(rs.series, rs.truth, config().fit_bounds, settings);
+    const RegionSeries& series = rs.series(area);
+    const RegionFit fit = fit_region(series, rs.truth, config().fit_bounds, settings);
     ++r.fits;
     if (fit.status != FitStatus::Ok) continue;
     ++ok;
@@ -116,7 +131,9 @@ Recovery recover(Smoothing smoothing) {
     ec.push_back(rel_error(fit.cbar_ns_per_mm3.value, rs.truth.cbar_ns_per_mm3));
     em.push_back(rel_error(fit.m.value, rs.truth.m));
     nrmse.push_back(fit.nrmse_pct);
-    const double peak = *std::max_element(rs.series.force_n.begin(), rs.series.force_n.end());
+    const double errors[] = {ek.back(), en.back(), ec.back(), em.back(), nrmse.back()};
+    for (std::size_t i = 0; i < 5; ++i) per_region[index_of(rs.region)][i].push_back(errors[i]);
+    const double peak = *std::max_element(series.force_n.begin(), series.force_n.end());
     for (double f : fit.model_force_n) r.min_force_share = std::min(r.min_force_share, f / peak);
   }
   r.ok_fraction = static_cast<double>(ok) / static_cast<double>(r.fits);
@@ -128,16 +145,25 @@ Recovery recover(Smoothing smoothing) {
     r.nrmse = median(nrmse);
   }
   std::printf(
-      "[ smoothing %s ] %zu fits, ok %.1f %%, median rel. error kbar %.3f n %.3f cbar %.3f m %.3f, "
-      "median NRMSE %.2f %%\n",
-      std::string(smoothing_name(smoothing)).c_str(), r.fits, 100.0 * r.ok_fraction, r.kbar, r.n,
-      r.cbar, r.m, r.nrmse);
+      "[ smoothing %s, area %s ] %zu fits, ok %.1f %%, median rel. error kbar %.3f n %.3f cbar "
+      "%.3f m %.3f, median NRMSE %.2f %%\n",
+      std::string(smoothing_name(smoothing)).c_str(), std::string(area_source_name(area)).c_str(),
+      r.fits, 100.0 * r.ok_fraction, r.kbar, r.n, r.cbar, r.m, r.nrmse);
+  for (Region region : kRegions) {
+    const auto& e = per_region[index_of(region)];
+    if (e[0].empty()) continue;
+    std::printf("    %-18s %3zu fits: kbar %.3f n %.3f cbar %.3f m %.3f NRMSE %.2f %%\n",
+                std::string(region_name(region)).c_str(), e[0].size(), median(e[0]), median(e[1]),
+                median(e[2]), median(e[3]), median(e[4]));
+  }
   return r;
 }
 
-const Recovery& recovery(Smoothing smoothing) {
-  static const Recovery none = recover(Smoothing::None);
-  static const Recovery seed = recover(Smoothing::Seed);
+const Recovery& recovery(Smoothing smoothing, AreaSource area = AreaSource::Footprint) {
+  static const Recovery none = recover(Smoothing::None, AreaSource::Footprint);
+  static const Recovery seed = recover(Smoothing::Seed, AreaSource::Footprint);
+  static const Recovery seed_ellipse = recover(Smoothing::Seed, AreaSource::Ellipse);
+  if (area == AreaSource::Ellipse) return seed_ellipse;
   return smoothing == Smoothing::None ? none : seed;
 }
 
@@ -160,6 +186,24 @@ TEST(TissueFitRecovery, SeedSmoothingIsTheDefaultBecauseItRecoversBetter) {
   EXPECT_LT(seed.nrmse, none.nrmse);
   EXPECT_LT(seed.kbar, none.kbar);
   EXPECT_LT(seed.cbar, none.cbar);
+}
+
+// One of the recovery targets that is met with the defaults: the median NRMSE is below
+// 5 % (4.3 % when measured; 5.8 % with the seed's contact-ellipse area).
+TEST(TissueFitRecovery, MedianNrmseIsBelowFivePercent) {
+  EXPECT_LT(recovery(Smoothing::Seed).nrmse, 5.0);
+}
+
+// The default contact area is the one that recovers the truth better: the load-fitted footprint
+// gives a lower median NRMSE and lower median errors for kbar and n than the seed's contact
+// ellipse, with the same smoothing.
+TEST(TissueFitRecovery, FootprintAreaIsTheDefaultBecauseItRecoversBetter) {
+  EXPECT_EQ(AnalysisSettings{}.area, AreaSource::Footprint);
+  const Recovery& footprint = recovery(Smoothing::Seed, AreaSource::Footprint);
+  const Recovery& ellipse = recovery(Smoothing::Seed, AreaSource::Ellipse);
+  EXPECT_LT(footprint.nrmse, ellipse.nrmse);
+  EXPECT_LT(footprint.kbar, ellipse.kbar);
+  EXPECT_LT(footprint.n, ellipse.n);
 }
 
 // The other recovery targets (median relative error <= 10 % for kbar, n, cbar, m and median
@@ -281,7 +325,7 @@ TEST(TissueFit, Seed8OnASimulatedRegionStepReportsCAndD0Undetermined) {
   FitSettings settings;
   settings.mode = FitMode::Seed8;
   const RegionFit fit =
-      fit_region(data.front().series, EllipsoidParams{}, config().fit_bounds, settings);
+      fit_region(data.front().footprint, EllipsoidParams{}, config().fit_bounds, settings);
   EXPECT_NE(std::find(fit.undetermined.begin(), fit.undetermined.end(), "C_mm"),
             fit.undetermined.end());
   EXPECT_NE(std::find(fit.undetermined.begin(), fit.undetermined.end(), "d0_mm"),
@@ -298,8 +342,8 @@ TEST(TissueFit, SeedEq25SessionNeedsTheSeedEq25Model) {
   std::vector<double> e_seed, e_correct, nrmse_seed, nrmse_correct;
   for (const RegionStep& rs : steps) {
     if (rs.contact_frames < 10) continue;
-    const RegionFit a = fit_region(rs.series, rs.truth, config().fit_bounds, seed);
-    const RegionFit b = fit_region(rs.series, rs.truth, config().fit_bounds, FitSettings{});
+    const RegionFit a = fit_region(rs.footprint, rs.truth, config().fit_bounds, seed);
+    const RegionFit b = fit_region(rs.footprint, rs.truth, config().fit_bounds, FitSettings{});
     if (a.status != FitStatus::Ok || b.status != FitStatus::Ok) continue;
     e_seed.push_back(rel_error(a.cbar_ns_per_mm3.value, rs.truth.cbar_ns_per_mm3));
     e_correct.push_back(rel_error(b.cbar_ns_per_mm3.value, rs.truth.cbar_ns_per_mm3));

@@ -3,27 +3,39 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "gaitmon/config.hpp"
 #include "gaitmon/contact_ellipse.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/segmentation.hpp"
+#include "gaitmon/stance.hpp"
 #include "gaitmon/tissue_fit.hpp"
 #include "gaitmon/types.hpp"
 
 namespace gaitmon {
 
+/// Which contact area Ae(t) the fit is given. `Ellipse` is the seed's contact ellipse of the
+/// active cells (chapter 4). `Footprint` is the paraboloid fitted to the active cells' loads
+/// (footprint.hpp) wherever they determine it, and the contact ellipse elsewhere: it recovers
+/// simulated truths better (README, "How the fit works"), so it is the default.
+enum class AreaSource { Ellipse, Footprint };
+std::string_view area_source_name(AreaSource source);  ///< "ellipse", "footprint"
+std::optional<AreaSource> parse_area_source(std::string_view text);
+
 /// The fit's bounds come from Config::fit_bounds.
 struct AnalysisSettings {
   FitSettings fit;
+  AreaSource area = AreaSource::Footprint;
 };
 
 /// One region of one step: what was measured, what was declared and what was fitted.
 struct RegionAnalysis {
   Region region = Region::Heel;
-  RegionSeries series;       ///< per stance frame: time, contact-ellipse area, force
+  RegionSeries series;       ///< per stance frame: time, contact area (AreaSource), force
   EllipsoidParams declared;  ///< A, B from P and the step's aspect; C, d0 from Appendix I
   double aspect = 0.0;       ///< A/B used: median ra/rb over contact frames, else Appendix I's
   RegionFit fit;
@@ -51,6 +63,9 @@ struct StepAnalysis {
 /// m are Appendix I's means (the fit's starting point in Identifiable mode). Throws
 /// std::invalid_argument unless aspect is positive and finite.
 EllipsoidParams declared_params(const SeedTissueStats& seed, double aspect);
+
+/// The contact area the fit uses for one region at one instant: 0 without a contact ellipse.
+double fit_area_mm2(const RegionSample& sample, AreaSource source);
 
 /// Measures the stance (measure_stance) and fits every region. Regions without contact come
 /// back with status NoContact; a region whose fit fails or has no model force contributes zero

@@ -1,14 +1,17 @@
-// Per region and per frame of one stance: force (eq 42), active-sensor area and contact ellipse.
+// Per region and per frame of one stance: force (eq 42), active-sensor area, contact ellipse and
+// load-fitted footprint.
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
 #include "gaitmon/config.hpp"
 #include "gaitmon/contact_ellipse.hpp"
+#include "gaitmon/footprint.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/segmentation.hpp"
 #include "gaitmon/types.hpp"
@@ -21,6 +24,9 @@ struct RegionSample {
   double sensor_area_mm2 = 0.0;  ///< active sensors x sensing area
   int active_sensors = 0;        ///< sensors at or above the adaptive threshold
   ContactEllipse ellipse;        ///< seed chapter 4; ellipse.kase None when no contact
+  /// The paraboloid footprint fitted to the active cells' loads (footprint.hpp); nullopt when
+  /// they do not determine it.
+  std::optional<double> footprint_area_mm2;
 };
 
 /// Every frame of one stance, heel strike to toe off inclusive.
@@ -39,12 +45,13 @@ struct StanceSeries {
 struct FrameScratch {
   std::vector<double> zeroed;
   std::vector<ActiveCell> cells;
+  std::vector<LoadedCell> loaded;
 };
 
 /// One frame: zeroes the raw bits with `zero`, applies the adaptive threshold and measures every
-/// region (force, active-sensor area, contact ellipse). `first_instant` is Case 1's first instant
-/// of a stance. The live monitor calls it per frame; measure_stance per stance frame. Throws
-/// std::invalid_argument if `raw` or `zero` does not have the layout's sensor count.
+/// region (force, active-sensor area, contact ellipse, footprint). `first_instant` is Case 1's
+/// first instant of a stance. The live monitor calls it per frame; measure_stance per stance frame.
+/// Throws std::invalid_argument if `raw` or `zero` does not have the layout's sensor count.
 std::array<RegionSample, kRegionCount> measure_frame(
     std::span<const std::uint8_t> raw, std::span<const double> zero, double threshold_bits,
     const InsoleLayout& layout, const Calibration& calibration, bool first_instant,

@@ -36,6 +36,7 @@ struct AnalyzeArgs {
   std::string model = "correct";
   std::string fit = "identifiable";
   std::string smoothing = "seed";
+  std::string area = "footprint";
   bool free_scale = false;
   std::vector<std::string> effects;
   bool effects_given = false;
@@ -63,6 +64,7 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
   s.fit.model = *parse_model_variant(args.model);
   s.fit.mode = *parse_fit_mode(args.fit);
   s.fit.smoothing = *parse_smoothing(args.smoothing);
+  s.area = *parse_area_source(args.area);
   s.fit.free_scale = args.free_scale;
   if (s.fit.free_scale && s.fit.mode != FitMode::Identifiable) {
     throw CLI::ValidationError("--free-scale", "applies to --fit identifiable only");
@@ -222,6 +224,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
   j["settings"] = {{"model", model_variant_name(settings.fit.model)},
                    {"fit", fit_mode_name(settings.fit.mode)},
                    {"smoothing", smoothing_name(settings.fit.smoothing)},
+                   {"area", area_source_name(settings.area)},
                    {"free_scale", settings.fit.free_scale},
                    {"starts", settings.fit.starts},
                    {"max_iterations", settings.fit.max_iterations},
@@ -262,11 +265,11 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
                    const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                    const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
                    const std::vector<std::filesystem::path>& written) {
-  fmt::print("{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}{})\n",
+  fmt::print("{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{})\n",
              args.session.string(), insole_size_name(header.insole_size), steps.size(),
              analyses.size(), model_variant_name(settings.fit.model),
              fit_mode_name(settings.fit.mode), smoothing_name(settings.fit.smoothing),
-             settings.fit.free_scale ? ", free scale" : "");
+             area_source_name(settings.area), settings.fit.free_scale ? ", free scale" : "");
   fmt::print("{:<19}{:>8}{:>10}{:>12}{:>10}{:>13}{:>10}{:>12}{:>12}\n", "region", "fitted",
              "contact", "kbar N/mm3", "n", "cbar Ns/mm3", "m", "NRMSE %", "session %");
   for (const RegionSessionAnalysis& r : session.regions) {
@@ -444,6 +447,11 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--smoothing", args->smoothing,
                   "seed (default: the seed's moving average and polynomials) or none (raw series)")
       ->check(CLI::IsMember({"none", "seed"}));
+  sub->add_option("--area", args->area,
+                  "Contact area given to the fit: footprint (default: a paraboloid fitted to the "
+                  "active cells' loads where they determine it, else the contact ellipse) or "
+                  "ellipse (the seed's contact ellipse of the active cells)")
+      ->check(CLI::IsMember({"footprint", "ellipse"}));
   sub->add_flag("--free-scale", args->free_scale,
                 "Also fit P = pi A B (keeping A/B); identifiable mode only");
   sub->add_option("--effects", args->effects,
