@@ -133,10 +133,12 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   print("Best candidate by held-out error, named or not", ranked_matrix);
   fmt::print("Sessions:\n{}", shrinks);
   // The naming threshold (15 %) sits above the largest false improvement seen on sessions
-  // without an effect, so none of these is named; the targets for the effect sessions
-  // are not met through the simulated measurement chain (README, "Model-data discrepancy").
-  EXPECT_EQ(none_named, 0);
+  // without an effect, so none of these is named, and no effect session is named wrongly; the
+  // issue's targets for the effect sessions (90 % named, 40 % shrink) are not met through the
+  // simulated measurement chain (README, "Model-data discrepancy").
   fmt::print("effect sessions with a wrong effect named: {}\n", wrong_names);
+  EXPECT_EQ(none_named, 0);
+  EXPECT_EQ(wrong_names, 0);
 }
 
 TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
