@@ -258,7 +258,7 @@ std::string area_chart(const std::vector<const StepAnalysis*>& steps, const Step
     for (double v : s->at(region).series.area_mm2) y.add(v);
   }
   y.add(0.0);
-  Chart c(420, 260, x.padded(0.02), y.padded(0.05), "contact-ellipse area over the stance",
+  Chart c(420, 260, x.padded(0.02), y.padded(0.05), "contact area given to the fit",
           "time since heel strike (s)", "area (mm\u00b2)");
   for (const StepAnalysis* s : steps) {
     c.line(since_heel_strike(*s), s->at(region).series.area_mm2, "#888888", 1.0, 0.35);
