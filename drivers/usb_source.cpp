@@ -53,6 +53,9 @@ struct UsbSource::Impl {
   std::string lost_reason;
   const BytesHandler* on_bytes = nullptr;
   std::vector<Slot> slots;
+  /// Pools with a transfer that never completed after cancellation: kept, with their buffers,
+  /// for the life of the source, since libusb may still write into them.
+  std::vector<std::vector<Slot>> abandoned;
 
   static void LIBUSB_CALL completed(libusb_transfer* transfer) {
     auto* slot = static_cast<Slot*>(transfer->user_data);
@@ -132,9 +135,16 @@ struct UsbSource::Impl {
            std::chrono::steady_clock::now() < give_up) {
       handle_events_for(std::chrono::milliseconds(50));
     }
+    bool wedged = false;
     for (Slot& slot : slots) {
-      if (!slot.in_flight) libusb_free_transfer(slot.transfer);
+      if (slot.in_flight) {
+        wedged = true;
+      } else {
+        libusb_free_transfer(slot.transfer);
+        slot.transfer = nullptr;
+      }
     }
+    if (wedged) abandoned.push_back(std::move(slots));  // moving keeps the slots' addresses
     slots.clear();
   }
 };
