@@ -2,6 +2,7 @@
 #include "gaitmon/config.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <toml++/toml.h>
 
 #include <algorithm>
@@ -676,7 +677,21 @@ void read_usb(TableReader table, UsbSettings& usb) {
   table.finish();
 }
 
+void read_log(TableReader table, LogSettings& log) {
+  log.level = table.string("level");
+  const std::vector<std::string> names = log_level_names();
+  if (std::find(names.begin(), names.end(), log.level) == names.end()) {
+    table.fail("level", fmt::format("must be one of \"{}\", got \"{}\"", fmt::join(names, "\", \""),
+                                    log.level));
+  }
+  table.finish();
+}
+
 }  // namespace
+
+std::vector<std::string> log_level_names() {
+  return {"trace", "debug", "info", "warn", "error", "off"};
+}
 
 Config load_config(const fs::path& main_file) {
   Config config;
@@ -701,6 +716,7 @@ Config load_config(const fs::path& main_file) {
   read_monitor(root.table("monitor"), config.monitor);
   read_lcm(root.table("lcm"), config.lcm);
   read_usb(root.table("usb"), config.usb);
+  read_log(root.table("log"), config.log);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

@@ -824,5 +824,47 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
             (std::vector<std::string>{"sensor_saturation", "impact_transient"}));
 }
 
+TEST(Config, LogLevelDefaultsToInfoAndIsRead) {
+  EXPECT_EQ(load_config(shipped_config()).log.level, "info");
+  EXPECT_EQ(LogSettings{}.level, "info");
+  for (const std::string& level : log_level_names()) {
+    const fs::path dir = copy_config("LogRead-" + level);
+    edit_file(dir / kMain, replace("[log]", "level = \"info\"", "level = \"" + level + "\""));
+    EXPECT_EQ(load_config(dir / kMain).log.level, level);
+  }
+}
+
+TEST(Config, LogLevelIsValidated) {
+  const struct {
+    const char* name;
+    Edit edit;
+    std::string key;
+    std::string reason;
+  } cases[] = {
+      {"LogMissingTable", truncate_at("[log]\n"), "log", "missing"},
+      {"LogMissingLevel", replace("[log]", "level = \"info\"\n", ""), "log.level", "missing"},
+      {"LogUnknownLevel", replace("[log]", "level = \"info\"", "level = \"verbose\""), "log.level",
+       R"(must be one of "trace", "debug", "info", "warn", "error", "off", got "verbose")"},
+      {"LogLevelCapitals", replace("[log]", "level = \"info\"", "level = \"INFO\""), "log.level",
+       R"(got "INFO")"},
+      {"LogLevelNotString", replace("[log]", "level = \"info\"", "level = 2"), "log.level",
+       "expected a string, got an integer"},
+      {"LogUnknownKey", replace("[log]\n", "[log]\nfile = \"gaitmon.log\"\n"), "log.file",
+       "unknown key"},
+  };
+  for (const auto& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / kMain, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon

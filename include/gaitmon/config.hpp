@@ -154,6 +154,14 @@ struct UsbSettings {
   int reconnect_max_ms = 2000;
 };
 
+/// [log]: how much the commands log; --log-level overrides it.
+struct LogSettings {
+  std::string level = "info";  ///< one of log_level_names()
+};
+
+/// The levels of [log] level and --log-level, spdlog's names, from the most verbose to none.
+std::vector<std::string> log_level_names();
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -170,6 +178,7 @@ struct Config {
   MonitorSettings monitor;
   LcmSettings lcm;  ///< [lcm] of the main file
   UsbSettings usb;  ///< [usb]: the USB driver
+  LogSettings log;  ///< [log]
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {
