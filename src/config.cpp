@@ -519,7 +519,8 @@ void read_lcm(TableReader table, LcmSettings& lcm) {
                            {"step", &lcm.channels.step},
                            {"fit", &lcm.channels.fit},
                            {"status", &lcm.channels.status},
-                           {"raw", &lcm.channels.raw}}) {
+                           {"raw", &lcm.channels.raw},
+                           {"effects", &lcm.channels.effects}}) {
     *name = read_channel(channels, key);
     const auto [it, fresh] = used.try_emplace(*name, std::string(key));
     if (!fresh) {
@@ -554,6 +555,9 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
     }
     model.effects.push_back(name->get());
   }
+  // The extended model's k-fold needs at least one step per fold.
+  model.effects_window_steps =
+      integer_in(table, "effects_window_steps", DiscrepancySettings{}.folds, 100000);
   table.finish();
 }
 

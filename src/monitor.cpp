@@ -16,6 +16,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -24,6 +25,7 @@
 
 #include "gaitmon/batch.hpp"
 #include "gaitmon/device_clock.hpp"
+#include "gaitmon/discrepancy.hpp"
 #include "gaitmon/frame_ring.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/log_throttle.hpp"
@@ -100,6 +102,27 @@ FitReport failed_report(const Step& step, const std::string& reason) {
   return report;
 }
 
+EffectsReport effects_report(const ExtendedModelFit& fit, std::span<const Step> steps) {
+  EffectsReport report;
+  report.steps = static_cast<int>(steps.size());
+  report.t_first_heel_strike_s = steps.front().t_heel_strike_s;
+  report.t_last_toe_off_s = steps.front().t_toe_off_s;
+  for (const Step& step : steps) {
+    report.t_first_heel_strike_s = std::min(report.t_first_heel_strike_s, step.t_heel_strike_s);
+    report.t_last_toe_off_s = std::max(report.t_last_toe_off_s, step.t_toe_off_s);
+  }
+  report.baseline_nrmse_pct = fit.baseline_nrmse_pct;
+  report.extended_nrmse_pct = fit.extended_nrmse_pct;
+  report.baseline_heldout_nrmse_pct = fit.baseline_heldout_nrmse_pct;
+  report.extended_heldout_nrmse_pct = fit.extended_heldout_nrmse_pct;
+  for (const EffectEstimate& effect : fit.effects) {
+    for (const ParamEstimate& p : effect.params) {
+      report.params.push_back({effect.name, p.name, p.value, p.se});
+    }
+  }
+  return report;
+}
+
 // Nearest rank: the smallest value with at least p of the values at or below it.
 double percentile(std::vector<double>& values, double p) {
   if (values.empty()) return 0.0;
@@ -129,6 +152,16 @@ struct Monitor::Impl {
     std::uint64_t next = 0;
     bool draining = false;  ///< a thread is publishing from this buffer
     std::map<std::uint64_t, std::optional<Ready>> pending;
+  };
+  /// The latest complete steps for the extended model, keyed by time (both feet), so that the
+  /// window and the fit do not depend on the order in which the workers finish.
+  struct EffectWindow {
+    std::map<std::pair<double, Foot>, std::pair<Step, StepAnalysis>> steps;
+    std::shared_ptr<const InsoleLayout> layout;  ///< of the first step; one insole per session
+    std::size_t fresh = 0;                       ///< steps added since the last fit took its copy
+    bool fitting = false;                        ///< a fit is queued or running
+    std::optional<EffectsReport> last;           ///< the latest published
+    bool last_is_current = false;                ///< `last` is of the window as it is now
   };
   /// Detector-thread state of one foot.
   struct FootState {
@@ -419,9 +452,12 @@ struct Monitor::Impl {
       try {
         Ready ready{{}, job->finalised, false};
         try {
-          const StepAnalysis analysis =
+          StepAnalysis analysis =
               analyse_step(job->step, *job->layout, config, options.analysis, &cache);
           ready.report = fit_report(analysis, ready.failed);
+          if (!config.model.effects.empty()) {
+            remember_for_effects(std::move(job->step), std::move(analysis), job->layout);
+          }
         } catch (const std::exception& e) {
           ready.report = failed_report(job->step, e.what());
           ready.failed = true;
@@ -468,6 +504,100 @@ struct Monitor::Impl {
       if (done.failed) fits_failed.fetch_add(1, std::memory_order_relaxed);
     }
     r.draining = false;
+  }
+
+  // ---- the extended model ([model] effects) ----
+
+  /// Adds an analysed step to the window. A fit starts once there is a step per fold, then
+  /// whenever the new steps are as many as the old ones (5, 10, 20, ...; every half window once
+  /// full), so its cost stays proportional to the steps.
+  void remember_for_effects(Step step, StepAnalysis analysis,
+                            std::shared_ptr<const InsoleLayout> layout) {
+    const std::lock_guard lock(effects_mutex);
+    EffectWindow& w = effect_window;
+    if (!w.layout) w.layout = layout;
+    if (w.layout->sensor_count() != layout->sensor_count()) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: foot {} step {}: another insole size than the first step's; left "
+            "out of the extended model ({} similar suppressed)",
+            foot_name(step.foot), step.index, *held);
+      }
+      return;
+    }
+    w.steps.insert_or_assign(std::pair(step.t_heel_strike_s, step.foot),
+                             std::pair(std::move(step), std::move(analysis)));
+    while (w.steps.size() > static_cast<std::size_t>(config.model.effects_window_steps)) {
+      w.steps.erase(w.steps.begin());
+    }
+    ++w.fresh;
+    w.last_is_current = false;
+    const std::size_t folds = static_cast<std::size_t>(DiscrepancySettings{}.folds);
+    if (w.fitting || w.steps.size() < folds ||
+        w.fresh < std::max(folds, w.steps.size() - w.fresh)) {
+      return;
+    }
+    w.fitting = true;
+    boost::asio::post(pool, [this] { fit_effects(false); });
+  }
+
+  /// Fits the extended model to a copy of the window and publishes it.
+  void fit_effects(bool final_estimate) {
+    std::vector<Step> steps;
+    std::vector<StepAnalysis> analyses;
+    std::shared_ptr<const InsoleLayout> layout;
+    {
+      const std::lock_guard lock(effects_mutex);
+      for (const auto& [key, entry] : effect_window.steps) {
+        steps.push_back(entry.first);
+        analyses.push_back(entry.second);
+      }
+      layout = effect_window.layout;
+      effect_window.fresh = 0;
+    }
+    std::optional<EffectsReport> report;
+    try {
+      const ExtendedModelFit fit =
+          fit_extended_model(make_discrepancy_input(steps, std::move(analyses), *layout, config),
+                             config.model.effects);
+      report = effects_report(fit, steps);
+      report->final_estimate = final_estimate;
+      report->utime = now_utime();
+      send(*report);
+    } catch (const std::exception& e) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: the extended model could not be fitted to {} steps: {} ({} similar "
+            "suppressed)",
+            steps.size(), e.what(), *held);
+      }
+    }
+    const std::lock_guard lock(effects_mutex);
+    effect_window.last_is_current = report && effect_window.fresh == 0;
+    if (report) effect_window.last = std::move(report);
+    effect_window.fitting = false;
+  }
+
+  /// At shutdown, after the workers: the final estimate, over the window as it ends.
+  void finish_effects() {
+    if (config.model.effects.empty()) return;
+    std::size_t held = 0;
+    std::optional<EffectsReport> last;
+    {
+      const std::lock_guard lock(effects_mutex);
+      held = effect_window.steps.size();
+      if (effect_window.last_is_current) last = effect_window.last;
+    }
+    if (last) {
+      last->final_estimate = true;
+      last->utime = now_utime();
+      send(*last);
+    } else if (held >= static_cast<std::size_t>(DiscrepancySettings{}.folds)) {
+      fit_effects(true);
+    } else {
+      spdlog::warn("monitor: {} complete steps are too few for the extended model (it needs {})",
+                   held, DiscrepancySettings{}.folds);
+    }
   }
 
   // ---- any thread ----
@@ -538,6 +668,7 @@ struct Monitor::Impl {
     input_done.store(true, std::memory_order_release);
     if (detector.joinable()) detector.join();
     pool.join();
+    finish_effects();
     send(status(true));
     stopped = true;
   }
@@ -577,7 +708,11 @@ struct Monitor::Impl {
   std::vector<double> latencies;
   std::size_t latency_next = 0;
 
-  LogThrottle reject_log, step_drop_log, fit_log, publish_log;
+  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log;
+
+  // The extended model's window, shared by the workers.
+  std::mutex effects_mutex;
+  EffectWindow effect_window;
 
   boost::asio::thread_pool pool;
   std::thread detector;

@@ -716,6 +716,7 @@ TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
   EXPECT_EQ(lcm.channels.fit, "GAITMON_FIT");
   EXPECT_EQ(lcm.channels.status, "GAITMON_STATUS");
   EXPECT_EQ(lcm.channels.raw, "GAITMON_RAW");
+  EXPECT_EQ(lcm.channels.effects, "GAITMON_EFFECTS");
   // The struct's defaults are the shipped file's, for code that builds settings by hand.
   const LcmSettings defaults;
   EXPECT_EQ(defaults.url, lcm.url);
@@ -767,6 +768,11 @@ TEST(Config, LcmSettingsAreValidated) {
        "lcm.channels.raw", "at most 63 characters, got 64"},
       {"LcmChannelTwice", replace("[lcm.channels]", "\"GAITMON_STATUS\"", "\"GAITMON_FIT\""),
        "lcm.channels.status", "is also the fit channel"},
+      {"LcmEffectsChannelMissing", replace("[lcm.channels]", "effects = \"GAITMON_EFFECTS\"", ""),
+       "lcm.channels.effects", "missing"},
+      {"LcmEffectsChannelTwice",
+       replace("[lcm.channels]", "\"GAITMON_EFFECTS\"", "\"GAITMON_STEP\""), "lcm.channels.effects",
+       "is also the step channel"},
   };
   for (const auto& c : cases) {
     const fs::path dir = copy_config(c.name);
@@ -790,6 +796,8 @@ namespace {
 
 TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   EXPECT_TRUE(load_config(shipped_config()).model.effects.empty());
+  EXPECT_EQ(load_config(shipped_config()).model.effects_window_steps, 100);
+  EXPECT_EQ(ModelSettings{}.effects_window_steps, 100);
   const struct {
     const char* name;
     Edit edit;
@@ -805,6 +813,14 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
       {"ModelUnknownKey", replace("effects = []", "effects = []\nstrength = 1"), "model.strength",
        "unknown key"},
       {"ModelMissing", replace("effects = []", ""), "model.effects", "missing"},
+      {"ModelWindowBelowTheFolds",
+       replace("effects_window_steps = 100", "effects_window_steps = 4"),
+       "model.effects_window_steps", "must be in [5, 100000], got 4"},
+      {"ModelWindowNotInteger",
+       replace("effects_window_steps = 100", "effects_window_steps = 100.5"),
+       "model.effects_window_steps", "expected an integer"},
+      {"ModelWindowMissing", replace("effects_window_steps = 100\n", ""),
+       "model.effects_window_steps", "missing"},
   };
   for (const auto& c : cases) {
     const fs::path dir = copy_config(c.name);
@@ -820,8 +836,10 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   const fs::path dir = copy_config("ModelTwoEffects");
   edit_file(dir / kMain,
             replace("effects = []", R"(effects = ["sensor_saturation", "impact_transient"])"));
+  edit_file(dir / kMain, replace("effects_window_steps = 100", "effects_window_steps = 40"));
   EXPECT_EQ(load_config(dir / kMain).model.effects,
             (std::vector<std::string>{"sensor_saturation", "impact_transient"}));
+  EXPECT_EQ(load_config(dir / kMain).model.effects_window_steps, 40);
 }
 
 TEST(Config, LogLevelDefaultsToInfoAndIsRead) {

@@ -82,6 +82,9 @@ struct ModelSettings {
   /// Named effects (discrepancy_effect_names()) that `gaitmon analyze` and the live monitor add
   /// to the model, in order; empty is the ellipsoid alone.
   std::vector<std::string> effects;
+  /// The live monitor fits them to this many of the latest complete steps (both feet); analyze
+  /// fits them to the whole session.
+  int effects_window_steps = 100;
 };
 
 /// The check value that ends every insole frame (drivers/PROTOCOL.md).
@@ -128,11 +131,12 @@ struct MonitorSettings {
 
 /// [lcm]: where the live monitor publishes (include/gaitmon/lcm/*.lcm defines the messages).
 struct LcmChannels {
-  std::string frame = "GAITMON_FRAME";    ///< FrameReport, per foot and frame
-  std::string step = "GAITMON_STEP";      ///< StepEvent
-  std::string fit = "GAITMON_FIT";        ///< FitReport, per foot-step
-  std::string status = "GAITMON_STATUS";  ///< StatusReport, 1 Hz
-  std::string raw = "GAITMON_RAW";        ///< RawFrameReport, only when raw_enabled
+  std::string frame = "GAITMON_FRAME";      ///< FrameReport, per foot and frame
+  std::string step = "GAITMON_STEP";        ///< StepEvent
+  std::string fit = "GAITMON_FIT";          ///< FitReport, per foot-step
+  std::string status = "GAITMON_STATUS";    ///< StatusReport, 1 Hz
+  std::string raw = "GAITMON_RAW";          ///< RawFrameReport, only when raw_enabled
+  std::string effects = "GAITMON_EFFECTS";  ///< EffectsReport, only with [model] effects
 };
 
 struct LcmSettings {
