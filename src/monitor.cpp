@@ -18,6 +18,7 @@
 #include <optional>
 #include <span>
 #include <stdexcept>
+#include <stop_token>
 #include <string>
 #include <thread>
 #include <utility>
@@ -541,13 +542,18 @@ struct Monitor::Impl {
     boost::asio::post(pool, [this] { fit_effects(false); });
   }
 
-  /// Fits the extended model to a copy of the window and publishes it.
+  /// Fits the extended model to a copy of the window and publishes it. When the run is
+  /// interrupted a fit still queued is skipped and a running one stops.
   void fit_effects(bool final_estimate) {
     std::vector<Step> steps;
     std::vector<StepAnalysis> analyses;
     std::shared_ptr<const InsoleLayout> layout;
     {
       const std::lock_guard lock(effects_mutex);
+      if (interrupted.load()) {
+        effect_window.fitting = false;
+        return;
+      }
       for (const auto& [key, entry] : effect_window.steps) {
         steps.push_back(entry.first);
         analyses.push_back(entry.second);
@@ -559,11 +565,13 @@ struct Monitor::Impl {
     try {
       const ExtendedModelFit fit =
           fit_extended_model(make_discrepancy_input(steps, std::move(analyses), *layout, config),
-                             config.model.effects);
+                             config.model.effects, {}, effects_stop.get_token());
       report = effects_report(fit, steps);
       report->final_estimate = final_estimate;
       report->utime = now_utime();
       send(*report);
+    } catch (const FitStopped&) {
+      spdlog::debug("monitor: the extended model's fit to {} steps stopped", steps.size());
     } catch (const std::exception& e) {
       if (auto held = effects_log.allow()) {
         spdlog::warn(
@@ -578,7 +586,9 @@ struct Monitor::Impl {
     effect_window.fitting = false;
   }
 
-  /// At shutdown, after the workers: the final estimate, over the window as it ends.
+  /// At shutdown, after the workers: the final estimate, over the window as it ends. An
+  /// interrupted run (close()) publishes its latest estimate instead, as a fit of the window
+  /// could take longer than a signal's shutdown may.
   void finish_effects() {
     if (config.model.effects.empty()) return;
     std::size_t held = 0;
@@ -586,13 +596,14 @@ struct Monitor::Impl {
     {
       const std::lock_guard lock(effects_mutex);
       held = effect_window.steps.size();
-      if (effect_window.last_is_current) last = effect_window.last;
+      if (effect_window.last_is_current || interrupted.load()) last = effect_window.last;
     }
     if (last) {
       last->final_estimate = true;
       last->utime = now_utime();
       send(*last);
-    } else if (held >= static_cast<std::size_t>(DiscrepancySettings{}.folds)) {
+    } else if (held >= static_cast<std::size_t>(DiscrepancySettings{}.folds) &&
+               !interrupted.load()) {
       fit_effects(true);
     } else {
       spdlog::warn("monitor: {} complete steps are too few for the extended model (it needs {})",
@@ -679,6 +690,8 @@ struct Monitor::Impl {
   FrameRing ring;
   const Clock::duration status_period;
   std::atomic<bool> closed{false};
+  std::atomic<bool> interrupted{false};  ///< close() was called: a signal, not the end of input
+  std::stop_source effects_stop;         ///< requested with `interrupted`
   std::atomic<bool> input_done{false};
   std::mutex stop_mutex;
   bool stopped = false;
@@ -746,6 +759,8 @@ bool Monitor::offer_wait(const SensorFrame& frame) {
 }
 
 void Monitor::close() {
+  impl_->interrupted.store(true);
+  impl_->effects_stop.request_stop();
   impl_->closed.store(true);
 }
 

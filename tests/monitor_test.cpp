@@ -440,6 +440,36 @@ TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
   }
 }
 
+// close() (the commands' SIGINT and SIGTERM) makes the shutdown publish the latest estimate as
+// the final one instead of fitting the window again, which could outlast the 2-s shutdown.
+TEST(Monitor, AnInterruptedRunPublishesItsLatestEffectsEstimateAsTheFinalOne) {
+  Config config = shipped_config();
+  config.model.effects = {"impact_transient"};
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  options.backlog_overflow = BacklogOverflow::Wait;
+  Monitor monitor(config, options, publisher);
+  for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+    ASSERT_TRUE(monitor.offer_wait(frame));
+  }
+  ASSERT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
+  monitor.close();
+  monitor.stop();
+  const std::vector<EffectsReport> reports = publisher.effects();
+  ASSERT_GE(reports.size(), 2u);
+  const EffectsReport& last = reports.back();
+  const EffectsReport& before = reports[reports.size() - 2];
+  EXPECT_TRUE(last.final_estimate);
+  EXPECT_FALSE(before.final_estimate);
+  EXPECT_EQ(last.steps, before.steps);
+  EXPECT_EQ(last.t_last_toe_off_s, before.t_last_toe_off_s);
+  ASSERT_EQ(last.params.size(), before.params.size());
+  for (std::size_t i = 0; i < last.params.size(); ++i) {
+    EXPECT_EQ(last.params[i].value, before.params[i].value) << last.params[i].name;
+  }
+}
+
 TEST(Monitor, WithoutEffectsNothingIsPublishedOnTheirChannel) {
   const Config config = shipped_config();
   ASSERT_TRUE(config.model.effects.empty());

@@ -56,12 +56,15 @@
 // (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
 // recording (its last steps are finalised and queued) and exits; (3) the workers finish every
 // queued step and publish it; with effects, the extended model is fitted to the window as it
-// ends (unless the last estimate already covers it) and published with final_estimate set;
-// (4) the final status is published, its connection "finished" (the
-// driver callback fills the other driver fields); (5) every thread is joined. The caller must have
-// stopped its driver thread first (offer() may race with stop(), but a frame offered after the
+// ends (unless the last estimate already covers it, or close() was called: see there) and
+// published with final_estimate set; (4) the final status is published, its connection "finished"
+// (the driver callback fills the other driver fields); (5) every thread is joined. The caller must
+// have stopped its driver thread first (offer() may race with stop(), but a frame offered after the
 // drain would be lost); close() alone does step (1), from any thread, to release a driver blocked
-// in offer_wait().
+// in offer_wait(). close() also marks the run as interrupted (the commands call it on SIGINT and
+// SIGTERM): stop() then publishes the latest estimate of the effects as the final one rather
+// than fitting the window again, skips a fit still waiting for a worker and stops a running
+// one, so that the shutdown stays within the 2 s.
 #pragma once
 
 #include <atomic>
@@ -129,7 +132,7 @@ class Monitor {
   /// monitor is closed (the frame is then not queued).
   [[nodiscard]] bool offer_wait(const SensorFrame& frame);
 
-  /// Stop accepting frames. Any thread; idempotent.
+  /// Stop accepting frames, as an interrupted run (see above). Any thread; idempotent.
   void close();
 
   /// The shutdown sequence described above. Any thread but the driver's, once that has stopped
