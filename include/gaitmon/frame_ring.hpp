@@ -60,7 +60,11 @@ class FrameRing {
   }
 
   /// Consumer. Moves the oldest frame into `out`; false when the ring is empty.
-  [[nodiscard]] bool try_pop(SensorFrame& out) { return try_pop_batch({&out, 1}) == 1; }
+  [[nodiscard]] bool try_pop(SensorFrame& out) {
+    if (!queue_.pop(out)) return false;
+    popped_.store(popped_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+    return true;
+  }
 
   /// Consumer. Moves the oldest frames, as many as are waiting up to out.size(), into the front
   /// of `out` in order, and returns how many (0 when the ring is empty). Their slots are free for
