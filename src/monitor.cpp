@@ -450,15 +450,12 @@ struct Monitor::Impl {
         backlog.store(jobs.size(), std::memory_order_relaxed);
       }
       room.notify_one();
+      std::optional<StepAnalysis> analysis;
       try {
         Ready ready{{}, job->finalised, false};
         try {
-          StepAnalysis analysis =
-              analyse_step(job->step, *job->layout, config, options.analysis, &cache);
-          ready.report = fit_report(analysis, ready.failed);
-          if (!config.model.effects.empty()) {
-            remember_for_effects(std::move(job->step), std::move(analysis), job->layout);
-          }
+          analysis = analyse_step(job->step, *job->layout, config, options.analysis, &cache);
+          ready.report = fit_report(*analysis, ready.failed);
         } catch (const std::exception& e) {
           ready.report = failed_report(job->step, e.what());
           ready.failed = true;
@@ -472,6 +469,9 @@ struct Monitor::Impl {
         spdlog::error("monitor: foot {} step {} lost: {}", foot_name(job->foot), job->step.index,
                       e.what());
         complete(job->foot, job->seq, std::nullopt);
+      }
+      if (analysis && !config.model.effects.empty()) {
+        remember_for_effects(std::move(job->step), std::move(*analysis), job->layout);
       }
     }
   }
@@ -511,8 +511,22 @@ struct Monitor::Impl {
 
   /// Adds an analysed step to the window. A fit starts once there is a step per fold, then
   /// whenever the new steps are as many as the old ones (5, 10, 20, ...; every half window once
-  /// full), so its cost stays proportional to the steps.
+  /// full), so its cost stays proportional to the steps. Never throws: the step's fit is out.
   void remember_for_effects(Step step, StepAnalysis analysis,
+                            std::shared_ptr<const InsoleLayout> layout) noexcept {
+    try {
+      add_to_effect_window(std::move(step), std::move(analysis), std::move(layout));
+    } catch (const std::exception& e) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: a step was left out of the extended model: {} ({} similar "
+            "suppressed)",
+            e.what(), *held);
+      }
+    }
+  }
+
+  void add_to_effect_window(Step step, StepAnalysis analysis,
                             std::shared_ptr<const InsoleLayout> layout) {
     const std::lock_guard lock(effects_mutex);
     EffectWindow& w = effect_window;
@@ -602,12 +616,13 @@ struct Monitor::Impl {
       last->final_estimate = true;
       last->utime = now_utime();
       send(*last);
-    } else if (held >= static_cast<std::size_t>(DiscrepancySettings{}.folds) &&
-               !interrupted.load()) {
-      fit_effects(true);
-    } else {
+    } else if (held < static_cast<std::size_t>(DiscrepancySettings{}.folds)) {
       spdlog::warn("monitor: {} complete steps are too few for the extended model (it needs {})",
                    held, DiscrepancySettings{}.folds);
+    } else if (interrupted.load()) {
+      spdlog::warn("monitor: stopped before the extended model's first estimate");
+    } else {
+      fit_effects(true);
     }
   }
 
