@@ -2,6 +2,7 @@
 #include "gaitmon/config.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <toml++/toml.h>
 
 #include <algorithm>
@@ -518,7 +519,8 @@ void read_lcm(TableReader table, LcmSettings& lcm) {
                            {"step", &lcm.channels.step},
                            {"fit", &lcm.channels.fit},
                            {"status", &lcm.channels.status},
-                           {"raw", &lcm.channels.raw}}) {
+                           {"raw", &lcm.channels.raw},
+                           {"effects", &lcm.channels.effects}}) {
     *name = read_channel(channels, key);
     const auto [it, fresh] = used.try_emplace(*name, std::string(key));
     if (!fresh) {
@@ -553,6 +555,9 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
     }
     model.effects.push_back(name->get());
   }
+  // The extended model's k-fold needs at least one step per fold.
+  model.effects_window_steps =
+      integer_in(table, "effects_window_steps", DiscrepancySettings{}.folds, 100000);
   table.finish();
 }
 
@@ -676,7 +681,21 @@ void read_usb(TableReader table, UsbSettings& usb) {
   table.finish();
 }
 
+void read_log(TableReader table, LogSettings& log) {
+  log.level = table.string("level");
+  const std::vector<std::string> names = log_level_names();
+  if (std::find(names.begin(), names.end(), log.level) == names.end()) {
+    table.fail("level", fmt::format("must be one of \"{}\", got \"{}\"", fmt::join(names, "\", \""),
+                                    log.level));
+  }
+  table.finish();
+}
+
 }  // namespace
+
+std::vector<std::string> log_level_names() {
+  return {"trace", "debug", "info", "warn", "error", "off"};
+}
 
 Config load_config(const fs::path& main_file) {
   Config config;
@@ -701,6 +720,7 @@ Config load_config(const fs::path& main_file) {
   read_monitor(root.table("monitor"), config.monitor);
   read_lcm(root.table("lcm"), config.lcm);
   read_usb(root.table("usb"), config.usb);
+  read_log(root.table("log"), config.log);
   root.finish();
   read_insoles(insoles_file, file, config);
   read_tissue(tissue_file, file, config);

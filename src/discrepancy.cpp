@@ -12,6 +12,7 @@
 #include <mutex>
 #include <numbers>
 #include <stdexcept>
+#include <stop_token>
 #include <thread>
 #include <utility>
 
@@ -559,11 +560,17 @@ std::vector<std::vector<double>> grid_of(const CandidateSpec& spec) {
 }
 
 // Fits one candidate on top of `base` (fixed effects): grid, k-fold, local refinement, SEs.
+// Every evaluation of the model first checks `stop`.
 CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& pooled,
-                               std::span<const FixedEffect> base, const CandidateSpec& spec) {
+                               std::span<const FixedEffect> base, const CandidateSpec& spec,
+                               const std::stop_token& stop = {}) {
+  const auto check_stop = [&] {
+    if (stop.stop_requested()) throw FitStopped();
+  };
   const auto grid = grid_of(spec);
   std::vector<std::vector<double>> costs(grid.size());
   parallel_for(grid.size(), [&](std::size_t gi) {
+    check_stop();
     std::vector<FixedEffect> fx(base.begin(), base.end());
     fx.push_back({&spec, grid[gi]});
     costs[gi] = unit_costs(units, fx);
@@ -598,6 +605,7 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   }
   std::vector<double> theta = grid[best];
   const auto objective = [&](const std::vector<double>& th) {
+    check_stop();
     std::vector<FixedEffect> fx(base.begin(), base.end());
     fx.push_back({&spec, th});
     return sum(unit_costs(units, fx));
@@ -1181,7 +1189,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
 
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
-                                    const DiscrepancySettings& settings) {
+                                    const DiscrepancySettings& settings,
+                                    const std::stop_token& stop) {
   check_settings(settings, input);
   for (std::size_t i = 0; i < effects.size(); ++i) {
     check_discrepancy_effect(effects[i]);
@@ -1202,7 +1211,7 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   std::vector<double> in_sample = base;
   for (const std::string& name : effects) {
     const CandidateOutcome c =
-        fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name));
+        fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name), stop);
     out.effects.push_back(estimate_of(c));
     chosen.push_back({c.spec, c.theta});
     heldout = c.heldout;

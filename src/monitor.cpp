@@ -16,7 +16,9 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <stdexcept>
+#include <stop_token>
 #include <string>
 #include <thread>
 #include <utility>
@@ -24,6 +26,7 @@
 
 #include "gaitmon/batch.hpp"
 #include "gaitmon/device_clock.hpp"
+#include "gaitmon/discrepancy.hpp"
 #include "gaitmon/frame_ring.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/log_throttle.hpp"
@@ -38,6 +41,9 @@ using Clock = std::chrono::steady_clock;
 // How long the detector sleeps when the ring is empty: at 200 frames/s it wakes about every
 // frame, and the delay it adds to a step's latency stays far below the 20 ms budget.
 constexpr auto kIdlePoll = std::chrono::microseconds(500);
+// Frames the detector takes from the ring at a time: their slots are free again at once, and the
+// ring's indices cross between the cores once per batch rather than per frame.
+constexpr std::size_t kPopBatch = 64;
 // Fit latencies kept for the status percentiles: the latest ones, about 8 minutes of walking.
 constexpr std::size_t kLatencyWindow = 1024;
 
@@ -97,6 +103,27 @@ FitReport failed_report(const Step& step, const std::string& reason) {
   return report;
 }
 
+EffectsReport effects_report(const ExtendedModelFit& fit, std::span<const Step> steps) {
+  EffectsReport report;
+  report.steps = static_cast<int>(steps.size());
+  report.t_first_heel_strike_s = steps.front().t_heel_strike_s;
+  report.t_last_toe_off_s = steps.front().t_toe_off_s;
+  for (const Step& step : steps) {
+    report.t_first_heel_strike_s = std::min(report.t_first_heel_strike_s, step.t_heel_strike_s);
+    report.t_last_toe_off_s = std::max(report.t_last_toe_off_s, step.t_toe_off_s);
+  }
+  report.baseline_nrmse_pct = fit.baseline_nrmse_pct;
+  report.extended_nrmse_pct = fit.extended_nrmse_pct;
+  report.baseline_heldout_nrmse_pct = fit.baseline_heldout_nrmse_pct;
+  report.extended_heldout_nrmse_pct = fit.extended_heldout_nrmse_pct;
+  for (const EffectEstimate& effect : fit.effects) {
+    for (const ParamEstimate& p : effect.params) {
+      report.params.push_back({effect.name, p.name, p.value, p.se});
+    }
+  }
+  return report;
+}
+
 // Nearest rank: the smallest value with at least p of the values at or below it.
 double percentile(std::vector<double>& values, double p) {
   if (values.empty()) return 0.0;
@@ -126,6 +153,16 @@ struct Monitor::Impl {
     std::uint64_t next = 0;
     bool draining = false;  ///< a thread is publishing from this buffer
     std::map<std::uint64_t, std::optional<Ready>> pending;
+  };
+  /// The latest complete steps for the extended model, keyed by time (both feet), so that the
+  /// window and the fit do not depend on the order in which the workers finish.
+  struct EffectWindow {
+    std::map<std::pair<double, Foot>, std::pair<Step, StepAnalysis>> steps;
+    std::shared_ptr<const InsoleLayout> layout;  ///< of the first step; one insole per session
+    std::size_t fresh = 0;                       ///< steps added since the last fit took its copy
+    bool fitting = false;                        ///< a fit is queued or running
+    std::optional<EffectsReport> last;           ///< the latest published
+    bool last_is_current = false;                ///< `last` is of the window as it is now
   };
   /// Detector-thread state of one foot.
   struct FootState {
@@ -160,17 +197,21 @@ struct Monitor::Impl {
 
   void detector_main() {
     try {
-      SensorFrame frame;
+      std::vector<SensorFrame> batch(kPopBatch);
       next_status = Clock::now() + status_period;
       for (;;) {
         bool any = false;
-        while (ring.try_pop(frame)) {
+        while (const std::size_t n = ring.try_pop_batch(batch)) {
           any = true;
-          handle(frame);
-          maybe_status();
+          for (std::size_t i = 0; i < n; ++i) {
+            handle(batch[i]);
+            maybe_status();
+          }
         }
         if (input_done.load(std::memory_order_acquire)) {
-          while (ring.try_pop(frame)) handle(frame);
+          while (const std::size_t n = ring.try_pop_batch(batch)) {
+            for (std::size_t i = 0; i < n; ++i) handle(batch[i]);
+          }
           break;
         }
         maybe_status();
@@ -409,12 +450,12 @@ struct Monitor::Impl {
         backlog.store(jobs.size(), std::memory_order_relaxed);
       }
       room.notify_one();
+      std::optional<StepAnalysis> analysis;
       try {
         Ready ready{{}, job->finalised, false};
         try {
-          const StepAnalysis analysis =
-              analyse_step(job->step, *job->layout, config, options.analysis, &cache);
-          ready.report = fit_report(analysis, ready.failed);
+          analysis = analyse_step(job->step, *job->layout, config, options.analysis, &cache);
+          ready.report = fit_report(*analysis, ready.failed);
         } catch (const std::exception& e) {
           ready.report = failed_report(job->step, e.what());
           ready.failed = true;
@@ -428,6 +469,9 @@ struct Monitor::Impl {
         spdlog::error("monitor: foot {} step {} lost: {}", foot_name(job->foot), job->step.index,
                       e.what());
         complete(job->foot, job->seq, std::nullopt);
+      }
+      if (analysis && !config.model.effects.empty()) {
+        remember_for_effects(std::move(job->step), std::move(*analysis), job->layout);
       }
     }
   }
@@ -461,6 +505,125 @@ struct Monitor::Impl {
       if (done.failed) fits_failed.fetch_add(1, std::memory_order_relaxed);
     }
     r.draining = false;
+  }
+
+  // ---- the extended model ([model] effects) ----
+
+  /// Adds an analysed step to the window. A fit starts once there is a step per fold, then
+  /// whenever the new steps are as many as the old ones (5, 10, 20, ...; every half window once
+  /// full), so its cost stays proportional to the steps. Never throws: the step's fit is out.
+  void remember_for_effects(Step step, StepAnalysis analysis,
+                            std::shared_ptr<const InsoleLayout> layout) noexcept {
+    try {
+      add_to_effect_window(std::move(step), std::move(analysis), std::move(layout));
+    } catch (const std::exception& e) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: a step was left out of the extended model: {} ({} similar "
+            "suppressed)",
+            e.what(), *held);
+      }
+    }
+  }
+
+  void add_to_effect_window(Step step, StepAnalysis analysis,
+                            std::shared_ptr<const InsoleLayout> layout) {
+    const std::lock_guard lock(effects_mutex);
+    EffectWindow& w = effect_window;
+    if (!w.layout) w.layout = layout;
+    if (w.layout->sensor_count() != layout->sensor_count()) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: foot {} step {}: another insole size than the first step's; left "
+            "out of the extended model ({} similar suppressed)",
+            foot_name(step.foot), step.index, *held);
+      }
+      return;
+    }
+    w.steps.insert_or_assign(std::pair(step.t_heel_strike_s, step.foot),
+                             std::pair(std::move(step), std::move(analysis)));
+    while (w.steps.size() > static_cast<std::size_t>(config.model.effects_window_steps)) {
+      w.steps.erase(w.steps.begin());
+    }
+    ++w.fresh;
+    w.last_is_current = false;
+    const std::size_t folds = static_cast<std::size_t>(DiscrepancySettings{}.folds);
+    if (w.fitting || w.steps.size() < folds ||
+        w.fresh < std::max(folds, w.steps.size() - w.fresh)) {
+      return;
+    }
+    w.fitting = true;
+    boost::asio::post(pool, [this] { fit_effects(false); });
+  }
+
+  /// Fits the extended model to a copy of the window and publishes it. When the run is
+  /// interrupted a fit still queued is skipped and a running one stops.
+  void fit_effects(bool final_estimate) {
+    std::vector<Step> steps;
+    std::vector<StepAnalysis> analyses;
+    std::shared_ptr<const InsoleLayout> layout;
+    {
+      const std::lock_guard lock(effects_mutex);
+      if (interrupted.load()) {
+        effect_window.fitting = false;
+        return;
+      }
+      for (const auto& [key, entry] : effect_window.steps) {
+        steps.push_back(entry.first);
+        analyses.push_back(entry.second);
+      }
+      layout = effect_window.layout;
+      effect_window.fresh = 0;
+    }
+    std::optional<EffectsReport> report;
+    try {
+      const ExtendedModelFit fit =
+          fit_extended_model(make_discrepancy_input(steps, std::move(analyses), *layout, config),
+                             config.model.effects, {}, effects_stop.get_token());
+      report = effects_report(fit, steps);
+      report->final_estimate = final_estimate;
+      report->utime = now_utime();
+      send(*report);
+    } catch (const FitStopped&) {
+      spdlog::debug("monitor: the extended model's fit to {} steps stopped", steps.size());
+    } catch (const std::exception& e) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: the extended model could not be fitted to {} steps: {} ({} similar "
+            "suppressed)",
+            steps.size(), e.what(), *held);
+      }
+    }
+    const std::lock_guard lock(effects_mutex);
+    effect_window.last_is_current = report && effect_window.fresh == 0;
+    if (report) effect_window.last = std::move(report);
+    effect_window.fitting = false;
+  }
+
+  /// At shutdown, after the workers: the final estimate, over the window as it ends. An
+  /// interrupted run (close()) publishes its latest estimate instead, as a fit of the window
+  /// could take longer than a signal's shutdown may.
+  void finish_effects() {
+    if (config.model.effects.empty()) return;
+    std::size_t held = 0;
+    std::optional<EffectsReport> last;
+    {
+      const std::lock_guard lock(effects_mutex);
+      held = effect_window.steps.size();
+      if (effect_window.last_is_current || interrupted.load()) last = effect_window.last;
+    }
+    if (last) {
+      last->final_estimate = true;
+      last->utime = now_utime();
+      send(*last);
+    } else if (held < static_cast<std::size_t>(DiscrepancySettings{}.folds)) {
+      spdlog::warn("monitor: {} complete steps are too few for the extended model (it needs {})",
+                   held, DiscrepancySettings{}.folds);
+    } else if (interrupted.load()) {
+      spdlog::warn("monitor: stopped before the extended model's first estimate");
+    } else {
+      fit_effects(true);
+    }
   }
 
   // ---- any thread ----
@@ -531,6 +694,7 @@ struct Monitor::Impl {
     input_done.store(true, std::memory_order_release);
     if (detector.joinable()) detector.join();
     pool.join();
+    finish_effects();
     send(status(true));
     stopped = true;
   }
@@ -541,6 +705,8 @@ struct Monitor::Impl {
   FrameRing ring;
   const Clock::duration status_period;
   std::atomic<bool> closed{false};
+  std::atomic<bool> interrupted{false};  ///< close() was called: a signal, not the end of input
+  std::stop_source effects_stop;         ///< requested with `interrupted`
   std::atomic<bool> input_done{false};
   std::mutex stop_mutex;
   bool stopped = false;
@@ -570,7 +736,11 @@ struct Monitor::Impl {
   std::vector<double> latencies;
   std::size_t latency_next = 0;
 
-  LogThrottle reject_log, step_drop_log, fit_log, publish_log;
+  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log;
+
+  // The extended model's window, shared by the workers.
+  std::mutex effects_mutex;
+  EffectWindow effect_window;
 
   boost::asio::thread_pool pool;
   std::thread detector;
@@ -604,6 +774,8 @@ bool Monitor::offer_wait(const SensorFrame& frame) {
 }
 
 void Monitor::close() {
+  impl_->interrupted.store(true);
+  impl_->effects_stop.request_stop();
   impl_->closed.store(true);
 }
 

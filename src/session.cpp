@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <functional>
+#include <istream>
 #include <limits>
 #include <stdexcept>
 #include <string_view>
@@ -17,7 +19,7 @@
 namespace gaitmon {
 namespace {
 
-constexpr std::size_t kChunkBytes = std::size_t{1} << 20;
+constexpr std::size_t kChunkBytes = std::size_t{1} << 16;
 constexpr std::size_t kMaxLineBytes = std::size_t{1} << 20;
 constexpr std::string_view kBom = "\xEF\xBB\xBF";
 constexpr double kNoTime = -std::numeric_limits<double>::infinity();
@@ -128,22 +130,23 @@ struct FileCloser {
 };
 using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 
+// Fills `buffer` with up to `size` bytes of the input and returns how many; 0 at its end, or on a
+// read error, which it describes in `error`.
+using ReadBytes = std::function<std::size_t(char* buffer, std::size_t size, std::string& error)>;
+
 // Hands out one line at a time from large reads, keeping only the current chunk and the tail of a
-// line that crosses a chunk boundary.
+// line that crosses a chunk boundary. The buffer starts at one chunk and grows only for a line
+// longer than that: a reader is cheap to make for a small input (the fuzzer makes one per run).
 class LineSource {
  public:
-  LineSource(const std::filesystem::path& path, const std::string& name) : name_(name) {
-    file_.reset(std::fopen(path.c_str(), "rb"));
-    if (!file_) throw InputError(name_, 0, std::string("cannot open: ") + std::strerror(errno));
-    buffer_.resize(kChunkBytes + kMaxLineBytes);
-  }
+  LineSource(std::string name, ReadBytes read) : name_(std::move(name)), read_(std::move(read)) {}
 
-  // The next line without its "\n" or "\r\n"; false at the end of the file.
+  // The next line without its "\n" or "\r\n"; false at the end of the input.
   bool next(std::string_view& line) {
     for (;;) {
       const std::size_t pending = end_ - begin_;
-      const char* first = buffer_.data() + begin_;
-      if (const void* newline = std::memchr(first, '\n', pending)) {
+      const char* first = buffer_.get() + begin_;
+      if (const void* newline = pending > 0 ? std::memchr(first, '\n', pending) : nullptr) {
         const auto length = static_cast<std::size_t>(static_cast<const char*>(newline) - first);
         begin_ += length + 1;
         return take(line, first, length);
@@ -154,27 +157,39 @@ class LineSource {
         return take(line, first, pending);
       }
       if (pending > kMaxLineBytes) too_long();
-      std::memmove(buffer_.data(), first, pending);
-      begin_ = 0;
-      end_ = pending;
-      const std::size_t got =
-          std::fread(buffer_.data() + end_, 1, buffer_.size() - end_, file_.get());
-      if (got == 0) {
-        if (std::ferror(file_.get()) != 0) {
-          throw InputError(name_, line_ + 1, std::string("cannot read: ") + std::strerror(errno));
-        }
-        eof_ = true;
-      }
+      make_room(pending);
+      std::string error;
+      const std::size_t got = read_(buffer_.get() + end_, capacity_ - end_, error);
+      if (!error.empty()) throw InputError(name_, line_ + 1, "cannot read: " + error);
+      if (got == 0) eof_ = true;
       end_ += got;
       bytes_loaded_ += got;
     }
   }
+
+  const std::string& name() const { return name_; }
 
   std::uint64_t line_number() const { return line_; }
 
   std::uint64_t bytes_consumed() const { return bytes_loaded_ - (end_ - begin_); }
 
  private:
+  // Moves the `pending` bytes of an unfinished line to the front, growing the buffer while they
+  // would fill more than half of it, so that every read gets at least half a chunk.
+  void make_room(std::size_t pending) {
+    if (capacity_ == 0 || pending > capacity_ / 2) {
+      const std::size_t size = std::max(kChunkBytes, 2 * capacity_);
+      auto grown = std::make_unique_for_overwrite<char[]>(size);
+      if (pending > 0) std::memcpy(grown.get(), buffer_.get() + begin_, pending);
+      buffer_ = std::move(grown);
+      capacity_ = size;
+    } else if (pending > 0) {
+      std::memmove(buffer_.get(), buffer_.get() + begin_, pending);
+    }
+    begin_ = 0;
+    end_ = pending;
+  }
+
   bool take(std::string_view& line, const char* first, std::size_t length) {
     if (length > kMaxLineBytes) too_long();
     ++line_;
@@ -189,14 +204,38 @@ class LineSource {
   }
 
   std::string name_;
-  FilePtr file_;
-  std::vector<char> buffer_;
+  ReadBytes read_;
+  std::unique_ptr<char[]> buffer_;
+  std::size_t capacity_ = 0;
   std::size_t begin_ = 0;
   std::size_t end_ = 0;
   bool eof_ = false;
   std::uint64_t line_ = 0;
   std::uint64_t bytes_loaded_ = 0;
 };
+
+LineSource file_lines(const std::filesystem::path& path) {
+  std::string name = path.string();
+  FilePtr opened(std::fopen(path.c_str(), "rb"));
+  if (!opened) throw InputError(name, 0, std::string("cannot open: ") + std::strerror(errno));
+  // Shared: ReadBytes is a std::function, which must be copyable.
+  std::shared_ptr<std::FILE> file = std::move(opened);
+  auto read = [file](char* buffer, std::size_t size, std::string& error) {
+    const std::size_t got = std::fread(buffer, 1, size, file.get());
+    if (got == 0 && std::ferror(file.get()) != 0) error = std::strerror(errno);
+    return got;
+  };
+  return LineSource(std::move(name), std::move(read));
+}
+
+LineSource stream_lines(std::istream& in, std::string name) {
+  auto read = [&in](char* buffer, std::size_t size, std::string& error) {
+    in.read(buffer, static_cast<std::streamsize>(size));
+    if (in.bad()) error = "the stream failed";
+    return static_cast<std::size_t>(in.gcount());
+  };
+  return LineSource(std::move(name), std::move(read));
+}
 
 }  // namespace
 
@@ -223,19 +262,17 @@ std::size_t session_sensor_count(InsoleSize size) {
 
 struct SessionReader::Impl {
   std::filesystem::path path;
-  std::string name;
   LineSource lines;
   SessionHeader header;
   std::array<double, 2> last_t{kNoTime, kNoTime};
   std::uint64_t frame_line = 0;
 
-  explicit Impl(const std::filesystem::path& file)
-      : path(file), name(file.string()), lines(path, name) {
+  explicit Impl(LineSource source) : path(source.name()), lines(std::move(source)) {
     read_header();
   }
 
   [[noreturn]] void fail(std::uint64_t line, std::string reason) const {
-    throw InputError(name, line, std::move(reason));
+    throw InputError(lines.name(), line, std::move(reason));
   }
 
   void read_header();
@@ -429,7 +466,10 @@ void SessionReader::Impl::fail_field(std::string_view line, std::size_t field) c
 }
 
 SessionReader::SessionReader(const std::filesystem::path& path)
-    : impl_(std::make_unique<Impl>(path)) {}
+    : impl_(std::make_unique<Impl>(file_lines(path))) {}
+
+SessionReader::SessionReader(std::istream& in, std::string name)
+    : impl_(std::make_unique<Impl>(stream_lines(in, std::move(name)))) {}
 
 SessionReader::~SessionReader() = default;
 

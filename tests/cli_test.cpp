@@ -109,5 +109,46 @@ TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
   EXPECT_NE(out.find("surprise"), std::string::npos) << out;
 }
 
+// analyze logs its timings at debug level: they show exactly when the level allows them.
+TEST(Cli, LogLevelComesFromTheConfigUnlessGivenOnTheCommandLine) {
+  const auto dir = test::scratch_dir("cli-log-level");
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    std::filesystem::copy_file(test::source_dir() / "config" / name, dir / name);
+  }
+  std::string config = read_all(dir / "gaitmon.toml");
+  const std::string shipped = "[log]\n# How much";
+  ASSERT_NE(config.find(shipped), std::string::npos);
+  const auto level = config.find("level = \"info\"", config.find(shipped));
+  ASSERT_NE(level, std::string::npos);
+  config.replace(level, std::string("level = \"info\"").size(), "level = \"debug\"");
+  test::write_text(dir / "debug.toml", config);
+
+  int status = -1;
+  std::string out =
+      run("simulate --size 37-38 --duration 8 --seed 3 --out " + (dir / "s.csv").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  const std::string analyze = " analyze " + (dir / "s.csv").string() + " --out ";
+  const std::string debug_config = "--config " + (dir / "debug.toml").string();
+
+  out = run(debug_config + analyze + (dir / "a").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
+
+  out = run(debug_config + " --log-level info" + analyze + (dir / "b").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
+
+  out =
+      run("--config " + (dir / "gaitmon.toml").string() + analyze + (dir / "c").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
+
+  out = run("--config " + (dir / "gaitmon.toml").string() + " --log-level debug" + analyze +
+                (dir / "d").string(),
+            &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace gaitmon

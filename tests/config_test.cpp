@@ -313,6 +313,22 @@ void PrintTo(const Refusal& r, std::ostream* os) {
   *os << r.name;
 }
 
+// For tests that list their own refusals rather than adding to kRefusals.
+void expect_refusals(const std::vector<Refusal>& cases) {
+  for (const Refusal& c : cases) {
+    const fs::path dir = copy_config(c.name);
+    edit_file(dir / c.file, c.edit);
+    try {
+      load_config(dir / kMain);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), (dir / c.file).string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name;
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
+    }
+  }
+}
+
 class ConfigRefusal : public ::testing::TestWithParam<Refusal> {};
 
 TEST_P(ConfigRefusal, ThrowsConfigErrorNamingFileAndKey) {
@@ -510,36 +526,22 @@ TEST(Config, FitBoundsAreDerivedFromAppendixI) {
 }
 
 TEST(Config, FitBoundsAreValidated) {
-  const struct {
-    const char* name;
-    Edit edit;
-    std::string key;
-    std::string reason;
-  } cases[] = {
-      {"FitUnknownKey", replace("[fit]\n", "[fit]\nP_mm2 = { lower = 1.0, upper = 2.0 }\n"),
+  const std::vector<Refusal> cases = {
+      {"FitUnknownKey", kMain, replace("[fit]\n", "[fit]\nP_mm2 = { lower = 1.0, upper = 2.0 }\n"),
        "fit.P_mm2", "unknown key"},
-      {"FitMissing", replace("m = { lower = 0.82, upper = 1.38 }\n", ""), "fit.m", "missing"},
-      {"FitLowerZero", replace("{ lower = 0.01, upper = 0.981 }", "{ lower = 0.0, upper = 0.981 }"),
-       "fit.n.lower", "must be > 0"},
-      {"FitUpperBelowLower",
+      {"FitMissing", kMain, replace("m = { lower = 0.82, upper = 1.38 }\n", ""), "fit.m",
+       "missing"},
+      {"FitLowerZero", kMain,
+       replace("{ lower = 0.01, upper = 0.981 }", "{ lower = 0.0, upper = 0.981 }"), "fit.n.lower",
+       "must be > 0"},
+      {"FitUpperBelowLower", kMain,
        replace("{ lower = 20.0, upper = 213.5 }", "{ lower = 20.0, upper = 19.0 }"),
        "fit.A_mm.upper", "must be > lower"},
-      {"FitUnknownBoundKey",
+      {"FitUnknownBoundKey", kMain,
        replace("{ lower = 1.0, upper = 22.8 }", "{ lower = 1.0, upper = 22.8, mid = 5.0 }"),
        "fit.d0_mm.mid", "unknown key"},
   };
-  for (const auto& c : cases) {
-    const fs::path dir = copy_config(c.name);
-    edit_file(dir / kMain, c.edit);
-    try {
-      load_config(dir / kMain);
-      ADD_FAILURE() << c.name << ": no ConfigError";
-    } catch (const ConfigError& e) {
-      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
-      EXPECT_EQ(e.key(), c.key) << c.name;
-      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
-    }
-  }
+  expect_refusals(cases);
 }
 
 TEST(Config, WireAndSerialDefaults) {
@@ -586,75 +588,62 @@ TEST(Config, WireAndSerialAcceptTheirAlternatives) {
 }
 
 TEST(Config, WireAndSerialAreValidated) {
-  const struct {
-    const char* name;
-    Edit edit;
-    std::string key;
-    std::string reason;
-  } cases[] = {
-      {"WireMissing", erase_from_to("[wire]\n", "[serial]\n"), "wire", "missing"},
-      {"WireUnknownKey", replace("[wire]\n", "[wire]\nsink = 1\n"), "wire.sink", "unknown key"},
-      {"WireSyncEmpty", replace("sync = [0xA5, 0x5A]", "sync = []"), "wire.sync",
+  const std::vector<Refusal> cases = {
+      {"WireMissing", kMain, erase_from_to("[wire]\n", "[serial]\n"), "wire", "missing"},
+      {"WireUnknownKey", kMain, replace("[wire]\n", "[wire]\nsink = 1\n"), "wire.sink",
+       "unknown key"},
+      {"WireSyncEmpty", kMain, replace("sync = [0xA5, 0x5A]", "sync = []"), "wire.sync",
        "must list 1 to 4 bytes, got 0"},
-      {"WireSyncTooLong", replace("sync = [0xA5, 0x5A]", "sync = [1, 2, 3, 4, 5]"), "wire.sync",
-       "must list 1 to 4 bytes, got 5"},
-      {"WireSyncByteTooLarge", replace("sync = [0xA5, 0x5A]", "sync = [0xA5, 256]"), "wire.sync[1]",
-       "must be in [0, 255], got 256"},
-      {"WireSyncByteNotInteger", replace("sync = [0xA5, 0x5A]", "sync = [\"A5\"]"), "wire.sync[0]",
-       "expected an integer, got a string"},
-      {"WireUnknownCrc", replace("crc = \"crc16-ccitt-false\"", "crc = \"crc8\""), "wire.crc",
-       "must be one of \"crc16-ccitt-false\", \"crc32\", \"none\", got \"crc8\""},
-      {"WireBadByteOrder", replace("crc_byte_order = \"little\"", "crc_byte_order = \"middle\""),
-       "wire.crc_byte_order", "must be one of"},
-      {"WireCountNotBoolean",
+      {"WireSyncTooLong", kMain, replace("sync = [0xA5, 0x5A]", "sync = [1, 2, 3, 4, 5]"),
+       "wire.sync", "must list 1 to 4 bytes, got 5"},
+      {"WireSyncByteTooLarge", kMain, replace("sync = [0xA5, 0x5A]", "sync = [0xA5, 256]"),
+       "wire.sync[1]", "must be in [0, 255], got 256"},
+      {"WireSyncByteNotInteger", kMain, replace("sync = [0xA5, 0x5A]", "sync = [\"A5\"]"),
+       "wire.sync[0]", "expected an integer, got a string"},
+      {"WireUnknownCrc", kMain, replace("crc = \"crc16-ccitt-false\"", "crc = \"crc8\""),
+       "wire.crc", "must be one of \"crc16-ccitt-false\", \"crc32\", \"none\", got \"crc8\""},
+      {"WireBadByteOrder", kMain,
+       replace("crc_byte_order = \"little\"", "crc_byte_order = \"middle\""), "wire.crc_byte_order",
+       "must be one of"},
+      {"WireCountNotBoolean", kMain,
        replace("require_size_sensor_count = true", "require_size_sensor_count = 1"),
        "wire.require_size_sensor_count", "expected a boolean, got an integer"},
-      {"SerialMissing", erase_from_to("[serial]\n", "[usb]\n"), "serial", "missing"},
-      {"SerialUnknownKey", replace("[serial]\n", "[serial]\nbaudrate = 9600\n"), "serial.baudrate",
-       "unknown key"},
-      {"SerialEmptyDevice", replace("device = \"/dev/ttyUSB0\"", "device = \"\""), "serial.device",
-       "must not be empty"},
-      {"SerialBaudZero", replace("baud = 921600", "baud = 0"), "serial.baud",
+      {"SerialMissing", kMain, erase_from_to("[serial]\n", "[usb]\n"), "serial", "missing"},
+      {"SerialUnknownKey", kMain, replace("[serial]\n", "[serial]\nbaudrate = 9600\n"),
+       "serial.baudrate", "unknown key"},
+      {"SerialEmptyDevice", kMain, replace("device = \"/dev/ttyUSB0\"", "device = \"\""),
+       "serial.device", "must not be empty"},
+      {"SerialBaudZero", kMain, replace("baud = 921600", "baud = 0"), "serial.baud",
        "must be in [50, 4000000], got 0"},
-      {"SerialBadParity", replace("parity = \"none\"", "parity = \"mark\""), "serial.parity",
+      {"SerialBadParity", kMain, replace("parity = \"none\"", "parity = \"mark\""), "serial.parity",
        "must be one of \"none\", \"odd\", \"even\", got \"mark\""},
-      {"SerialDataBits", replace("data_bits = 8", "data_bits = 9"), "serial.data_bits",
+      {"SerialDataBits", kMain, replace("data_bits = 8", "data_bits = 9"), "serial.data_bits",
        "must be in [5, 8], got 9"},
-      {"SerialStopBits", replace("stop_bits = 1", "stop_bits = 3"), "serial.stop_bits",
+      {"SerialStopBits", kMain, replace("stop_bits = 1", "stop_bits = 3"), "serial.stop_bits",
        "must be in [1, 2], got 3"},
-      {"SerialBadFlow", replace("flow_control = \"none\"", "flow_control = \"xon\""),
+      {"SerialBadFlow", kMain, replace("flow_control = \"none\"", "flow_control = \"xon\""),
        "serial.flow_control", "must be one of"},
-      {"SerialBackoffZero", replace("reconnect_initial_ms = 50", "reconnect_initial_ms = 0"),
+      {"SerialBackoffZero", kMain, replace("reconnect_initial_ms = 50", "reconnect_initial_ms = 0"),
        "serial.reconnect_initial_ms", "must be in [1, 60000], got 0"},
-      {"SerialBackoffMaxBelowInitial", replace("reconnect_max_ms = 2000", "reconnect_max_ms = 10"),
-       "serial.reconnect_max_ms", "must be >= reconnect_initial_ms (50), got 10"},
-      {"UsbMissing", truncate_at("[usb]\n"), "usb", "missing"},
-      {"UsbUnknownKey", replace("[usb]\n", "[usb]\nserial_number = 1\n"), "usb.serial_number",
-       "unknown key"},
-      {"UsbVendorTooLarge", replace("vendor_id = 0x0000", "vendor_id = 0x10000"), "usb.vendor_id",
-       "must be in [0, 65535], got 65536"},
-      {"UsbOutEndpoint", replace("endpoint = 0x81", "endpoint = 0x01"), "usb.endpoint",
+      {"SerialBackoffMaxBelowInitial", kMain,
+       replace("reconnect_max_ms = 2000", "reconnect_max_ms = 10"), "serial.reconnect_max_ms",
+       "must be >= reconnect_initial_ms (50), got 10"},
+      {"UsbMissing", kMain, truncate_at("[usb]\n"), "usb", "missing"},
+      {"UsbUnknownKey", kMain, replace("[usb]\n", "[usb]\nserial_number = 1\n"),
+       "usb.serial_number", "unknown key"},
+      {"UsbVendorTooLarge", kMain, replace("vendor_id = 0x0000", "vendor_id = 0x10000"),
+       "usb.vendor_id", "must be in [0, 65535], got 65536"},
+      {"UsbOutEndpoint", kMain, replace("endpoint = 0x81", "endpoint = 0x01"), "usb.endpoint",
        "must be an IN endpoint address 0x81-0x8F, got 0x01"},
-      {"UsbTransfersZero", replace("transfers = 4", "transfers = 0"), "usb.transfers",
+      {"UsbTransfersZero", kMain, replace("transfers = 4", "transfers = 0"), "usb.transfers",
        "must be in [1, 64], got 0"},
-      {"UsbTransferBytes", replace("transfer_bytes = 16384", "transfer_bytes = 8"),
+      {"UsbTransferBytes", kMain, replace("transfer_bytes = 16384", "transfer_bytes = 8"),
        "usb.transfer_bytes", "must be in [64, 1048576], got 8"},
-      {"UsbBackoffMaxBelowInitial",
+      {"UsbBackoffMaxBelowInitial", kMain,
        replace("[usb]", "reconnect_max_ms = 2000", "reconnect_max_ms = 1"), "usb.reconnect_max_ms",
        "must be >= reconnect_initial_ms (50), got 1"},
   };
-  for (const auto& c : cases) {
-    const fs::path dir = copy_config(c.name);
-    edit_file(dir / kMain, c.edit);
-    try {
-      load_config(dir / kMain);
-      ADD_FAILURE() << c.name << ": no ConfigError";
-    } catch (const ConfigError& e) {
-      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
-      EXPECT_EQ(e.key(), c.key) << c.name;
-      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
-    }
-  }
+  expect_refusals(cases);
 }
 
 TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
@@ -667,44 +656,28 @@ TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
 }
 
 TEST(Config, RingAndMonitorAreValidated) {
-  const struct {
-    const char* name;
-    Edit edit;
-    std::string key;
-    std::string reason;
-  } cases[] = {
-      {"RingMissing", erase_from_to("[ring]", "[monitor]"), "ring", "missing"},
-      {"RingCapacityOne", replace("capacity_frames = 4096", "capacity_frames = 1"),
+  const std::vector<Refusal> cases = {
+      {"RingMissing", kMain, erase_from_to("[ring]", "[monitor]"), "ring", "missing"},
+      {"RingCapacityOne", kMain, replace("capacity_frames = 4096", "capacity_frames = 1"),
        "ring.capacity_frames", "must be in [2, 16777216]"},
-      {"RingCapacityFloat", replace("capacity_frames = 4096", "capacity_frames = 4096.0"),
+      {"RingCapacityFloat", kMain, replace("capacity_frames = 4096", "capacity_frames = 4096.0"),
        "ring.capacity_frames", "expected an integer"},
-      {"RingUnknownKey", replace("[ring]\n", "[ring]\npolicy = \"drop\"\n"), "ring.policy",
+      {"RingUnknownKey", kMain, replace("[ring]\n", "[ring]\npolicy = \"drop\"\n"), "ring.policy",
        "unknown key"},
-      {"MonitorWorkersZero", replace("workers = 2", "workers = 0"), "monitor.workers",
+      {"MonitorWorkersZero", kMain, replace("workers = 2", "workers = 0"), "monitor.workers",
        "must be in [1, 64]"},
-      {"MonitorBacklogZero", replace("max_step_backlog = 32", "max_step_backlog = 0"),
+      {"MonitorBacklogZero", kMain, replace("max_step_backlog = 32", "max_step_backlog = 0"),
        "monitor.max_step_backlog", "must be in [1, 100000]"},
-      {"MonitorStatusPeriodZero", replace("status_period_s = 1.0", "status_period_s = 0"),
+      {"MonitorStatusPeriodZero", kMain, replace("status_period_s = 1.0", "status_period_s = 0"),
        "monitor.status_period_s", "must be in [0.01, 3600]"},
-      {"MonitorPublishFramesNotBool", replace("publish_frames = true", "publish_frames = 1"),
+      {"MonitorPublishFramesNotBool", kMain, replace("publish_frames = true", "publish_frames = 1"),
        "monitor.publish_frames", "expected a boolean"},
-      {"MonitorPublishFramesMissing", replace("publish_frames = true\n", ""),
+      {"MonitorPublishFramesMissing", kMain, replace("publish_frames = true\n", ""),
        "monitor.publish_frames", "missing"},
-      {"MonitorUnknownKey", replace("[monitor]\n", "[monitor]\nthreads = 2\n"), "monitor.threads",
-       "unknown key"},
+      {"MonitorUnknownKey", kMain, replace("[monitor]\n", "[monitor]\nthreads = 2\n"),
+       "monitor.threads", "unknown key"},
   };
-  for (const auto& c : cases) {
-    const fs::path dir = copy_config(c.name);
-    edit_file(dir / kMain, c.edit);
-    try {
-      load_config(dir / kMain);
-      ADD_FAILURE() << c.name << ": no ConfigError";
-    } catch (const ConfigError& e) {
-      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
-      EXPECT_EQ(e.key(), c.key) << c.name;
-      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
-    }
-  }
+  expect_refusals(cases);
 }
 
 TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
@@ -716,6 +689,7 @@ TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
   EXPECT_EQ(lcm.channels.fit, "GAITMON_FIT");
   EXPECT_EQ(lcm.channels.status, "GAITMON_STATUS");
   EXPECT_EQ(lcm.channels.raw, "GAITMON_RAW");
+  EXPECT_EQ(lcm.channels.effects, "GAITMON_EFFECTS");
   // The struct's defaults are the shipped file's, for code that builds settings by hand.
   const LcmSettings defaults;
   EXPECT_EQ(defaults.url, lcm.url);
@@ -736,50 +710,41 @@ TEST(Config, LcmSettingsAreRead) {
 
 TEST(Config, LcmSettingsAreValidated) {
   const std::string too_long(64, 'C');
-  const struct {
-    const char* name;
-    Edit edit;
-    std::string key;
-    std::string reason;
-  } cases[] = {
-      {"LcmMissingTable", truncate_at("[lcm]\n"), "lcm", "missing"},
-      {"LcmMissingUrl", replace("[lcm]", "url = \"udpm://239.255.76.67:7667?ttl=0\"\n", ""),
+  const std::vector<Refusal> cases = {
+      {"LcmMissingTable", kMain, truncate_at("[lcm]\n"), "lcm", "missing"},
+      {"LcmMissingUrl", kMain, replace("[lcm]", "url = \"udpm://239.255.76.67:7667?ttl=0\"\n", ""),
        "lcm.url", "missing"},
-      {"LcmUnknownKey", replace("[lcm]\n", "[lcm]\nttl = 0\n"), "lcm.ttl", "unknown key"},
-      {"LcmUrlNoProvider",
+      {"LcmUnknownKey", kMain, replace("[lcm]\n", "[lcm]\nttl = 0\n"), "lcm.ttl", "unknown key"},
+      {"LcmUrlNoProvider", kMain,
        replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "\"239.255.76.67\""), "lcm.url",
        "is not PROVIDER://"},
-      {"LcmUrlUnknownProvider", replace("[lcm]", "\"udpm://", "\"udp://"), "lcm.url",
+      {"LcmUrlUnknownProvider", kMain, replace("[lcm]", "\"udpm://", "\"udp://"), "lcm.url",
        "providers are udpm"},
-      {"LcmUrlNotString", replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "7667"),
+      {"LcmUrlNotString", kMain, replace("[lcm]", "\"udpm://239.255.76.67:7667?ttl=0\"", "7667"),
        "lcm.url", "expected a string, got an integer"},
-      {"LcmRawNotBoolean", replace("[lcm]", "raw_enabled = false", "raw_enabled = \"no\""),
+      {"LcmRawNotBoolean", kMain, replace("[lcm]", "raw_enabled = false", "raw_enabled = \"no\""),
        "lcm.raw_enabled", "expected a boolean, got a string"},
-      {"LcmChannelMissing", replace("[lcm.channels]", "status = \"GAITMON_STATUS\"", ""),
+      {"LcmChannelMissing", kMain, replace("[lcm.channels]", "status = \"GAITMON_STATUS\"", ""),
        "lcm.channels.status", "missing"},
-      {"LcmChannelUnknown", replace("[lcm.channels]\n", "[lcm.channels]\nevents = \"E\"\n"),
+      {"LcmChannelUnknown", kMain, replace("[lcm.channels]\n", "[lcm.channels]\nevents = \"E\"\n"),
        "lcm.channels.events", "unknown key"},
-      {"LcmChannelEmpty", replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"\""),
+      {"LcmChannelEmpty", kMain, replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"\""),
        "lcm.channels.step", "must name a channel"},
-      {"LcmChannelSpace", replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"GAITMON STEP\""),
+      {"LcmChannelSpace", kMain, replace("[lcm.channels]", "\"GAITMON_STEP\"", "\"GAITMON STEP\""),
        "lcm.channels.step", "space or a control character"},
-      {"LcmChannelTooLong", replace("[lcm.channels]", "\"GAITMON_RAW\"", "\"" + too_long + "\""),
-       "lcm.channels.raw", "at most 63 characters, got 64"},
-      {"LcmChannelTwice", replace("[lcm.channels]", "\"GAITMON_STATUS\"", "\"GAITMON_FIT\""),
+      {"LcmChannelTooLong", kMain,
+       replace("[lcm.channels]", "\"GAITMON_RAW\"", "\"" + too_long + "\""), "lcm.channels.raw",
+       "at most 63 characters, got 64"},
+      {"LcmChannelTwice", kMain, replace("[lcm.channels]", "\"GAITMON_STATUS\"", "\"GAITMON_FIT\""),
        "lcm.channels.status", "is also the fit channel"},
+      {"LcmEffectsChannelMissing", kMain,
+       replace("[lcm.channels]", "effects = \"GAITMON_EFFECTS\"", ""), "lcm.channels.effects",
+       "missing"},
+      {"LcmEffectsChannelTwice", kMain,
+       replace("[lcm.channels]", "\"GAITMON_EFFECTS\"", "\"GAITMON_STEP\""), "lcm.channels.effects",
+       "is also the step channel"},
   };
-  for (const auto& c : cases) {
-    const fs::path dir = copy_config(c.name);
-    edit_file(dir / kMain, c.edit);
-    try {
-      load_config(dir / kMain);
-      ADD_FAILURE() << c.name << ": no ConfigError";
-    } catch (const ConfigError& e) {
-      EXPECT_EQ(e.file(), (dir / kMain).string()) << c.name;
-      EXPECT_EQ(e.key(), c.key) << c.name;
-      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
-    }
-  }
+  expect_refusals(cases);
 }
 
 }  // namespace
@@ -790,38 +755,64 @@ namespace {
 
 TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   EXPECT_TRUE(load_config(shipped_config()).model.effects.empty());
-  const struct {
-    const char* name;
-    Edit edit;
-    std::string key;
-    std::string reason;
-  } cases[] = {
-      {"ModelUnknownEffect", replace("effects = []", R"(effects = ["crosstalk"])"),
+  EXPECT_EQ(load_config(shipped_config()).model.effects_window_steps, 100);
+  EXPECT_EQ(ModelSettings{}.effects_window_steps, 100);
+  const std::vector<Refusal> cases = {
+      {"ModelUnknownEffect", kMain, replace("effects = []", R"(effects = ["crosstalk"])"),
        "model.effects[0]", "unknown effect 'crosstalk'"},
-      {"ModelEffectTwice", replace("effects = []", R"(effects = ["hysteresis", "hysteresis"])"),
-       "model.effects[1]", "listed twice"},
-      {"ModelEffectNotString", replace("effects = []", "effects = [1]"), "model.effects[0]",
+      {"ModelEffectTwice", kMain,
+       replace("effects = []", R"(effects = ["hysteresis", "hysteresis"])"), "model.effects[1]",
+       "listed twice"},
+      {"ModelEffectNotString", kMain, replace("effects = []", "effects = [1]"), "model.effects[0]",
        "must be a string"},
-      {"ModelUnknownKey", replace("effects = []", "effects = []\nstrength = 1"), "model.strength",
-       "unknown key"},
-      {"ModelMissing", replace("effects = []", ""), "model.effects", "missing"},
+      {"ModelUnknownKey", kMain, replace("effects = []", "effects = []\nstrength = 1"),
+       "model.strength", "unknown key"},
+      {"ModelMissing", kMain, replace("effects = []", ""), "model.effects", "missing"},
+      {"ModelWindowBelowTheFolds", kMain,
+       replace("effects_window_steps = 100", "effects_window_steps = 4"),
+       "model.effects_window_steps", "must be in [5, 100000], got 4"},
+      {"ModelWindowNotInteger", kMain,
+       replace("effects_window_steps = 100", "effects_window_steps = 100.5"),
+       "model.effects_window_steps", "expected an integer"},
+      {"ModelWindowMissing", kMain, replace("effects_window_steps = 100\n", ""),
+       "model.effects_window_steps", "missing"},
   };
-  for (const auto& c : cases) {
-    const fs::path dir = copy_config(c.name);
-    edit_file(dir / kMain, c.edit);
-    try {
-      load_config(dir / kMain);
-      ADD_FAILURE() << c.name << ": no ConfigError";
-    } catch (const ConfigError& e) {
-      EXPECT_EQ(e.key(), c.key) << c.name;
-      EXPECT_THAT(e.reason(), HasSubstr(c.reason)) << c.name;
-    }
-  }
+  expect_refusals(cases);
   const fs::path dir = copy_config("ModelTwoEffects");
   edit_file(dir / kMain,
             replace("effects = []", R"(effects = ["sensor_saturation", "impact_transient"])"));
+  edit_file(dir / kMain, replace("effects_window_steps = 100", "effects_window_steps = 40"));
   EXPECT_EQ(load_config(dir / kMain).model.effects,
             (std::vector<std::string>{"sensor_saturation", "impact_transient"}));
+  EXPECT_EQ(load_config(dir / kMain).model.effects_window_steps, 40);
+}
+
+TEST(Config, LogLevelDefaultsToInfoAndIsRead) {
+  EXPECT_EQ(load_config(shipped_config()).log.level, "info");
+  EXPECT_EQ(LogSettings{}.level, "info");
+  for (const std::string& level : log_level_names()) {
+    const fs::path dir = copy_config("LogRead-" + level);
+    edit_file(dir / kMain, replace("[log]", "level = \"info\"", "level = \"" + level + "\""));
+    EXPECT_EQ(load_config(dir / kMain).log.level, level);
+  }
+}
+
+TEST(Config, LogLevelIsValidated) {
+  const std::vector<Refusal> cases = {
+      {"LogMissingTable", kMain, truncate_at("[log]\n"), "log", "missing"},
+      {"LogMissingLevel", kMain, replace("[log]", "level = \"info\"\n", ""), "log.level",
+       "missing"},
+      {"LogUnknownLevel", kMain, replace("[log]", "level = \"info\"", "level = \"verbose\""),
+       "log.level",
+       R"(must be one of "trace", "debug", "info", "warn", "error", "off", got "verbose")"},
+      {"LogLevelCapitals", kMain, replace("[log]", "level = \"info\"", "level = \"INFO\""),
+       "log.level", R"(got "INFO")"},
+      {"LogLevelNotString", kMain, replace("[log]", "level = \"info\"", "level = 2"), "log.level",
+       "expected a string, got an integer"},
+      {"LogUnknownKey", kMain, replace("[log]\n", "[log]\nfile = \"gaitmon.log\"\n"), "log.file",
+       "unknown key"},
+  };
+  expect_refusals(cases);
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <map>
 #include <numbers>
 #include <random>
+#include <stop_token>
 #include <string>
 #include <vector>
 
@@ -167,6 +168,14 @@ TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
   EXPECT_THROW(fit_extended_model(input, twice), std::invalid_argument);
   const std::vector<std::string> unknown{"crosstalk"};
   EXPECT_THROW(fit_extended_model(input, unknown), std::invalid_argument);
+
+  // A stop request (the live monitor's shutdown on a signal) ends the fit with FitStopped; an
+  // unrequested token changes nothing.
+  std::stop_source stop;
+  const ExtendedModelFit again = fit_extended_model(input, effects, {}, stop.get_token());
+  EXPECT_EQ(again.effects.front().params[0].value, params[0].value);
+  stop.request_stop();
+  EXPECT_THROW(fit_extended_model(input, effects, {}, stop.get_token()), FitStopped);
 }
 
 TEST(Discrepancy, RefusesBadSettingsAndTooFewSteps) {

@@ -1,10 +1,12 @@
-// FrameRing: capacity, FIFO order, exact drop counting, and two-thread stress (run under TSan).
+// FrameRing: capacity, FIFO order, batch pops, exact drop counting, and two-thread stress (run
+// under TSan).
 #include "gaitmon/frame_ring.hpp"
 
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <cstdint>
+#include <span>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -49,6 +51,31 @@ TEST(FrameRing, HoldsExactlyItsCapacityAndCountsEveryDrop) {
   EXPECT_TRUE(ring.try_push(frame_with(6)));
   EXPECT_EQ(ring.drops(), 2u);
   EXPECT_EQ(ring.depth(), 1u);
+}
+
+TEST(FrameRing, BatchPopTakesWhatIsWaitingUpToItsSize) {
+  FrameRing ring(4);
+  std::vector<SensorFrame> out(8);
+  EXPECT_EQ(ring.try_pop_batch(out), 0u);
+  EXPECT_EQ(ring.popped(), 0u);
+  for (std::uint32_t i = 0; i < 3; ++i) ASSERT_TRUE(ring.try_push(frame_with(i)));
+  ASSERT_EQ(ring.try_pop_batch(std::span(out).first(2)), 2u);
+  EXPECT_EQ(out[0].sequence, 0u);
+  EXPECT_EQ(out[1].sequence, 1u);
+  EXPECT_EQ(ring.popped(), 2u);
+  EXPECT_EQ(ring.depth(), 1u);
+  // Four more: the ring's storage wraps in the middle of the next batch.
+  for (std::uint32_t i = 3; i < 6; ++i) ASSERT_TRUE(ring.try_push(frame_with(i)));
+  EXPECT_EQ(ring.depth(), 4u);
+  ASSERT_EQ(ring.try_pop_batch(out), 4u);
+  for (std::uint32_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(out[i].sequence, i + 2);
+    EXPECT_EQ(out[i].bits[0], i + 2);
+  }
+  EXPECT_EQ(ring.try_pop_batch(out), 0u);
+  EXPECT_EQ(ring.popped(), 6u);
+  EXPECT_EQ(ring.pushed(), 6u);
+  EXPECT_EQ(ring.depth(), 0u);
 }
 
 TEST(FrameRing, WaitingPushGivesUpOnlyWhenStopped) {
@@ -118,6 +145,45 @@ TEST(FrameRing, TwoThreadStressKeepsOrderAndCountsDropsExactly) {
   EXPECT_EQ(ring.pushed() + ring.drops(), kFrames);
   EXPECT_EQ(ring.popped(), ring.pushed());
   EXPECT_EQ(received, accepted);
+}
+
+// The monitor's pattern: frames pushed one at a time, taken in batches of an odd size so that
+// batches end at every place in the ring. Each frame must arrive exactly once, in order, whole.
+TEST(FrameRing, TwoThreadBatchPopDeliversEveryFrameOnceInOrder) {
+  constexpr std::uint32_t kFrames = 200000;
+  FrameRing ring(256);
+  std::atomic<bool> done{false};
+  std::vector<std::uint32_t> received;
+  received.reserve(kFrames);
+  std::uint64_t damaged = 0;
+  std::thread consumer([&] {
+    std::vector<SensorFrame> out(37);
+    for (;;) {
+      // Read before popping: once the producer is done, an empty pop means the end.
+      const bool finished = done.load(std::memory_order_acquire);
+      const std::size_t n = ring.try_pop_batch(out);
+      if (n == 0) {
+        if (finished) break;
+        std::this_thread::yield();
+      }
+      for (std::size_t i = 0; i < n; ++i) {
+        received.push_back(out[i].sequence);
+        damaged += out[i].bits[0] != (out[i].sequence & 0xFF) ||
+                   out[i].bits[2] != ((out[i].sequence >> 8) & 0xFF);
+      }
+    }
+  });
+  // A refused push counts as a drop; here the producer offers the same frame again.
+  for (std::uint32_t i = 0; i < kFrames; ++i) {
+    while (!ring.try_push(frame_with(i))) std::this_thread::yield();
+  }
+  done.store(true, std::memory_order_release);
+  consumer.join();
+  EXPECT_EQ(damaged, 0u);
+  EXPECT_EQ(ring.pushed(), kFrames);
+  EXPECT_EQ(ring.popped(), kFrames);
+  ASSERT_EQ(received.size(), kFrames);
+  for (std::uint32_t i = 0; i < kFrames; ++i) ASSERT_EQ(received[i], i);
 }
 
 TEST(FrameRing, TwoThreadStressWithWaitingPushLosesNothing) {

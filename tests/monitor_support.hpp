@@ -17,19 +17,21 @@ namespace gaitmon::test {
 /// Keeps every message. Thread-safe, as Publisher requires.
 class RecordingPublisher : public Publisher {
  public:
-  enum class Kind { Frame, Step, Fit, Status, Raw };
+  enum class Kind { Frame, Step, Fit, Status, Raw, Effects };
 
   void publish(const FrameReport& r) override { add(frames_, r, Kind::Frame); }
   void publish(const StepEvent& r) override { add(events_, r, Kind::Step); }
   void publish(const FitReport& r) override { add(fits_, r, Kind::Fit); }
   void publish(const StatusReport& r) override { add(statuses_, r, Kind::Status); }
   void publish(const RawFrameReport& r) override { add(raws_, r, Kind::Raw); }
+  void publish(const EffectsReport& r) override { add(effects_, r, Kind::Effects); }
 
   std::vector<FrameReport> frames() const { return copy(frames_); }
   std::vector<StepEvent> events() const { return copy(events_); }
   std::vector<FitReport> fits() const { return copy(fits_); }
   std::vector<StatusReport> statuses() const { return copy(statuses_); }
   std::vector<RawFrameReport> raws() const { return copy(raws_); }
+  std::vector<EffectsReport> effects() const { return copy(effects_); }
   /// The kinds in publication order.
   std::vector<Kind> order() const { return copy(order_); }
 
@@ -52,6 +54,7 @@ class RecordingPublisher : public Publisher {
   std::vector<FitReport> fits_;
   std::vector<StatusReport> statuses_;
   std::vector<RawFrameReport> raws_;
+  std::vector<EffectsReport> effects_;
   std::vector<Kind> order_;
 };
 

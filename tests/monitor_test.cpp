@@ -20,6 +20,7 @@
 
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
+#include "gaitmon/discrepancy.hpp"
 #include "gaitmon/insole.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
@@ -358,6 +359,132 @@ TEST(Monitor, StopDrainsTheRingFinishesTheFitsAndPublishesAFinalStatus) {
   EXPECT_EQ(std::count_if(statuses.begin(), statuses.end(),
                           [](const StatusReport& s) { return s.connection == "finished"; }),
             1);
+}
+
+// [model] effects in the config: the monitor fits the extended model to its latest complete
+// steps as `gaitmon analyze --effects` fits it to a session (make_discrepancy_input and
+// fit_extended_model over the same analyses), now and then and once more at shutdown.
+TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
+  Config config = shipped_config();
+  config.model.effects = {"impact_transient"};
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  std::vector<Step> ok;
+  for (Step& step : batch_steps(demo_30s(), config)) {
+    if (step.status == StepStatus::Ok) ok.push_back(std::move(step));
+  }
+  std::sort(ok.begin(), ok.end(), [](const Step& a, const Step& b) {
+    return std::pair(a.t_heel_strike_s, a.foot) < std::pair(b.t_heel_strike_s, b.foot);
+  });
+  const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+
+  // The whole session fits in a window of 100; a window of 20 keeps the latest 20 by time.
+  for (const int window : {100, 20}) {
+    SCOPED_TRACE(window);
+    config.model.effects_window_steps = window;
+    const std::size_t used = std::min(ok.size(), static_cast<std::size_t>(window));
+    const std::vector<Step> latest(ok.end() - static_cast<std::ptrdiff_t>(used), ok.end());
+    std::vector<StepAnalysis> analyses;
+    for (const Step& step : latest)
+      analyses.push_back(analyse_step(step, layout, config, quick_fits()));
+    const ExtendedModelFit expected = fit_extended_model(
+        make_discrepancy_input(latest, std::move(analyses), layout, config), config.model.effects);
+
+    RecordingPublisher publisher;
+    MonitorOptions options;
+    options.sample_rate_hz = header.sample_rate_hz;
+    options.analysis = quick_fits();
+    options.backlog_overflow = BacklogOverflow::Wait;
+    {
+      Monitor monitor(config, options, publisher);
+      for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
+    }
+    ASSERT_GT(ok.size(), 40u) << "the 30 s demo has about 50 complete steps";
+    const std::vector<EffectsReport> reports = publisher.effects();
+    ASSERT_GE(reports.size(), 2u) << "estimates while running, and the final one";
+    for (std::size_t i = 0; i + 1 < reports.size(); ++i) {
+      EXPECT_FALSE(reports[i].final_estimate) << i;
+      EXPECT_GE(reports[i].steps, 5) << i;
+      EXPECT_LE(reports[i].steps, window) << i;
+    }
+    const EffectsReport& last = reports.back();
+    EXPECT_TRUE(last.final_estimate);
+    EXPECT_EQ(last.steps, static_cast<int>(used));
+    EXPECT_EQ(last.t_first_heel_strike_s, latest.front().t_heel_strike_s);
+    expect_close(last.baseline_nrmse_pct, expected.baseline_nrmse_pct, "baseline NRMSE");
+    expect_close(last.extended_nrmse_pct, expected.extended_nrmse_pct, "extended NRMSE");
+    expect_close(last.baseline_heldout_nrmse_pct, expected.baseline_heldout_nrmse_pct,
+                 "baseline held-out NRMSE");
+    expect_close(last.extended_heldout_nrmse_pct, expected.extended_heldout_nrmse_pct,
+                 "extended held-out NRMSE");
+    ASSERT_EQ(expected.effects.size(), 1u);
+    const std::vector<ParamEstimate>& params = expected.effects.front().params;
+    ASSERT_EQ(last.params.size(), params.size());
+    for (std::size_t i = 0; i < params.size(); ++i) {
+      EXPECT_EQ(last.params[i].effect, "impact_transient");
+      EXPECT_EQ(last.params[i].name, params[i].name);
+      expect_close(last.params[i].value, params[i].value, params[i].name);
+      if (std::isnan(params[i].se)) {
+        EXPECT_TRUE(std::isnan(last.params[i].se)) << params[i].name;
+      } else {
+        expect_close(last.params[i].se, params[i].se, params[i].name + " SE");
+      }
+    }
+    // The final estimate comes after every fit and before the final status.
+    const auto order = publisher.order();
+    const auto last_effects =
+        std::find(order.rbegin(), order.rend(), RecordingPublisher::Kind::Effects);
+    const auto last_fit = std::find(order.rbegin(), order.rend(), RecordingPublisher::Kind::Fit);
+    EXPECT_LT(last_effects - order.rbegin(), last_fit - order.rbegin());
+    EXPECT_EQ(order.back(), RecordingPublisher::Kind::Status);
+  }
+}
+
+// close() (the commands' SIGINT and SIGTERM) makes the shutdown publish the latest estimate as
+// the final one instead of fitting the window again, which could outlast the 2-s shutdown.
+TEST(Monitor, AnInterruptedRunPublishesItsLatestEffectsEstimateAsTheFinalOne) {
+  Config config = shipped_config();
+  config.model.effects = {"impact_transient"};
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  options.backlog_overflow = BacklogOverflow::Wait;
+  Monitor monitor(config, options, publisher);
+  for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+    ASSERT_TRUE(monitor.offer_wait(frame));
+  }
+  ASSERT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
+  monitor.close();
+  monitor.stop();
+  const std::vector<EffectsReport> reports = publisher.effects();
+  ASSERT_GE(reports.size(), 2u);
+  const EffectsReport& last = reports.back();
+  const EffectsReport& before = reports[reports.size() - 2];
+  EXPECT_TRUE(last.final_estimate);
+  EXPECT_FALSE(before.final_estimate);
+  EXPECT_EQ(last.steps, before.steps);
+  EXPECT_EQ(last.t_last_toe_off_s, before.t_last_toe_off_s);
+  ASSERT_EQ(last.params.size(), before.params.size());
+  for (std::size_t i = 0; i < last.params.size(); ++i) {
+    EXPECT_EQ(last.params[i].value, before.params[i].value) << last.params[i].name;
+  }
+}
+
+TEST(Monitor, WithoutEffectsNothingIsPublishedOnTheirChannel) {
+  const Config config = shipped_config();
+  ASSERT_TRUE(config.model.effects.empty());
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  options.backlog_overflow = BacklogOverflow::Wait;
+  {
+    Monitor monitor(config, options, publisher);
+    for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+      ASSERT_TRUE(monitor.offer_wait(frame));
+    }
+  }
+  EXPECT_FALSE(publisher.fits().empty());
+  EXPECT_TRUE(publisher.effects().empty());
 }
 
 TEST(Monitor, StatusIsPeriodicAndCarriesTheDriverCounters) {

@@ -9,10 +9,12 @@
 #include <bit>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <limits>
 #include <new>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -95,21 +97,35 @@ std::vector<Frame> read_all(const fs::path& path) {
   return frames;
 }
 
-// Reads the whole file and checks the InputError it must raise: its line, its file and reason.
-void expect_input_error(const fs::path& path, std::uint64_t line, const std::string& reason) {
-  SCOPED_TRACE(path.string());
+std::string file_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// Reads everything and checks the InputError it must raise: its line, its source and reason.
+void expect_reader_error(const std::function<SessionReader()>& open, const std::string& source,
+                         std::uint64_t line, const std::string& reason) {
+  SCOPED_TRACE(source);
   try {
-    SessionReader reader(path);
+    SessionReader reader = open();
     Frame frame;
     while (reader.next(frame)) {
     }
     ADD_FAILURE() << "no InputError; expected line " << line << ": " << reason;
   } catch (const InputError& e) {
     EXPECT_EQ(e.line(), line) << e.what();
-    EXPECT_EQ(e.file(), path.string());
-    EXPECT_THAT(e.what(), HasSubstr(path.string()));
+    EXPECT_EQ(e.file(), source);
+    EXPECT_THAT(e.what(), HasSubstr(source + ":" + std::to_string(line) + ": "));
     EXPECT_THAT(e.what(), HasSubstr(reason));
   }
+}
+
+// The file by its path, and its bytes through a stream under a label: one parser, one error.
+void expect_input_error(const fs::path& path, std::uint64_t line, const std::string& reason) {
+  expect_reader_error([&] { return SessionReader(path); }, path.string(), line, reason);
+  std::istringstream in(file_text(path));
+  expect_reader_error([&] { return SessionReader(in, "stream of " + path.filename().string()); },
+                      "stream of " + path.filename().string(), line, reason);
 }
 
 TEST(SessionSensorCount, MatchesTheFormat) {
@@ -147,10 +163,8 @@ std::string hand_written_file(const std::string& eol) {
   return converted;
 }
 
-void expect_hand_written_content(const fs::path& path) {
-  SessionReader reader(path);
+void expect_hand_written_content(SessionReader& reader) {
   const SessionHeader& h = reader.header();
-  EXPECT_EQ(reader.path(), path);
   EXPECT_EQ(h.version, 1);
   EXPECT_EQ(h.insole_size, InsoleSize::S35_36);
   EXPECT_EQ(h.sample_rate_hz, 99.5);
@@ -183,6 +197,12 @@ void expect_hand_written_content(const fs::path& path) {
   EXPECT_FALSE(reader.next(frame));
 }
 
+void expect_hand_written_content(const fs::path& path) {
+  SessionReader reader(path);
+  EXPECT_EQ(reader.path(), path);
+  expect_hand_written_content(reader);
+}
+
 TEST(SessionReader, ReadsAHandWrittenFile) {
   expect_hand_written_content(write_file("lf.csv", hand_written_file("\n")));
 }
@@ -204,6 +224,60 @@ TEST(SessionReader, AcceptsAFileWithoutFinalNewline) {
 TEST(SessionReader, AcceptsBlankLinesAtTheEnd) {
   expect_hand_written_content(write_file("blank-end.csv", hand_written_file("\n") + "\n\n"));
   expect_hand_written_content(write_file("blank-end-crlf.csv", hand_written_file("\r\n") + "\r\n"));
+}
+
+TEST(SessionReader, ReadsAStreamUnderTheNameGiven) {
+  for (const char* eol : {"\n", "\r\n"}) {
+    std::istringstream in("\xEF\xBB\xBF" + hand_written_file(eol));
+    SessionReader reader(in, "walk-7 (upload)");
+    EXPECT_EQ(reader.path(), fs::path("walk-7 (upload)"));
+    expect_hand_written_content(reader);
+  }
+}
+
+// Hands out `text`, then fails as a device or network stream would (std::filebuf throws from
+// underflow on a read error, and the stream turns that into badbit).
+class FailingBuffer : public std::streambuf {
+ public:
+  explicit FailingBuffer(std::string text) : text_(std::move(text)) {}
+
+ protected:
+  int_type underflow() override {
+    if (given_) throw std::runtime_error("device gone");
+    given_ = true;
+    setg(text_.data(), text_.data(), text_.data() + text_.size());
+    return traits_type::to_int_type(text_.front());
+  }
+
+ private:
+  std::string text_;
+  bool given_ = false;
+};
+
+TEST(SessionReader, AStreamThatFailsIsAnErrorAtTheLineItCutShort) {
+  // Longer than the reader's chunks, so frames come through before the failure.
+  std::string text = meta() + columns();
+  constexpr int kFrames = 1000;
+  for (int i = 0; i < kFrames; ++i) text += frame_line(std::to_string(i) + ".5", "L", zeros());
+  FailingBuffer buffer(text);
+  std::istream in(&buffer);
+  SessionReader reader(in, "live upload");
+  Frame frame;
+  int frames = 0;
+  try {
+    while (reader.next(frame)) {
+      ASSERT_EQ(frame.t_s, frames + 0.5);
+      ++frames;
+    }
+    ADD_FAILURE() << "no InputError";
+  } catch (const InputError& e) {
+    EXPECT_GT(frames, 0);
+    EXPECT_LT(frames, kFrames);
+    EXPECT_EQ(e.file(), "live upload");
+    EXPECT_EQ(e.line(), 5u + static_cast<std::uint64_t>(frames) + 1u);
+    EXPECT_THAT(e.what(), HasSubstr("live upload:" + std::to_string(e.line()) +
+                                    ": cannot read: the stream failed"));
+  }
 }
 
 TEST(SessionReader, HeaderOnlyFileHasNoFrames) {
@@ -605,7 +679,7 @@ TEST(SessionWriter, RoundTripsHeaderAndFramesExactly) {
 }
 
 TEST(SessionWriter, RoundTripsAFileSpanningManyReadChunks) {
-  // About 3 MB at size 45-46, so lines cross the reader's 1 MiB chunk boundaries.
+  // About 3 MB at size 45-46, so many lines cross the reader's chunk boundaries.
   SessionHeader h;
   h.insole_size = InsoleSize::S45_46;
   h.sensors = 161;

@@ -82,6 +82,9 @@ struct ModelSettings {
   /// Named effects (discrepancy_effect_names()) that `gaitmon analyze` and the live monitor add
   /// to the model, in order; empty is the ellipsoid alone.
   std::vector<std::string> effects;
+  /// The live monitor fits them to this many of the latest complete steps (both feet); analyze
+  /// fits them to the whole session.
+  int effects_window_steps = 100;
 };
 
 /// The check value that ends every insole frame (drivers/PROTOCOL.md).
@@ -128,11 +131,12 @@ struct MonitorSettings {
 
 /// [lcm]: where the live monitor publishes (include/gaitmon/lcm/*.lcm defines the messages).
 struct LcmChannels {
-  std::string frame = "GAITMON_FRAME";    ///< FrameReport, per foot and frame
-  std::string step = "GAITMON_STEP";      ///< StepEvent
-  std::string fit = "GAITMON_FIT";        ///< FitReport, per foot-step
-  std::string status = "GAITMON_STATUS";  ///< StatusReport, 1 Hz
-  std::string raw = "GAITMON_RAW";        ///< RawFrameReport, only when raw_enabled
+  std::string frame = "GAITMON_FRAME";      ///< FrameReport, per foot and frame
+  std::string step = "GAITMON_STEP";        ///< StepEvent
+  std::string fit = "GAITMON_FIT";          ///< FitReport, per foot-step
+  std::string status = "GAITMON_STATUS";    ///< StatusReport, 1 Hz
+  std::string raw = "GAITMON_RAW";          ///< RawFrameReport, only when raw_enabled
+  std::string effects = "GAITMON_EFFECTS";  ///< EffectsReport, only with [model] effects
 };
 
 struct LcmSettings {
@@ -154,6 +158,14 @@ struct UsbSettings {
   int reconnect_max_ms = 2000;
 };
 
+/// [log]: how much the commands log; --log-level overrides it.
+struct LogSettings {
+  std::string level = "info";  ///< one of log_level_names()
+};
+
+/// The levels of [log] level and --log-level, spdlog's names, from the most verbose to none.
+std::vector<std::string> log_level_names();
+
 struct Config {
   std::filesystem::path source;  ///< the main file this was loaded from
   double sample_rate_hz = 100.0;
@@ -170,6 +182,7 @@ struct Config {
   MonitorSettings monitor;
   LcmSettings lcm;  ///< [lcm] of the main file
   UsbSettings usb;  ///< [usb]: the USB driver
+  LogSettings log;  ///< [log]
 
   const InsoleSpec& insole(InsoleSize size) const { return insoles[index_of(size)]; }
   const SeedTissueStats& tissue(InsoleSize size, Region region) const {

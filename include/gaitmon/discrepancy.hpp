@@ -39,6 +39,8 @@
 
 #include <array>
 #include <span>
+#include <stdexcept>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -202,9 +204,17 @@ struct ExtendedModelFit {
   std::vector<RegionComparison> regions;
 };
 
-/// Throws std::invalid_argument for an unknown or repeated name or fewer steps than folds.
+/// Thrown by fit_extended_model when its stop token is triggered.
+class FitStopped : public std::runtime_error {
+ public:
+  FitStopped() : std::runtime_error("the fit was stopped") {}
+};
+
+/// Throws std::invalid_argument for an unknown or repeated name or fewer steps than folds, and
+/// FitStopped soon after `stop` is requested (the live monitor's shutdown on a signal).
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
-                                    const DiscrepancySettings& settings = {});
+                                    const DiscrepancySettings& settings = {},
+                                    const std::stop_token& stop = {});
 
 }  // namespace gaitmon

@@ -21,7 +21,8 @@ class Subscription;
 namespace gaitmon {
 
 /// One decoded message; the alternative tells its type.
-using LcmMessage = std::variant<FrameReport, StepEvent, FitReport, StatusReport, RawFrameReport>;
+using LcmMessage =
+    std::variant<FrameReport, StepEvent, FitReport, StatusReport, RawFrameReport, EffectsReport>;
 
 /// Thread safety: construct it, then call handle() from one thread at a time; the handler runs
 /// on that thread, inside handle().
@@ -30,7 +31,7 @@ class LcmSubscriber {
   using Handler = std::function<void(const std::string& channel, const LcmMessage& message)>;
 
   /// Subscribes on its own connection to settings.url. `channels` are names among
-  /// settings.channels (each decoded as that channel's type); empty means all five.
+  /// settings.channels (each decoded as that channel's type); empty means all six.
   /// @throw LcmError for a URL LCM cannot open or a channel settings does not name.
   LcmSubscriber(const LcmSettings& settings, const std::vector<std::string>& channels,
                 Handler handler);

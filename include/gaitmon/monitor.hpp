@@ -19,6 +19,13 @@
 //  - config.monitor.workers threads (a Boost.Asio thread_pool) run analyse_step. Results are
 //    published in step order per foot (a reorder buffer holds those that finish early), each
 //    with latency_ms = publication time - the time the detector finalised the step.
+//  - With [model] effects in the config, the workers also keep the latest
+//    config.model.effects_window_steps analysed Ok steps (both feet, by heel strike time) and
+//    fit the extended model (discrepancy.hpp: make_discrepancy_input, fit_extended_model) to
+//    them on the pool, once there are as many steps as folds (5) and again whenever the new
+//    steps are as many as the old (5, 10, 20, ...; every half window once full); each estimate
+//    is published as an EffectsReport. Over a session no longer than the window, the final one
+//    equals `gaitmon analyze --effects` on it.
 //
 // Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
 // wrap, divided by 1e6 (for replays that is the session's t_s, which the drivers encode as
@@ -48,11 +55,16 @@
 // Shutdown, by stop(): (1) stop accepting: offer() and offer_wait() return false from now on;
 // (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
 // recording (its last steps are finalised and queued) and exits; (3) the workers finish every
-// queued step and publish it; (4) the final status is published, its connection "finished" (the
-// driver callback fills the other driver fields); (5) every thread is joined. The caller must have
-// stopped its driver thread first (offer() may race with stop(), but a frame offered after the
+// queued step and publish it; with effects, the extended model is fitted to the window as it
+// ends (unless the last estimate already covers it, or close() was called: see there) and
+// published with final_estimate set; (4) the final status is published, its connection "finished"
+// (the driver callback fills the other driver fields); (5) every thread is joined. The caller must
+// have stopped its driver thread first (offer() may race with stop(), but a frame offered after the
 // drain would be lost); close() alone does step (1), from any thread, to release a driver blocked
-// in offer_wait().
+// in offer_wait(). close() also marks the run as interrupted (the commands call it on SIGINT and
+// SIGTERM): stop() then publishes the latest estimate of the effects as the final one rather
+// than fitting the window again, skips a fit still waiting for a worker and stops a running
+// one, so that the shutdown stays within the 2 s.
 #pragma once
 
 #include <atomic>
@@ -120,7 +132,7 @@ class Monitor {
   /// monitor is closed (the frame is then not queued).
   [[nodiscard]] bool offer_wait(const SensorFrame& frame);
 
-  /// Stop accepting frames. Any thread; idempotent.
+  /// Stop accepting frames, as an interrupted run (see above). Any thread; idempotent.
   void close();
 
   /// The shutdown sequence described above. Any thread but the driver's, once that has stopped

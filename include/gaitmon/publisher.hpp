@@ -98,6 +98,29 @@ struct RawFrameReport {
   std::vector<std::uint8_t> bits;
 };
 
+/// One shared parameter of one effect of the extended model.
+struct EffectParamReport {
+  std::string effect;  ///< discrepancy_effect_names()
+  std::string name;    ///< the parameter, its unit in the name (tau_s, amplitude_n, ...)
+  double value = 0.0;
+  double se = 0.0;  ///< standard error; NaN when the optimum is on a bound
+};
+
+/// The extended tissue model ([model] effects) fitted to the latest complete steps of both feet,
+/// as `gaitmon analyze --effects` fits it to a whole session (GAITMON_EFFECTS).
+struct EffectsReport {
+  std::int64_t utime = 0;
+  bool final_estimate = false;  ///< the last one of the run, published at shutdown
+  int steps = 0;                ///< complete steps the fit used
+  double t_first_heel_strike_s = 0.0;
+  double t_last_toe_off_s = 0.0;
+  double baseline_nrmse_pct = 0.0;  ///< pooled, in sample, without the effects
+  double extended_nrmse_pct = 0.0;  ///< pooled, in sample, with them
+  double baseline_heldout_nrmse_pct = 0.0;
+  double extended_heldout_nrmse_pct = 0.0;  ///< k-fold over steps
+  std::vector<EffectParamReport> params;    ///< effect by effect, in [model] effects order
+};
+
 /// Implementations must be safe to call from several threads at once.
 class Publisher {
  public:
@@ -107,6 +130,7 @@ class Publisher {
   virtual void publish(const FitReport& report) = 0;
   virtual void publish(const StatusReport& report) = 0;
   virtual void publish(const RawFrameReport& report) = 0;
+  virtual void publish(const EffectsReport& report) = 0;
 };
 
 }  // namespace gaitmon

@@ -1,12 +1,14 @@
 // Session CSV v1 (shared/docs/session-format.md): a streaming reader and a writer.
 //
 // The reader holds one line at a time, never the whole file. Bad input throws InputError naming
-// the file, the 1-based line and the reason; nothing partial is returned silently.
+// the file (or the name given for a stream), the 1-based line and the reason; nothing partial is
+// returned silently.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <iosfwd>
 #include <memory>
 #include <optional>
 #include <string>
@@ -44,11 +46,15 @@ class SessionReader {
  public:
   /// Opens the file and parses the metadata and column header. Throws InputError.
   explicit SessionReader(const std::filesystem::path& path);
+  /// Reads the session from `in` (which must outlive the reader), by the same parser; errors
+  /// name `name` where a file's would name its path. Throws InputError.
+  SessionReader(std::istream& in, std::string name);
   ~SessionReader();
   SessionReader(const SessionReader&) = delete;
   SessionReader& operator=(const SessionReader&) = delete;
 
   const SessionHeader& header() const;
+  /// The file's path, or the name given with a stream.
   const std::filesystem::path& path() const;
 
   /// Reads the next frame into `frame` (its bits buffer is reused). Returns false at the end of

@@ -12,11 +12,11 @@ namespace gaitmon::cli {
 /// Options every subcommand shares.
 struct GlobalOptions {
   std::filesystem::path config_path;
-  std::string log_level = "info";
+  std::string log_level;  ///< empty: [log] level of the config
 };
 
-/// Applies --log-level and loads the config named by --config, or the default one. Every
-/// command calls it first.
+/// Loads the config named by --config, or the default one, and sets the log level: --log-level,
+/// else the config's [log] level. Every command calls it first.
 Config load_global_config(const GlobalOptions& global);
 
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);

@@ -68,9 +68,29 @@ void StepPrinter::publish(const FitReport& report) {
       fmt::format_to(std::back_inserter(line), "  {} {}", region_name(r.region), r.status);
     }
   }
-  line += '\n';
+  print(line);
+}
+
+void StepPrinter::publish(const EffectsReport& report) {
+  next_.publish(report);
+  std::string line = fmt::format(
+      "{} over {} steps ({:.1f}-{:.1f} s):", report.final_estimate ? "effects, final," : "effects",
+      report.steps, report.t_first_heel_strike_s, report.t_last_toe_off_s);
+  for (const EffectParamReport& p : report.params) {
+    fmt::format_to(std::back_inserter(line), " {}.{} = {:.4g} +- {:.2g};", p.effect, p.name,
+                   p.value, p.se);
+  }
+  fmt::format_to(std::back_inserter(line),
+                 " pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)",
+                 report.baseline_nrmse_pct, report.extended_nrmse_pct,
+                 report.baseline_heldout_nrmse_pct, report.extended_heldout_nrmse_pct);
+  print(line);
+}
+
+void StepPrinter::print(const std::string& line) {
   const std::lock_guard lock(print_mutex_);
   std::fputs(line.c_str(), stdout);
+  std::fputc('\n', stdout);
   std::fflush(stdout);
 }
 

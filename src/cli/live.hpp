@@ -36,7 +36,8 @@ class LinkStatus {
 };
 
 /// Forwards every message to `next` and prints one line per fitted step on stdout: the foot,
-/// the step, the stance time and every region's kbar and cbar. Thread-safe.
+/// the step, the stance time and every region's kbar and cbar; and one per estimate of the
+/// extended model's effects. Thread-safe.
 class StepPrinter final : public Publisher {
  public:
   explicit StepPrinter(Publisher& next) : next_(next) {}
@@ -45,8 +46,11 @@ class StepPrinter final : public Publisher {
   void publish(const FitReport& report) override;
   void publish(const StatusReport& report) override { next_.publish(report); }
   void publish(const RawFrameReport& report) override { next_.publish(report); }
+  void publish(const EffectsReport& report) override;
 
  private:
+  void print(const std::string& line);
+
   Publisher& next_;
   std::mutex print_mutex_;
 };

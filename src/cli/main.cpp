@@ -11,8 +11,11 @@
 namespace gaitmon::cli {
 
 Config load_global_config(const GlobalOptions& global) {
-  spdlog::set_level(spdlog::level::from_str(global.log_level));
-  return load_config(global.config_path.empty() ? default_config_path() : global.config_path);
+  Config config =
+      load_config(global.config_path.empty() ? default_config_path() : global.config_path);
+  spdlog::set_level(
+      spdlog::level::from_str(global.log_level.empty() ? config.log.level : global.log_level));
+  return config;
 }
 
 }  // namespace gaitmon::cli
@@ -27,8 +30,9 @@ int main(int argc, char** argv) {
                  "Main config file (default: $GAITMON_CONFIG or the source tree's "
                  "config/gaitmon.toml)")
       ->check(CLI::ExistingFile);
-  app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
-      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
+  app.add_option("--log-level", global.log_level,
+                 "trace, debug, info, warn, error or off (default: [log] level of the config)")
+      ->check(CLI::IsMember(gaitmon::log_level_names()));
   add_simulate_command(app, global);
   add_segment_command(app, global);
   add_analyze_command(app, global);

@@ -117,6 +117,24 @@ json to_json(const RawFrameReport& r) {
           {"bits", r.bits}};
 }
 
+json to_json(const EffectsReport& r) {
+  json params = json::array();
+  for (const EffectParamReport& p : r.params) {
+    params.push_back({{"effect", p.effect}, {"name", p.name}, {"value", p.value}, {"se", p.se}});
+  }
+  return {{"type", "effects_t"},
+          {"utime", r.utime},
+          {"final_estimate", r.final_estimate},
+          {"steps", r.steps},
+          {"t_first_heel_strike_s", r.t_first_heel_strike_s},
+          {"t_last_toe_off_s", r.t_last_toe_off_s},
+          {"baseline_nrmse_pct", r.baseline_nrmse_pct},
+          {"extended_nrmse_pct", r.extended_nrmse_pct},
+          {"baseline_heldout_nrmse_pct", r.baseline_heldout_nrmse_pct},
+          {"extended_heldout_nrmse_pct", r.extended_heldout_nrmse_pct},
+          {"params", std::move(params)}};
+}
+
 // Channel arguments may be the configured names or the message kinds.
 std::vector<std::string> resolve_channels(const LcmChannels& channels,
                                           const std::vector<std::string>& wanted) {
@@ -132,6 +150,8 @@ std::vector<std::string> resolve_channels(const LcmChannels& channels,
       out.push_back(channels.status);
     } else if (name == "raw") {
       out.push_back(channels.raw);
+    } else if (name == "effects") {
+      out.push_back(channels.effects);
     } else {
       out.push_back(name);
     }
@@ -184,7 +204,7 @@ void add_spy_command(CLI::App& app, const GlobalOptions& global) {
       "until --count messages, --timeout-s or Ctrl-C");
   sub->add_option("channels", args->channels,
                   "Channels to print: the config's channel names, or frame, step, fit, status, "
-                  "raw (default: all five)");
+                  "raw, effects (default: all six)");
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->add_option("--count", args->count,
                   "Exit after this many messages (exit code 1 if --timeout-s comes first)")

@@ -120,6 +120,28 @@ void to_lcm(const RawFrameReport& report, raw_t& message) {
   message.bits.assign(report.bits.begin(), report.bits.end());
 }
 
+void to_lcm(const EffectsReport& report, effects_t& message) {
+  message.utime = report.utime;
+  message.final_estimate = report.final_estimate;
+  message.steps = report.steps;
+  message.t_first_heel_strike_s = report.t_first_heel_strike_s;
+  message.t_last_toe_off_s = report.t_last_toe_off_s;
+  message.baseline_nrmse_pct = report.baseline_nrmse_pct;
+  message.extended_nrmse_pct = report.extended_nrmse_pct;
+  message.baseline_heldout_nrmse_pct = report.baseline_heldout_nrmse_pct;
+  message.extended_heldout_nrmse_pct = report.extended_heldout_nrmse_pct;
+  message.num_params = static_cast<std::int16_t>(report.params.size());
+  message.params.resize(report.params.size());
+  for (std::size_t i = 0; i < report.params.size(); ++i) {
+    const EffectParamReport& in = report.params[i];
+    effect_param_t& out = message.params[i];
+    out.effect = in.effect;
+    out.name = in.name;
+    out.value = in.value;
+    out.se = in.se;
+  }
+}
+
 std::optional<FrameReport> from_lcm(const frame_t& message) {
   FrameReport report;
   const auto foot = foot_of(message.foot);
@@ -237,6 +259,27 @@ std::optional<RawFrameReport> from_lcm(const raw_t& message) {
   report.sequence = static_cast<std::uint32_t>(message.sequence);
   report.device_time_us = static_cast<std::uint32_t>(message.device_time_us);
   report.bits.assign(message.bits.begin(), message.bits.end());
+  return report;
+}
+
+std::optional<EffectsReport> from_lcm(const effects_t& message) {
+  if (message.steps < 0 || message.num_params < 0 ||
+      static_cast<std::size_t>(message.num_params) != message.params.size()) {
+    return std::nullopt;
+  }
+  EffectsReport report;
+  report.utime = message.utime;
+  report.final_estimate = message.final_estimate;
+  report.steps = message.steps;
+  report.t_first_heel_strike_s = message.t_first_heel_strike_s;
+  report.t_last_toe_off_s = message.t_last_toe_off_s;
+  report.baseline_nrmse_pct = message.baseline_nrmse_pct;
+  report.extended_nrmse_pct = message.extended_nrmse_pct;
+  report.baseline_heldout_nrmse_pct = message.baseline_heldout_nrmse_pct;
+  report.extended_heldout_nrmse_pct = message.extended_heldout_nrmse_pct;
+  for (const effect_param_t& p : message.params) {
+    report.params.push_back({p.effect, p.name, p.value, p.se});
+  }
   return report;
 }
 

@@ -2,6 +2,7 @@
 // and the subscriber so that both directions live side by side.
 #pragma once
 
+#include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
@@ -19,13 +20,15 @@ void to_lcm(const StepEvent& event, step_t& message);
 void to_lcm(const FitReport& report, fit_t& message);
 void to_lcm(const StatusReport& report, status_t& message);
 void to_lcm(const RawFrameReport& report, raw_t& message);
+void to_lcm(const EffectsReport& report, effects_t& message);
 
 // nullopt when a field holds a value the struct cannot (a foot other than 0 or 1, an unknown
-// region or step kind, a negative counter, num_bits disagreeing with bits).
+// region or step kind, a negative counter, num_bits or num_params disagreeing with its array).
 std::optional<FrameReport> from_lcm(const frame_t& message);
 std::optional<StepEvent> from_lcm(const step_t& message);
 std::optional<FitReport> from_lcm(const fit_t& message);
 std::optional<StatusReport> from_lcm(const status_t& message);
 std::optional<RawFrameReport> from_lcm(const raw_t& message);
+std::optional<EffectsReport> from_lcm(const effects_t& message);
 
 }  // namespace gaitmon::lcm_messages

@@ -77,4 +77,9 @@ void LcmPublisher::publish(const RawFrameReport& report) {
   send(settings_.channels.raw, report, message);
 }
 
+void LcmPublisher::publish(const EffectsReport& report) {
+  thread_local effects_t message;
+  send(settings_.channels.effects, report, message);
+}
+
 }  // namespace gaitmon

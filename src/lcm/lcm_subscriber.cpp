@@ -12,7 +12,7 @@
 
 namespace gaitmon {
 
-enum class MessageKind { Frame, Step, Fit, Status, Raw };
+enum class MessageKind { Frame, Step, Fit, Status, Raw, Effects };
 
 struct LcmSubscriber::Route {
   LcmSubscriber* owner = nullptr;
@@ -59,7 +59,8 @@ LcmSubscriber::LcmSubscriber(std::shared_ptr<lcm::LCM> lcm, const LcmSettings& s
       {&settings.channels.step, MessageKind::Step},
       {&settings.channels.fit, MessageKind::Fit},
       {&settings.channels.status, MessageKind::Status},
-      {&settings.channels.raw, MessageKind::Raw}};
+      {&settings.channels.raw, MessageKind::Raw},
+      {&settings.channels.effects, MessageKind::Effects}};
   std::vector<std::string> wanted = channels;
   if (wanted.empty()) {
     for (const auto& [name, kind] : known) wanted.push_back(*name);
@@ -78,8 +79,8 @@ LcmSubscriber::LcmSubscriber(std::shared_ptr<lcm::LCM> lcm, const LcmSettings& s
     if (!found) {
       throw LcmError("\"" + channel + "\" is not a gaitmon channel; the config names " +
                      settings.channels.frame + ", " + settings.channels.step + ", " +
-                     settings.channels.fit + ", " + settings.channels.status + " and " +
-                     settings.channels.raw);
+                     settings.channels.fit + ", " + settings.channels.status + ", " +
+                     settings.channels.raw + " and " + settings.channels.effects);
     }
     route->subscription = lcm_->subscribeFunction(
         literal_pattern(channel),
@@ -115,6 +116,9 @@ void LcmSubscriber::dispatch(const Route& route, const void* data, std::uint32_t
       break;
     case MessageKind::Raw:
       ok = decode_into<raw_t>(data, size, message);
+      break;
+    case MessageKind::Effects:
+      ok = decode_into<effects_t>(data, size, message);
       break;
   }
   if (!ok) {

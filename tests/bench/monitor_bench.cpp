@@ -46,6 +46,7 @@ class LatencyPublisher : public gaitmon::Publisher {
   void publish(const gaitmon::StepEvent&) override {}
   void publish(const gaitmon::StatusReport&) override {}
   void publish(const gaitmon::RawFrameReport&) override {}
+  void publish(const gaitmon::EffectsReport&) override {}
   void publish(const gaitmon::FitReport& r) override {
     const std::lock_guard lock(mutex_);
     latencies_ms_.push_back(r.latency_ms);
@@ -67,31 +68,74 @@ double percentile(std::vector<double> v, double p) {
   return v[std::max<std::size_t>(rank, 1) - 1];
 }
 
-// One producer and one consumer thread moving frames through the ring; each yields its core
-// when the ring is full or empty (on a shared 2-core machine a spinning thread would starve the
-// other).
+// Waiting for the other thread: spin a little, doubling each round (it usually runs on the other
+// core and is about to move), then give the core away (on a shared machine it may be waiting
+// for this one).
+class Backoff {
+ public:
+  void pause() {
+    if (rounds_ < kRounds) {
+      for (int i = 0; i < 1 << rounds_; ++i) {
+#if defined(__x86_64__) || defined(__i386__)
+        __builtin_ia32_pause();
+#endif
+      }
+      ++rounds_;
+    } else {
+      std::this_thread::yield();
+    }
+  }
+  void reset() {
+    rounds_ = 0;
+  }
+
+ private:
+  static constexpr int kRounds = 8;
+  int rounds_ = 0;
+};
+
+// A producer thread pushing frames one at a time, as a driver does, and a consumer thread taking
+// them in batches of up to range(1), as the monitor's detector does. Every frame really crosses
+// between the threads, and the consumer checks that each arrives once and in order.
 void BM_FrameRingThroughput(benchmark::State& state) {
-  constexpr std::uint64_t kFrames = 2'000'000;
+  constexpr std::uint64_t kFrames = 4'000'000;
   gaitmon::FrameRing ring(static_cast<std::size_t>(state.range(0)));
+  const auto batch = static_cast<std::size_t>(state.range(1));
   gaitmon::SensorFrame frame;
   frame.sensor_count = 107;
+  std::uint64_t out_of_order = 0;
   for (auto _ : state) {
     std::thread consumer([&] {
-      gaitmon::SensorFrame out;
-      for (std::uint64_t i = 0; i < kFrames; ++i) {
-        while (!ring.try_pop(out)) std::this_thread::yield();
-        benchmark::DoNotOptimize(out.sequence);
+      std::vector<gaitmon::SensorFrame> out(batch);
+      Backoff empty;
+      for (std::uint64_t next = 0; next < kFrames;) {
+        const std::size_t n = ring.try_pop_batch(out);
+        if (n == 0) {
+          empty.pause();
+          continue;
+        }
+        empty.reset();
+        for (std::size_t i = 0; i < n; ++i, ++next) {
+          out_of_order += out[i].sequence != static_cast<std::uint32_t>(next);
+        }
       }
     });
+    Backoff full;
     for (std::uint64_t i = 0; i < kFrames; ++i) {
       frame.sequence = static_cast<std::uint32_t>(i);
-      while (!ring.try_push(frame)) std::this_thread::yield();
+      while (!ring.try_push(frame)) full.pause();
+      full.reset();
     }
     consumer.join();
   }
+  if (out_of_order != 0) state.SkipWithError("frames arrived out of order");
   state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * kFrames));
 }
-BENCHMARK(BM_FrameRingThroughput)->Arg(4096)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FrameRingThroughput)
+    ->ArgNames({"capacity", "batch"})
+    ->Args({4096, 64})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 // The ring's own cost without scheduling: one thread pushes a batch and pops it again. On a
 // loaded machine the two-thread figure above measures the scheduler as much as the ring.

@@ -1,15 +1,19 @@
 // `gaitmon replay` end to end through the in-process fake driver, the wire format, the real
 // decoder, the monitor and LCM (the file:// provider writes an LCM log): the fits equal
-// `gaitmon analyze` on the same session, and SIGINT stops it cleanly within 2 s.
+// `gaitmon analyze` on the same session (with [model] effects, the extended model's too), and
+// SIGINT stops it cleanly within 2 s.
 #include <gtest/gtest.h>
 #include <signal.h>
 
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/status_t.hpp>
+#include <iterator>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -127,6 +131,73 @@ TEST(ReplayCommand, FitsEqualAnalyzeOnTheSameSession) {
   EXPECT_EQ(statuses.back().fits_published, static_cast<std::int64_t>(fits.size()));
   EXPECT_EQ(statuses.back().frames_decoded,
             static_cast<std::int64_t>(test::session_frames(session).size()));
+}
+
+// [model] effects in the config makes the replay's monitor fit the extended model: its final
+// GAITMON_EFFECTS message equals `gaitmon analyze`'s extended_model (which reads the same
+// setting) on the same session, which is shorter than the monitor's window of 100 steps.
+TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
+  const fs::path dir = test::scratch_dir("replay-effects");
+  const fs::path session = demo_30s(dir);
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / name, dir / name);
+  }
+  std::ifstream in(dir / "gaitmon.toml");
+  std::string config((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto at = config.find("\neffects = []\n");
+  ASSERT_NE(at, std::string::npos);
+  config.replace(at, std::string("\neffects = []\n").size(),
+                 "\neffects = [\"impact_transient\"]\n");
+  test::write_text(dir / "gaitmon.toml", config);
+  const std::string gaitmon =
+      test::gaitmon_binary().string() + " --config " + (dir / "gaitmon.toml").string();
+
+  const fs::path log = dir / "replay.lcmlog";
+  std::string output;
+  ASSERT_EQ(test::run_command(gaitmon + " --log-level warn replay " + session.string() +
+                                  " --speed max --lcm-url 'file://" + log.string() + "?mode=w'",
+                              &output),
+            0)
+      << output;
+  EXPECT_NE(output.find("effects, final, over "), std::string::npos) << output;
+  ASSERT_EQ(test::run_command(
+                gaitmon + " analyze " + session.string() + " --out " + (dir / "analyze").string(),
+                &output),
+            0)
+      << output;
+
+  std::ifstream json_in(dir / "analyze" / "session.json");
+  const nlohmann::json extended = nlohmann::json::parse(json_in).at("extended_model");
+  ASSERT_EQ(extended.at("effects").size(), 1u);
+  const nlohmann::json& expected = extended.at("effects").at(0);
+  EXPECT_EQ(expected.at("name"), "impact_transient");
+
+  const auto events = test::read_lcm_log(log);
+  const auto reports = decode<gaitmon::effects_t>(events, "GAITMON_EFFECTS");
+  ASSERT_FALSE(reports.empty());
+  const gaitmon::effects_t& final_report = reports.back();
+  EXPECT_TRUE(final_report.final_estimate);
+  EXPECT_EQ(final_report.steps,
+            static_cast<std::int32_t>(decode<gaitmon::fit_t>(events, "GAITMON_FIT").size()));
+  const auto near = [](double value, double expected_value) {
+    return std::abs(value - expected_value) <= 1e-9 * std::max(1.0, std::abs(expected_value));
+  };
+  EXPECT_TRUE(near(final_report.baseline_nrmse_pct, extended.at("baseline_nrmse_pct")));
+  EXPECT_TRUE(near(final_report.extended_nrmse_pct, extended.at("extended_nrmse_pct")));
+  EXPECT_TRUE(
+      near(final_report.extended_heldout_nrmse_pct, extended.at("extended_heldout_nrmse_pct")));
+  ASSERT_EQ(static_cast<std::size_t>(final_report.num_params), expected.at("params").size());
+  for (const gaitmon::effect_param_t& p : final_report.params) {
+    EXPECT_EQ(p.effect, "impact_transient");
+    ASSERT_TRUE(expected.at("params").contains(p.name)) << p.name;
+    const nlohmann::json& e = expected.at("params").at(p.name);
+    EXPECT_TRUE(near(p.value, e.at("value"))) << p.name << " " << p.value << " vs " << e;
+    if (e.at("se").is_number()) {
+      EXPECT_TRUE(near(p.se, e.at("se"))) << p.name << " SE " << p.se << " vs " << e;
+    } else {
+      EXPECT_TRUE(std::isnan(p.se)) << p.name << " SE " << p.se << " vs " << e;
+    }
+  }
 }
 
 TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {

@@ -5,6 +5,7 @@
 
 #include <csignal>
 #include <functional>
+#include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
@@ -29,8 +30,8 @@ using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 using test::ChildProcess;
 
-const std::set<std::string> kAllChannels{"GAITMON_FRAME", "GAITMON_STEP", "GAITMON_FIT",
-                                         "GAITMON_STATUS", "GAITMON_RAW"};
+const std::set<std::string> kAllChannels{"GAITMON_FRAME",  "GAITMON_STEP", "GAITMON_FIT",
+                                         "GAITMON_STATUS", "GAITMON_RAW",  "GAITMON_EFFECTS"};
 
 class LcmBus : public ::testing::Test {
  protected:
@@ -100,6 +101,7 @@ void publish_samples(LcmPublisher& publisher) {
   publisher.publish(test::sample_fit());
   publisher.publish(test::sample_status());
   publisher.publish(test::sample_raw());
+  publisher.publish(test::sample_effects());
 }
 
 void read_messages(Listener& listener, std::size_t count) {
@@ -152,6 +154,25 @@ json lua_expected_fit() {
           {"regions", regions}};
 }
 
+json lua_expected_effects() {
+  const EffectsReport r = test::sample_effects();
+  json params = json::array();
+  for (const EffectParamReport& p : r.params) {
+    params.push_back({{"effect", p.effect}, {"name", p.name}, {"value", p.value}, {"se", p.se}});
+  }
+  return {{"utime", r.utime},
+          {"final_estimate", true},
+          {"steps", r.steps},
+          {"t_first_heel_strike_s", r.t_first_heel_strike_s},
+          {"t_last_toe_off_s", r.t_last_toe_off_s},
+          {"baseline_nrmse_pct", r.baseline_nrmse_pct},
+          {"extended_nrmse_pct", r.extended_nrmse_pct},
+          {"baseline_heldout_nrmse_pct", r.baseline_heldout_nrmse_pct},
+          {"extended_heldout_nrmse_pct", r.extended_heldout_nrmse_pct},
+          {"num_params", 3},
+          {"params", params}};
+}
+
 json lua_expected_status() {
   const StatusReport s = test::sample_status();
   return {{"utime", s.utime},           {"connection", "connected"}, {"bytes_received", 123456789},
@@ -191,7 +212,7 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   });
   ASSERT_TRUE(lua_listener.warm);
   publish_samples(publisher);
-  read_messages(lua_listener, 5);
+  read_messages(lua_listener, 6);
   EXPECT_EQ(publisher.failed_publishes(), 0U);
 
   // The Lua client decoded each message with the lcm-gen Lua types.
@@ -211,6 +232,10 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   EXPECT_EQ((*fit)["message"], lua_expected_fit());
   EXPECT_EQ((*status)["type"], "gaitmon.status_t");
   EXPECT_EQ((*status)["message"], lua_expected_status());
+  const json* effects = find_channel(lua_listener.messages, "GAITMON_EFFECTS");
+  ASSERT_TRUE(effects);
+  EXPECT_EQ((*effects)["type"], "gaitmon.effects_t");
+  EXPECT_EQ((*effects)["message"], lua_expected_effects());
   const json* frame = find_channel(lua_listener.messages, "GAITMON_FRAME");
   const json* raw = find_channel(lua_listener.messages, "GAITMON_RAW");
   ASSERT_TRUE(frame && raw);
@@ -239,17 +264,20 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   fit_t t;
   status_t u;
   raw_t r;
+  effects_t e;
   ASSERT_TRUE(decode_last("GAITMON_FRAME", f));
   ASSERT_TRUE(decode_last("GAITMON_STEP", s));
   ASSERT_TRUE(decode_last("GAITMON_FIT", t));
   ASSERT_TRUE(decode_last("GAITMON_STATUS", u));
   ASSERT_TRUE(decode_last("GAITMON_RAW", r));
+  ASSERT_TRUE(decode_last("GAITMON_EFFECTS", e));
   EXPECT_EQ(f.utime, 1763737200123456);
   EXPECT_EQ(s.utime, 1763737200223456);
   EXPECT_EQ(t.utime, 1763737200323456);
   EXPECT_EQ(t.regions[6].status, "fit_failed:no convergence");
   EXPECT_EQ(u.connection, "connected");
   EXPECT_EQ(r.bits.size(), 161U);
+  EXPECT_EQ(e.params.size(), 3U);
   // Event numbers count up from 0 in the order the logger received the messages.
   std::int64_t expected_number = 0;
   for (const auto& event : test::read_lcm_log(log_path)) {
@@ -268,8 +296,8 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
   LcmPublisher publisher(settings());
   warm_up(publisher, {&listener}, [] { return true; });
   publish_samples(publisher);
-  read_messages(listener, 5);
-  ASSERT_EQ(listener.messages.size(), 5U);
+  read_messages(listener, 6);
+  ASSERT_EQ(listener.messages.size(), 6U);
 
   const json* frame = find_channel(listener.messages, "GAITMON_FRAME");
   const json* step = find_channel(listener.messages, "GAITMON_STEP");
@@ -340,6 +368,14 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
   EXPECT_EQ((*raw)["device_time_us"], 3999999999U);
   ASSERT_EQ((*raw)["bits"].size(), 161U);
   EXPECT_EQ((*raw)["bits"][160], (160 * 37) % 256);
+
+  json expected_effects = lua_expected_effects();
+  expected_effects.erase("num_params");
+  expected_effects["channel"] = "GAITMON_EFFECTS";
+  expected_effects["type"] = "effects_t";
+  const json* effects = find_channel(listener.messages, "GAITMON_EFFECTS");
+  ASSERT_TRUE(effects);
+  EXPECT_EQ(*effects, expected_effects);
 }
 
 // Named channels only (by kind here), and --count ends the spy with exit code 0. UDP has no

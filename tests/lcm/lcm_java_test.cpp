@@ -18,8 +18,9 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-const char* const kTypes[] = {"frame_t",      "region_frame_t", "step_t", "fit_t",
-                              "region_fit_t", "status_t",       "raw_t"};
+const char* const kTypes[] = {"frame_t", "region_frame_t", "step_t",
+                              "fit_t",   "region_fit_t",   "status_t",
+                              "raw_t",   "effects_t",      "effect_param_t"};
 
 std::vector<std::string> lines_of(const std::string& text) {
   std::vector<std::string> lines;
@@ -45,7 +46,7 @@ TEST(LcmJava, LcmSpyFindsTheTypesOnClasspath) {
                         " timeout 60 java -Djava.awt.headless=true -cp " +
                         GAITMON_LCM_JAVA_LIB_JAR + " lcm.spy.Spy --lcm-url=memq:// 2>&1",
                     &output);
-  EXPECT_THAT(output, HasSubstr("Found 7 LCM types")) << output;
+  EXPECT_THAT(output, HasSubstr("Found 9 LCM types")) << output;
 }
 
 // Decodes the way lcm-spy does (fingerprint -> class through lcm.spy.LCMTypeDatabase), and once
@@ -94,7 +95,8 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
     publisher.publish(test::sample_fit());
     publisher.publish(test::sample_status());
     publisher.publish(test::sample_raw());
-    ASSERT_EQ(publisher.published(), 5U);
+    publisher.publish(test::sample_effects());
+    ASSERT_EQ(publisher.published(), 6U);
   }
   test::write_text(dir / "Decode.java", kDecodeJava);
   const std::string classpath =
@@ -115,11 +117,13 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
     if (line.rfind("event ", 0) == 0) events.push_back(line);
     if (line.rfind("fit ", 0) == 0) fit_line = line;
   }
-  const std::vector<std::string> expected{"event GAITMON_FRAME gaitmon.frame_t 1763737200123456",
-                                          "event GAITMON_STEP gaitmon.step_t 1763737200223456",
-                                          "event GAITMON_FIT gaitmon.fit_t 1763737200323456",
-                                          "event GAITMON_STATUS gaitmon.status_t 1763737200423456",
-                                          "event GAITMON_RAW gaitmon.raw_t 1763737200523456"};
+  const std::vector<std::string> expected{
+      "event GAITMON_FRAME gaitmon.frame_t 1763737200123456",
+      "event GAITMON_STEP gaitmon.step_t 1763737200223456",
+      "event GAITMON_FIT gaitmon.fit_t 1763737200323456",
+      "event GAITMON_STATUS gaitmon.status_t 1763737200423456",
+      "event GAITMON_RAW gaitmon.raw_t 1763737200523456",
+      "event GAITMON_EFFECTS gaitmon.effects_t 1763737200623456"};
   EXPECT_EQ(events, expected) << output;
   std::istringstream fit(fit_line);
   std::string word, foot, step, latency, region, kbar, status;

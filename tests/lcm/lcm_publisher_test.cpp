@@ -5,6 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
@@ -196,6 +197,34 @@ TEST_F(LcmPublisherMemq, RawFrameReportArrivesAsRawTWhenEnabled) {
   for (int i = 0; i < 161; ++i) EXPECT_EQ(m.bits[i], (i * 37) % 256) << i;
 }
 
+TEST_F(LcmPublisherMemq, EffectsReportArrivesAsEffectsT) {
+  LcmPublisher publisher(bus, memq_settings());
+  publisher.publish(test::sample_effects());
+  drain(*bus);
+  const auto m = only_message<effects_t>(received, "GAITMON_EFFECTS");
+  EXPECT_EQ(m.utime, 1763737200623456);
+  EXPECT_TRUE(m.final_estimate);
+  EXPECT_EQ(m.steps, 97);
+  EXPECT_EQ(m.t_first_heel_strike_s, 11.25);
+  EXPECT_EQ(m.t_last_toe_off_s, 63.5);
+  EXPECT_EQ(m.baseline_nrmse_pct, 6.75);
+  EXPECT_EQ(m.extended_nrmse_pct, 6.375);
+  EXPECT_EQ(m.baseline_heldout_nrmse_pct, 6.8125);
+  EXPECT_EQ(m.extended_heldout_nrmse_pct, 6.4375);
+  ASSERT_EQ(m.num_params, 3);
+  ASSERT_EQ(m.params.size(), 3U);
+  EXPECT_EQ(m.params[0].effect, "stress_relaxation");
+  EXPECT_EQ(m.params[0].name, "strength");
+  EXPECT_EQ(m.params[0].value, 0.3325);
+  EXPECT_EQ(m.params[0].se, 0.0094);
+  EXPECT_EQ(m.params[1].name, "tau_s");
+  EXPECT_EQ(m.params[1].value, 0.228125);
+  EXPECT_EQ(m.params[2].effect, "impact_transient");
+  EXPECT_EQ(m.params[2].name, "amplitude_n");
+  EXPECT_EQ(m.params[2].value, 81.5);
+  EXPECT_EQ(m.params[2].se, 4.25);
+}
+
 TEST_F(LcmPublisherMemq, RawFramesAreNotPublishedByDefault) {
   LcmSettings settings;
   settings.url = "memq://";
@@ -211,18 +240,19 @@ TEST_F(LcmPublisherMemq, RawFramesAreNotPublishedByDefault) {
 
 TEST_F(LcmPublisherMemq, UsesTheConfiguredChannels) {
   LcmSettings settings = memq_settings();
-  settings.channels = {"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW"};
+  settings.channels = {"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW", "A_EFFECTS"};
   LcmPublisher publisher(bus, settings);
   publisher.publish(test::sample_frame());
   publisher.publish(test::sample_step());
   publisher.publish(test::sample_fit());
   publisher.publish(test::sample_status());
   publisher.publish(test::sample_raw());
+  publisher.publish(test::sample_effects());
   drain(*bus);
   std::multiset<std::string> channels;
   for (const auto& [channel, bytes] : received.messages) channels.insert(channel);
-  EXPECT_EQ(channels,
-            (std::multiset<std::string>{"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW"}));
+  EXPECT_EQ(channels, (std::multiset<std::string>{"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW",
+                                                  "A_EFFECTS"}));
   // Each channel carries its own type: decoding as another type fails on the fingerprint.
   EXPECT_EQ(only_message<fit_t>(received, "A_FIT").step, 23);
   const auto& frame_bytes = received.messages.find("A.FRAME")->second;

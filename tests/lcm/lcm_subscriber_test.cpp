@@ -137,6 +137,26 @@ void expect_same(const RawFrameReport& a, const RawFrameReport& b) {
   EXPECT_EQ(a.bits, b.bits);
 }
 
+void expect_same(const EffectsReport& a, const EffectsReport& b) {
+  EXPECT_EQ(a.utime, b.utime);
+  EXPECT_EQ(a.final_estimate, b.final_estimate);
+  EXPECT_EQ(a.steps, b.steps);
+  EXPECT_EQ(a.t_first_heel_strike_s, b.t_first_heel_strike_s);
+  EXPECT_EQ(a.t_last_toe_off_s, b.t_last_toe_off_s);
+  EXPECT_EQ(a.baseline_nrmse_pct, b.baseline_nrmse_pct);
+  EXPECT_EQ(a.extended_nrmse_pct, b.extended_nrmse_pct);
+  EXPECT_EQ(a.baseline_heldout_nrmse_pct, b.baseline_heldout_nrmse_pct);
+  EXPECT_EQ(a.extended_heldout_nrmse_pct, b.extended_heldout_nrmse_pct);
+  ASSERT_EQ(a.params.size(), b.params.size());
+  for (std::size_t i = 0; i < a.params.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(a.params[i].effect, b.params[i].effect);
+    EXPECT_EQ(a.params[i].name, b.params[i].name);
+    EXPECT_EQ(a.params[i].value, b.params[i].value);
+    EXPECT_EQ(a.params[i].se, b.params[i].se);
+  }
+}
+
 template <typename Report>
 void expect_delivered(const Delivery& d, const std::string& channel, const Report& sent) {
   EXPECT_EQ(d.channel, channel);
@@ -153,13 +173,15 @@ TEST_F(LcmSubscriberMemq, EveryReportComesBackAsPublished) {
   publisher.publish(test::sample_fit());
   publisher.publish(test::sample_status());
   publisher.publish(test::sample_raw());
+  publisher.publish(test::sample_effects());
   drain(subscriber);
-  ASSERT_EQ(deliveries.size(), 5U);
+  ASSERT_EQ(deliveries.size(), 6U);
   expect_delivered(deliveries[0], "GAITMON_FRAME", test::sample_frame());
   expect_delivered(deliveries[1], "GAITMON_STEP", test::sample_step());
   expect_delivered(deliveries[2], "GAITMON_FIT", test::sample_fit());
   expect_delivered(deliveries[3], "GAITMON_STATUS", test::sample_status());
   expect_delivered(deliveries[4], "GAITMON_RAW", test::sample_raw());
+  expect_delivered(deliveries[5], "GAITMON_EFFECTS", test::sample_effects());
   EXPECT_EQ(subscriber.decode_errors(), 0U);
 }
 

@@ -108,4 +108,21 @@ inline RawFrameReport sample_raw() {
   return r;
 }
 
+inline EffectsReport sample_effects() {
+  EffectsReport r;
+  r.utime = 1763737200623456;
+  r.final_estimate = true;
+  r.steps = 97;
+  r.t_first_heel_strike_s = 11.25;
+  r.t_last_toe_off_s = 63.5;
+  r.baseline_nrmse_pct = 6.75;
+  r.extended_nrmse_pct = 6.375;
+  r.baseline_heldout_nrmse_pct = 6.8125;
+  r.extended_heldout_nrmse_pct = 6.4375;
+  r.params = {{"stress_relaxation", "strength", 0.3325, 0.0094},
+              {"stress_relaxation", "tau_s", 0.228125, 0.0083},
+              {"impact_transient", "amplitude_n", 81.5, 4.25}};
+  return r;
+}
+
 }  // namespace gaitmon::test
