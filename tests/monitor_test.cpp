@@ -61,6 +61,23 @@ AnalysisSettings quick_fits() {
   return settings;
 }
 
+// A replay's options (nothing dropped) with fits cut short.
+MonitorOptions quick_replay() {
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  options.backlog_overflow = BacklogOverflow::Wait;
+  return options;
+}
+
+void offer_all(Monitor& monitor, const std::vector<SensorFrame>& frames) {
+  for (const SensorFrame& frame : frames) {
+    if (!monitor.offer_wait(frame)) {
+      ADD_FAILURE() << "the monitor refused a frame";
+      return;
+    }
+  }
+}
+
 // Polls `done` every millisecond for up to 60 s.
 bool wait_until(const std::function<bool()>& done) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
@@ -391,13 +408,11 @@ TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
         make_discrepancy_input(latest, std::move(analyses), layout, config), config.model.effects);
 
     RecordingPublisher publisher;
-    MonitorOptions options;
+    MonitorOptions options = quick_replay();
     options.sample_rate_hz = header.sample_rate_hz;
-    options.analysis = quick_fits();
-    options.backlog_overflow = BacklogOverflow::Wait;
     {
       Monitor monitor(config, options, publisher);
-      for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
+      offer_all(monitor, frames);
     }
     ASSERT_GT(ok.size(), 40u) << "the 30 s demo has about 50 complete steps";
     const std::vector<EffectsReport> reports = publisher.effects();
@@ -446,13 +461,8 @@ TEST(Monitor, AnInterruptedRunPublishesItsLatestEffectsEstimateAsTheFinalOne) {
   Config config = shipped_config();
   config.model.effects = {"impact_transient"};
   RecordingPublisher publisher;
-  MonitorOptions options;
-  options.analysis = quick_fits();
-  options.backlog_overflow = BacklogOverflow::Wait;
-  Monitor monitor(config, options, publisher);
-  for (const SensorFrame& frame : test::session_frames(demo_30s())) {
-    ASSERT_TRUE(monitor.offer_wait(frame));
-  }
+  Monitor monitor(config, quick_replay(), publisher);
+  offer_all(monitor, test::session_frames(demo_30s()));
   ASSERT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
   monitor.close();
   monitor.stop();
@@ -474,14 +484,9 @@ TEST(Monitor, WithoutEffectsNothingIsPublishedOnTheirChannel) {
   const Config config = shipped_config();
   ASSERT_TRUE(config.model.effects.empty());
   RecordingPublisher publisher;
-  MonitorOptions options;
-  options.analysis = quick_fits();
-  options.backlog_overflow = BacklogOverflow::Wait;
   {
-    Monitor monitor(config, options, publisher);
-    for (const SensorFrame& frame : test::session_frames(demo_30s())) {
-      ASSERT_TRUE(monitor.offer_wait(frame));
-    }
+    Monitor monitor(config, quick_replay(), publisher);
+    offer_all(monitor, test::session_frames(demo_30s()));
   }
   EXPECT_FALSE(publisher.fits().empty());
   EXPECT_TRUE(publisher.effects().empty());
