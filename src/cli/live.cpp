@@ -132,8 +132,12 @@ StopOnSignal::StopOnSignal(std::function<void(int)> on_signal) : on_signal_(std:
 // The signals stay blocked: unblocking would let a second Ctrl-C, pending meanwhile, kill a
 // command that is about to exit 0.
 StopOnSignal::~StopOnSignal() {
+  finish();
+}
+
+void StopOnSignal::finish() {
   done_.store(true);
-  watcher_.join();
+  if (watcher_.joinable()) watcher_.join();
 }
 
 }  // namespace gaitmon::cli

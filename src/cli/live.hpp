@@ -70,6 +70,10 @@ class StopOnSignal {
   /// The signal received, 0 if none.
   int received() const { return received_.load(); }
 
+  /// Stops watching, after a call of `on_signal` in progress has returned: from here on what
+  /// `on_signal` touches may be torn down. Later signals stay blocked and pending.
+  void finish();
+
  private:
   std::function<void(int)> on_signal_;
   std::atomic<int> received_{0};

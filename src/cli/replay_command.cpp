@@ -63,7 +63,8 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
         });
       },
       [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
-  running.store(nullptr);
+  // A signal handled just now may still be closing the monitor: it has to return first.
+  on_signal.finish();
   monitor.stop();
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

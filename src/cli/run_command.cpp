@@ -71,7 +71,8 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
         },
         [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
   }
-  running.store(nullptr);
+  // A signal handled just now may still be closing the monitor: it has to return first.
+  on_signal.finish();
   monitor.stop();
   const MonitorCounters c = monitor.counters();
   fmt::print(
