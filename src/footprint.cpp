@@ -10,21 +10,66 @@
 namespace gaitmon {
 namespace {
 
-constexpr int kTerms = 5;  // 1, u, v, u^2, v^2
 constexpr double kMinAreaOfSensorArea = 0.5;
 constexpr double kMaxAreaOfSensorArea = 2.0;
 // Relative pivot below which the normal equations count as singular: far above rounding
 // (~1e-16) and far below the weakest determinable layout (three rows, one cell in one of them).
 constexpr double kRankThreshold = 1e-9;
 
+/// p = q0 + q1 u + q2 v + q3 u^2 + q4 v^2 in cell units (u widths, v heights from the centroid).
+struct Quadratic {
+  double q0, q1, q2, q3, q4;
+};
+
+/// Least squares of the cells' loads on `Terms` functions of (u, v); nullopt if the cells do
+/// not determine them.
+template <int Terms, typename RowOf>
+std::optional<Eigen::Matrix<double, Terms, 1>> least_squares(std::span<const LoadedCell> cells,
+                                                             double mean_x, double mean_y,
+                                                             CellSize size, RowOf row_of) {
+  if (cells.size() < static_cast<std::size_t>(Terms)) return std::nullopt;
+  Eigen::Matrix<double, Terms, Terms> normal = Eigen::Matrix<double, Terms, Terms>::Zero();
+  Eigen::Matrix<double, Terms, 1> rhs = Eigen::Matrix<double, Terms, 1>::Zero();
+  for (const LoadedCell& c : cells) {
+    const Eigen::Matrix<double, Terms, 1> row =
+        row_of((c.x_mm - mean_x) / size.width_mm, (c.y_mm - mean_y) / size.height_mm);
+    normal.noalias() += row * row.transpose();
+    rhs += row * c.load;
+  }
+  Eigen::FullPivLU<Eigen::Matrix<double, Terms, Terms>> lu(normal);
+  lu.setThreshold(kRankThreshold);
+  if (lu.rank() < Terms) return std::nullopt;
+  return lu.solve(rhs);
+}
+
+/// The cap's area, or nullopt if the quadratic is not a cap or the area is implausible.
+std::optional<double> cap_area_mm2(const Quadratic& q, std::size_t cells, CellSize size) {
+  if (!(q.q3 < 0.0) || !(q.q4 < 0.0)) return std::nullopt;
+  const double peak = q.q0 - q.q1 * q.q1 / (4.0 * q.q3) - q.q2 * q.q2 / (4.0 * q.q4);
+  if (!(peak > 0.0)) return std::nullopt;
+  // In cell units the ellipse's semi-axes are sqrt(-peak / q3) widths and sqrt(-peak / q4)
+  // heights.
+  const double area =
+      std::numbers::pi * peak / std::sqrt(q.q3 * q.q4) * size.width_mm * size.height_mm;
+  const double sensor_area = static_cast<double>(cells) * size.width_mm * size.height_mm;
+  if (!(area >= kMinAreaOfSensorArea * sensor_area && area <= kMaxAreaOfSensorArea * sensor_area)) {
+    return std::nullopt;
+  }
+  return area;
+}
+
 }  // namespace
 
-std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size) {
+std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size,
+                                         double aspect) {
   if (!(size.width_mm > 0.0) || !(size.height_mm > 0.0) || !std::isfinite(size.width_mm) ||
       !std::isfinite(size.height_mm)) {
     throw std::invalid_argument("footprint_area_mm2: the cell size must be finite and positive");
   }
-  if (cells.size() < static_cast<std::size_t>(kTerms)) return std::nullopt;
+  if (!(aspect > 0.0) || !std::isfinite(aspect)) {
+    throw std::invalid_argument("footprint_area_mm2: the aspect must be finite and positive");
+  }
+  if (cells.empty()) return std::nullopt;
   // Centred and in cell units, so the normal equations are well conditioned.
   double mean_x = 0.0;
   double mean_y = 0.0;
@@ -37,31 +82,29 @@ std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, Cell
   }
   mean_x /= static_cast<double>(cells.size());
   mean_y /= static_cast<double>(cells.size());
-  Eigen::Matrix<double, kTerms, kTerms> normal = Eigen::Matrix<double, kTerms, kTerms>::Zero();
-  Eigen::Matrix<double, kTerms, 1> rhs = Eigen::Matrix<double, kTerms, 1>::Zero();
-  for (const LoadedCell& c : cells) {
-    const double u = (c.x_mm - mean_x) / size.width_mm;
-    const double v = (c.y_mm - mean_y) / size.height_mm;
-    const Eigen::Matrix<double, kTerms, 1> row(1.0, u, v, u * u, v * v);
-    normal.noalias() += row * row.transpose();
-    rhs += row * c.load;
+
+  using Row5 = Eigen::Matrix<double, 5, 1>;
+  if (const auto q = least_squares<5>(cells, mean_x, mean_y, size, [](double u, double v) {
+        return Row5(1.0, u, v, u * u, v * v);
+      })) {
+    if (const auto area =
+            cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), (*q)(4)}, cells.size(), size)) {
+      return area;
+    }
   }
-  Eigen::FullPivLU<Eigen::Matrix<double, kTerms, kTerms>> lu(normal);
-  lu.setThreshold(kRankThreshold);
-  if (lu.rank() < kTerms) return std::nullopt;
-  const Eigen::Matrix<double, kTerms, 1> q = lu.solve(rhs);
-  if (!(q(3) < 0.0) || !(q(4) < 0.0)) return std::nullopt;
-  const double peak = q(0) - q(1) * q(1) / (4.0 * q(3)) - q(2) * q(2) / (4.0 * q(4));
-  if (!(peak > 0.0)) return std::nullopt;
-  // In cell units the ellipse's semi-axes are sqrt(-peak / q3) widths and sqrt(-peak / q4)
-  // heights.
-  const double area =
-      std::numbers::pi * peak / std::sqrt(q(3) * q(4)) * size.width_mm * size.height_mm;
-  const double sensor_area = static_cast<double>(cells.size()) * size.width_mm * size.height_mm;
-  if (!(area >= kMinAreaOfSensorArea * sensor_area && area <= kMaxAreaOfSensorArea * sensor_area)) {
-    return std::nullopt;
+  // rA = aspect rB, so in cell units q4 = kappa q3 with kappa = (aspect h / w)^2.
+  const double ratio = aspect * size.height_mm / size.width_mm;
+  const double kappa = ratio * ratio;
+  using Row4 = Eigen::Matrix<double, 4, 1>;
+  if (const auto q = least_squares<4>(cells, mean_x, mean_y, size, [kappa](double u, double v) {
+        return Row4(1.0, u, v, u * u + kappa * v * v);
+      })) {
+    if (const auto area = cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), kappa * (*q)(3)},
+                                       cells.size(), size)) {
+      return area;
+    }
   }
-  return area;
+  return std::nullopt;
 }
 
 }  // namespace gaitmon

@@ -1,6 +1,8 @@
 // Turns a segmented step into per-region force, area and ellipse series (seed 3.4, 3.5, ch. 4).
 #include "gaitmon/stance.hpp"
 
+#include <algorithm>
+#include <limits>
 #include <stdexcept>
 
 namespace gaitmon {
@@ -28,10 +30,18 @@ std::array<RegionSample, kRegionCount> measure_frame(
     double bits = 0.0;
     scratch.cells.clear();
     scratch.loaded.clear();
+    double x_lo = std::numeric_limits<double>::infinity();
+    double x_hi = -x_lo;
+    double y_lo = x_lo;
+    double y_hi = -x_lo;
     for (std::size_t i : layout.region_sensors(region)) {
+      const Sensor& s = layout.sensor(i);
+      x_lo = std::min(x_lo, s.grid_x_mm);
+      x_hi = std::max(x_hi, s.grid_x_mm);
+      y_lo = std::min(y_lo, s.grid_y_mm);
+      y_hi = std::max(y_hi, s.grid_y_mm);
       if (scratch.zeroed[i] <= 0.0) continue;
       bits += scratch.zeroed[i];
-      const Sensor& s = layout.sensor(i);
       scratch.cells.push_back({s.grid_x_mm, s.grid_y_mm, s.row == layout.outermost_heel_row()});
       scratch.loaded.push_back({s.grid_x_mm, s.grid_y_mm, scratch.zeroed[i]});
     }
@@ -41,7 +51,10 @@ std::array<RegionSample, kRegionCount> measure_frame(
     sample.ellipse = cache != nullptr
                          ? cache->fit(scratch.cells, cell, region, first_instant)
                          : fit_contact_ellipse(scratch.cells, cell, region, first_instant);
-    sample.footprint_area_mm2 = footprint_area_mm2(scratch.loaded, cell);
+    // The footprint grows into its region in the region's shape: where the loads cannot give
+    // the ellipse's aspect, the region's box does.
+    const double box_aspect = (x_hi - x_lo + cell.width_mm) / (y_hi - y_lo + cell.height_mm);
+    sample.footprint_area_mm2 = footprint_area_mm2(scratch.loaded, cell, box_aspect);
   }
   return samples;
 }

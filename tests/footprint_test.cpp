@@ -1,5 +1,6 @@
 // Tests of the load-fitted footprint: exact on a sampled paraboloid, close to the model's own
-// contact area on its pressure field, and nullopt wherever the cells cannot determine it.
+// contact area on its pressure field, exact on two rows given the aspect, and nullopt wherever
+// the cells cannot determine it.
 #include "gaitmon/footprint.hpp"
 
 #include <gtest/gtest.h>
@@ -22,6 +23,8 @@ namespace {
 constexpr double kW = 7.5;
 constexpr double kH = 15.0;
 constexpr double kPi = std::numbers::pi;
+// Where the cells span three rows and three columns the aspect is theirs and this one is unused.
+constexpr double kAnyAspect = 1.0;
 
 /// p = peak (1 - rho^2) of an axis-aligned ellipse sampled at the centres of a cols x rows grid,
 /// keeping the cells where it is positive, as the adaptive threshold keeps the loaded ones.
@@ -45,16 +48,16 @@ TEST(Footprint, ExactOnASampledParaboloid) {
   const double rB = 41.7;
   const auto cells = sampled_cap(31.1, 52.4, rA, rB, 87.0, 9, 8);
   ASSERT_GE(cells.size(), 10u);
-  const auto area = footprint_area_mm2(cells, CellSize{kW, kH});
+  const auto area = footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect);
   ASSERT_TRUE(area.has_value());
   EXPECT_NEAR(*area, kPi * rA * rB, 1e-9 * kPi * rA * rB);
 }
 
 TEST(Footprint, IndependentOfTheLoadUnit) {
   auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
-  const auto in_bits = footprint_area_mm2(cells, CellSize{kW, kH});
+  const auto in_bits = footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect);
   for (LoadedCell& c : cells) c.load *= 0.2824;
-  const auto in_newtons = footprint_area_mm2(cells, CellSize{kW, kH});
+  const auto in_newtons = footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect);
   ASSERT_TRUE(in_bits && in_newtons);
   EXPECT_NEAR(*in_bits, *in_newtons, 1e-9 * *in_bits);
 }
@@ -79,55 +82,72 @@ TEST(Footprint, RecoversTheModelsContactAreaFromItsPressureField) {
       const Sensor& s = layout.sensor(sensors[i]);
       cells.push_back({s.grid_x_mm, s.grid_y_mm, loads[i]});
     }
-    const auto area = footprint_area_mm2(cells, CellSize{kW, kH});
+    const auto area = footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect);
     ASSERT_TRUE(area.has_value()) << "area " << area_mm2;
     EXPECT_LT(g, 0.06);
     EXPECT_NEAR(*area / area_mm2, 1.0, g) << "area " << area_mm2 << ", g " << g;
   }
 }
 
-TEST(Footprint, TwoRowsDoNotDetermineIt) {
-  // A two-row midfoot: the anterior-posterior curvature is not seen.
-  EXPECT_FALSE(footprint_area_mm2(sampled_cap(30.0, 7.5, 40.0, 12.0, 60.0, 9, 2), CellSize{kW, kH})
-                   .has_value());
+// A two-row midfoot: the anterior-posterior curvature is not seen, so the aspect must be given.
+// With the true one the area is exact; with a wrong one it is wrong, which is the prior's cost.
+TEST(Footprint, TwoRowsDetermineItWithTheAspect) {
+  const double rA = 40.0;
+  const double rB = 12.0;
+  const auto cells = sampled_cap(31.0, 7.5, rA, rB, 60.0, 9, 2);
+  ASSERT_GE(cells.size(), 8u);
+  const auto area = footprint_area_mm2(cells, CellSize{kW, kH}, rA / rB);
+  ASSERT_TRUE(area.has_value());
+  EXPECT_NEAR(*area, kPi * rA * rB, 1e-9 * kPi * rA * rB);
+  const auto wrong = footprint_area_mm2(cells, CellSize{kW, kH}, 0.5 * rA / rB);
+  ASSERT_TRUE(wrong.has_value());
+  EXPECT_GT(std::abs(*wrong / (kPi * rA * rB) - 1.0), 0.1);
 }
 
-TEST(Footprint, FewerCellsThanTermsDoNotDetermineIt) {
+TEST(Footprint, OneRowOrTooFewCellsDoNotDetermineIt) {
+  EXPECT_FALSE(footprint_area_mm2(sampled_cap(31.0, 0.0, 40.0, 12.0, 60.0, 9, 1), CellSize{kW, kH},
+                                  40.0 / 12.0)
+                   .has_value());
   auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
-  cells.resize(4);
-  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}).has_value());
-  EXPECT_FALSE(footprint_area_mm2({}, CellSize{kW, kH}).has_value());
+  cells.resize(3);
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
+  EXPECT_FALSE(footprint_area_mm2({}, CellSize{kW, kH}, kAnyAspect).has_value());
 }
 
 TEST(Footprint, APlateauOrABowlIsNotACap) {
   auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
   for (LoadedCell& c : cells) c.load = 255.0;  // saturated
-  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}).has_value());
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
   for (LoadedCell& c : cells)
     c.load = 1.0 + std::pow(c.x_mm - 30.0, 2) + std::pow(c.y_mm - 45.0, 2);
-  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}).has_value());
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
 }
 
 TEST(Footprint, AnAreaFarFromTheActiveSensorAreaIsRejected) {
   // A nearly flat cap over 6 x 5 cells extrapolates to an ellipse many times their area.
   auto cells = sampled_cap(22.5, 30.0, 400.0, 600.0, 50.0, 6, 5);
   ASSERT_EQ(cells.size(), 30u);
-  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}).has_value());
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
 }
 
 TEST(Footprint, NonFiniteCellsGiveNothing) {
   auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
   cells[3].load = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}).has_value());
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
   cells[3].load = 1.0;
   cells[5].x_mm = std::numeric_limits<double>::infinity();
-  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}).has_value());
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
 }
 
-TEST(Footprint, ABadCellSizeThrows) {
+TEST(Footprint, ABadCellSizeOrAspectThrows) {
   const auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
-  EXPECT_THROW((void)footprint_area_mm2(cells, CellSize{0.0, kH}), std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_mm2(cells, CellSize{kW, std::nan("")}), std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_mm2(cells, CellSize{0.0, kH}, kAnyAspect),
+               std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_mm2(cells, CellSize{kW, std::nan("")}, kAnyAspect),
+               std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_mm2(cells, CellSize{kW, kH}, 0.0), std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_mm2(cells, CellSize{kW, kH}, std::nan("")),
+               std::invalid_argument);
 }
 
 }  // namespace

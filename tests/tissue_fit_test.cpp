@@ -106,8 +106,20 @@ double rel_error(double fitted, double truth) {
   return std::abs(fitted - truth) / truth;
 }
 
+struct Medians {
+  double kbar = 0.0, n = 0.0, cbar = 0.0, m = 0.0;
+};
+
+// The toes' one to three active cells mostly do not determine their footprint (footprint.hpp):
+// the fit gets their contact ellipse's area in most of their frames.
+bool area_determined(Region region) {
+  return region != Region::Toe1 && region != Region::Toe2 && region != Region::Toes3_5;
+}
+
 struct Recovery {
-  double kbar = 0.0, n = 0.0, cbar = 0.0, m = 0.0, nrmse = 0.0, ok_fraction = 0.0;
+  Medians all;         ///< median relative errors over every region-step
+  Medians determined;  ///< over the regions whose footprint the cells determine
+  double nrmse = 0.0, ok_fraction = 0.0;
   double min_force_share = 0.0;  ///< the most negative model force / that fit's peak measured
   std::size_t fits = 0;
 };
@@ -138,17 +150,28 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
   }
   r.ok_fraction = static_cast<double>(ok) / static_cast<double>(r.fits);
   if (ok > 0) {
-    r.kbar = median(ek);
-    r.n = median(en);
-    r.cbar = median(ec);
-    r.m = median(em);
+    r.all = {median(ek), median(en), median(ec), median(em)};
     r.nrmse = median(nrmse);
+  }
+  std::array<std::vector<double>, 4> determined;
+  for (Region region : kRegions) {
+    if (!area_determined(region)) continue;
+    for (std::size_t i = 0; i < 4; ++i) {
+      const auto& e = per_region[index_of(region)][i];
+      determined[i].insert(determined[i].end(), e.begin(), e.end());
+    }
+  }
+  if (!determined[0].empty()) {
+    r.determined = {median(determined[0]), median(determined[1]), median(determined[2]),
+                    median(determined[3])};
   }
   std::printf(
       "[ smoothing %s, area %s ] %zu fits, ok %.1f %%, median rel. error kbar %.3f n %.3f cbar "
-      "%.3f m %.3f, median NRMSE %.2f %%\n",
+      "%.3f m %.3f, median NRMSE %.2f %%\n"
+      "    without the toes    %3zu fits: kbar %.3f n %.3f cbar %.3f m %.3f\n",
       std::string(smoothing_name(smoothing)).c_str(), std::string(area_source_name(area)).c_str(),
-      r.fits, 100.0 * r.ok_fraction, r.kbar, r.n, r.cbar, r.m, r.nrmse);
+      r.fits, 100.0 * r.ok_fraction, r.all.kbar, r.all.n, r.all.cbar, r.all.m, r.nrmse,
+      determined[0].size(), r.determined.kbar, r.determined.n, r.determined.cbar, r.determined.m);
   for (Region region : kRegions) {
     const auto& e = per_region[index_of(region)];
     if (e[0].empty()) continue;
@@ -162,8 +185,10 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
 const Recovery& recovery(Smoothing smoothing, AreaSource area = AreaSource::Footprint) {
   static const Recovery none = recover(Smoothing::None, AreaSource::Footprint);
   static const Recovery seed = recover(Smoothing::Seed, AreaSource::Footprint);
+  static const Recovery none_ellipse = recover(Smoothing::None, AreaSource::Ellipse);
   static const Recovery seed_ellipse = recover(Smoothing::Seed, AreaSource::Ellipse);
-  if (area == AreaSource::Ellipse) return seed_ellipse;
+  if (area == AreaSource::Ellipse)
+    return smoothing == Smoothing::None ? none_ellipse : seed_ellipse;
   return smoothing == Smoothing::None ? none : seed;
 }
 
@@ -177,49 +202,54 @@ TEST(TissueFitRecovery, AtLeast99PercentOfRegionStepsConverge) {
   EXPECT_GE(recovery(Smoothing::None).ok_fraction, 0.99);
 }
 
-// The default smoothing is the one that recovers the truth better: the seed's polynomials give a
-// lower median NRMSE and lower median errors for kbar and cbar than the raw series.
-TEST(TissueFitRecovery, SeedSmoothingIsTheDefaultBecauseItRecoversBetter) {
-  EXPECT_EQ(FitSettings{}.smoothing, Smoothing::Seed);
-  const Recovery& seed = recovery(Smoothing::Seed);
-  const Recovery& none = recovery(Smoothing::None);
-  EXPECT_LT(seed.nrmse, none.nrmse);
-  EXPECT_LT(seed.kbar, none.kbar);
-  EXPECT_LT(seed.cbar, none.cbar);
+// The default smoothing is the one that recovers the truth better where the cells determine the
+// contact area: the raw series give lower median errors for kbar, n and cbar there (m is about
+// equal, and on the toes, fitted to their contact ellipse, the seed's polynomials do better).
+TEST(TissueFitRecovery, NoSmoothingIsTheDefaultBecauseItRecoversBetter) {
+  EXPECT_EQ(FitSettings{}.smoothing, Smoothing::None);
+  const Medians& none = recovery(Smoothing::None).determined;
+  const Medians& seed = recovery(Smoothing::Seed).determined;
+  EXPECT_LT(none.kbar, seed.kbar);
+  EXPECT_LT(none.n, seed.n);
+  EXPECT_LT(none.cbar, seed.cbar);
 }
 
 // One of the issue's recovery targets that is met with the defaults: the median NRMSE is below
-// 5 % (4.3 % when measured; 5.8 % with the seed's contact-ellipse area).
+// 5 % (4.9 % when measured; 12.8 % with the seed's contact-ellipse area).
 TEST(TissueFitRecovery, MedianNrmseIsBelowFivePercent) {
-  EXPECT_LT(recovery(Smoothing::Seed).nrmse, 5.0);
+  EXPECT_LT(recovery(Smoothing::None).nrmse, 5.0);
 }
 
 // The default contact area is the one that recovers the truth better: the load-fitted footprint
-// gives a lower median NRMSE and lower median errors for kbar and n than the seed's contact
-// ellipse, with the same smoothing.
+// gives a lower median NRMSE and lower median errors for kbar, n and cbar than the seed's contact
+// ellipse, with either smoothing.
 TEST(TissueFitRecovery, FootprintAreaIsTheDefaultBecauseItRecoversBetter) {
   EXPECT_EQ(AnalysisSettings{}.area, AreaSource::Footprint);
-  const Recovery& footprint = recovery(Smoothing::Seed, AreaSource::Footprint);
-  const Recovery& ellipse = recovery(Smoothing::Seed, AreaSource::Ellipse);
-  EXPECT_LT(footprint.nrmse, ellipse.nrmse);
-  EXPECT_LT(footprint.kbar, ellipse.kbar);
-  EXPECT_LT(footprint.n, ellipse.n);
+  for (Smoothing smoothing : {Smoothing::None, Smoothing::Seed}) {
+    const Recovery& footprint = recovery(smoothing, AreaSource::Footprint);
+    const Recovery& ellipse = recovery(smoothing, AreaSource::Ellipse);
+    EXPECT_LT(footprint.nrmse, ellipse.nrmse) << smoothing_name(smoothing);
+    EXPECT_LT(footprint.all.kbar, ellipse.all.kbar) << smoothing_name(smoothing);
+    EXPECT_LT(footprint.all.n, ellipse.all.n) << smoothing_name(smoothing);
+    EXPECT_LT(footprint.all.cbar, ellipse.all.cbar) << smoothing_name(smoothing);
+  }
 }
 
-// The other recovery targets (median relative error <= 10 % for kbar, n, cbar, m and median
-// NRMSE < 5 %) are not met through the simulated measurement chain; issue 3 stays open on them.
-// The measured contact area is biased and quantised against the true footprint: a cell counts
-// only at or above the adaptive threshold, so the low-pressure rim of the footprint is missed,
-// most at low loads, which flattens force against area and biases n low; and the area moves in
-// steps of one 112.5 mm^2 cell. A noise-free model series is recovered to within a few per cent
-// (RecoversANoiseFreeModelSeries). These runs print the figures.
+// The other recovery target (median relative error <= 10 % for kbar, n, cbar, m) is not met
+// through the simulated measurement chain; issue 3 stays open on it. The toes' one to three cells
+// mostly do not determine their footprint, so the fit gets their contact ellipse's area, which
+// moves in steps of one 112.5 mm^2 cell and misses the rim below the adaptive threshold. Where the
+// cells do determine it the errors are some 2-4 times lower but still above 10 % for n and cbar. A
+// noise-free model series is recovered to within a few per cent (RecoversANoiseFreeModelSeries).
+// These runs print the figures.
 
 // The penalty keeps every fitted model essentially non-negative on its own inputs: no model
 // force below -0.1 % of the fit's peak measured force.
 TEST(TissueFit, FittedModelsAreNotNegative) {
   EXPECT_GE(recovery(Smoothing::None).min_force_share, -1e-3);
   EXPECT_GE(recovery(Smoothing::Seed).min_force_share, -1e-3);
-  EXPECT_GE(recovery(Smoothing::Seed).min_force_share, -1e-3);
+  EXPECT_GE(recovery(Smoothing::None, AreaSource::Ellipse).min_force_share, -1e-3);
+  EXPECT_GE(recovery(Smoothing::Seed, AreaSource::Ellipse).min_force_share, -1e-3);
 }
 
 // A synthetic series straight from the model: no measurement chain, so the fit must find the

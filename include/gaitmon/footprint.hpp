@@ -18,11 +18,17 @@
 // The quadratic is fitted to the active cells' loads by linear least squares. The overall scale
 // of the loads cancels, so any unit (bits, N) serves.
 //
-// It is undetermined, and nullopt is returned, when the cells do not span three rows and three
-// columns (a two-row midfoot, a two-cell toe), when the fit is not a cap (c3 or c4 >= 0, or
-// p_max <= 0: a plateau or a saturated region), or when the area is outside 0.5-2 times the
-// active sensor area, the seed's plausibility rule for its ellipses (4.1.3). The caller then uses
-// the contact ellipse.
+// Cells in two rows (the midfoot) do not see the anterior-posterior curvature c4. There the
+// caller's aspect rA / rB (the region's box: the footprint grows into its region in the region's
+// shape) fixes it: c4 = c3 rA^2 / rB^2, leaving 1, x, y and x^2 + (rA / rB)^2 y^2. A wrong aspect
+// gives a wrong area, so the free quadratic is always tried first.
+//
+// It is undetermined, and nullopt is returned, when even that fit is not determined (one row;
+// fewer than four cells, as a toe of one to three cells: their loads carry no curvature, and the
+// loads of cells placed symmetrically about the footprint carry no size), when the fit is not a
+// cap (c3 or c4 >= 0, or p_max <= 0: a plateau or a saturated region), or when the area is
+// outside 0.5-2 times the active sensor area, the seed's plausibility rule for its ellipses
+// (4.1.3). The caller then uses the contact ellipse.
 #pragma once
 
 #include <optional>
@@ -40,8 +46,10 @@ struct LoadedCell {
 };
 
 /// The area (mm^2) of the paraboloid footprint fitted to the cells, or nullopt when the cells do
-/// not determine it (see above). Never throws for any cell values; non-finite cells give nullopt.
-/// Throws std::invalid_argument if the cell size is not finite and positive.
-std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size);
+/// not determine it (see above); `aspect` (rA / rB) is used only where the cells do not give it.
+/// Never throws for any cell values; non-finite cells give nullopt. Throws std::invalid_argument
+/// if the cell size or the aspect is not finite and positive.
+std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size,
+                                         double aspect);
 
 }  // namespace gaitmon

@@ -16,11 +16,12 @@
 namespace gaitmon {
 
 /// How the measured series are prepared before fitting.
-/// `None`: the raw series, gdot by central differences. `Seed` (default): the seed's 5.1.1/5.1.2
+/// `None` (default): the raw series, gdot by central differences. `Seed`: the seed's 5.1.1/5.1.2
 /// smoothing (3-point moving average then a 5th-order polynomial in normalised time for the area,
-/// a 5th-order polynomial for the force), gdot from the polynomial. `Seed` is the default because
-/// it recovers simulated truths better (tests/tissue_fit_test.cpp prints both; README figures):
-/// the area measured from whole cells moves in steps of a cell, and the polynomial smooths them.
+/// a 5th-order polynomial for the force), gdot from the polynomial. `None` is the default because
+/// it recovers simulated truths better where the cells determine the contact area (heel, midfoot,
+/// metatarsals; tests/tissue_fit_test.cpp prints both, README figures). `Seed` did better with the
+/// contact ellipse's area, whose one-cell steps it smooths; the load-fitted footprint has none.
 enum class Smoothing { None, Seed };
 std::string_view smoothing_name(Smoothing smoothing);  ///< "none", "seed"
 std::optional<Smoothing> parse_smoothing(std::string_view text);
@@ -47,7 +48,7 @@ struct FitBounds {
 struct FitSettings {
   ModelVariant model = ModelVariant::Correct;
   FitMode mode = FitMode::Identifiable;
-  Smoothing smoothing = Smoothing::Seed;
+  Smoothing smoothing = Smoothing::None;
   bool free_scale = false;  ///< also free P = pi A B (keeping A/B), Identifiable mode only
   /// Starts of the general solver (free P, seed8) around the principled initial guess. The
   /// default fit needs none: it searches the whole (n, m) box with K and D solved exactly.

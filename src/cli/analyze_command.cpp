@@ -35,7 +35,7 @@ struct AnalyzeArgs {
   bool report = false;
   std::string model = "correct";
   std::string fit = "identifiable";
-  std::string smoothing = "seed";
+  std::string smoothing = "none";
   std::string area = "footprint";
   bool free_scale = false;
   std::vector<std::string> effects;
@@ -445,7 +445,8 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "eight free, as the seed)")
       ->check(CLI::IsMember({"identifiable", "seed8"}));
   sub->add_option("--smoothing", args->smoothing,
-                  "seed (default: the seed's moving average and polynomials) or none (raw series)")
+                  "none (default: the raw series) or seed (the seed's moving average and "
+                  "polynomials)")
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_option("--area", args->area,
                   "Contact area given to the fit: footprint (default: a paraboloid fitted to the "
