@@ -219,6 +219,30 @@ TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
   EXPECT_NE(line.find("d0_mm"), std::string::npos) << line;
 }
 
+// --fit seed8 reproduces the seed's fit, inputs included, unless they are asked for.
+TEST(AnalyzeCommand, Seed8TakesTheSeedsInputsUnlessToldOtherwise) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto settings = [](const fs::path& dir) {
+    return nlohmann::json::parse(read_all(dir / "session.json")).at("settings");
+  };
+  EXPECT_EQ(settings(a.dir / "out").at("smoothing"), "none");
+  EXPECT_EQ(settings(a.dir / "out").at("area"), "footprint");
+  int status = -1;
+  std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                            (a.dir / "seed8-inputs").string() + " --fit seed8",
+                        &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(settings(a.dir / "seed8-inputs").at("smoothing"), "seed");
+  EXPECT_EQ(settings(a.dir / "seed8-inputs").at("area"), "ellipse");
+  out = run("analyze " + (a.dir / "s.csv").string() + " --out " + (a.dir / "seed8-raw").string() +
+                " --fit seed8 --smoothing none --area footprint",
+            &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(settings(a.dir / "seed8-raw").at("smoothing"), "none");
+  EXPECT_EQ(settings(a.dir / "seed8-raw").at("area"), "footprint");
+}
+
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-bad");
   std::string text =

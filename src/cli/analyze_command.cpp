@@ -35,8 +35,9 @@ struct AnalyzeArgs {
   bool report = false;
   std::string model = "correct";
   std::string fit = "identifiable";
-  std::string smoothing = "none";
-  std::string area = "footprint";
+  // Empty: the default, which for --fit seed8 is the seed's own input (see settings_from).
+  std::string smoothing;
+  std::string area;
   bool free_scale = false;
   std::vector<std::string> effects;
   bool effects_given = false;
@@ -63,8 +64,19 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
   // CLI11 has checked membership, so the parses cannot fail.
   s.fit.model = *parse_model_variant(args.model);
   s.fit.mode = *parse_fit_mode(args.fit);
-  s.fit.smoothing = *parse_smoothing(args.smoothing);
-  s.area = *parse_area_source(args.area);
+  // --fit seed8 reproduces the seed's fit, so by default it also gets the seed's inputs: the
+  // contact ellipse's area and the seed's smoothing.
+  const bool seed8 = s.fit.mode == FitMode::Seed8;
+  if (!args.smoothing.empty()) {
+    s.fit.smoothing = *parse_smoothing(args.smoothing);
+  } else if (seed8) {
+    s.fit.smoothing = Smoothing::Seed;
+  }
+  if (!args.area.empty()) {
+    s.area = *parse_area_source(args.area);
+  } else if (seed8) {
+    s.area = AreaSource::Ellipse;
+  }
   s.fit.free_scale = args.free_scale;
   if (s.fit.free_scale && s.fit.mode != FitMode::Identifiable) {
     throw CLI::ValidationError("--free-scale", "applies to --fit identifiable only");
@@ -446,12 +458,13 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"identifiable", "seed8"}));
   sub->add_option("--smoothing", args->smoothing,
                   "none (default: the raw series) or seed (the seed's moving average and "
-                  "polynomials)")
+                  "polynomials; the default with --fit seed8)")
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_option("--area", args->area,
                   "Contact area given to the fit: footprint (default: a paraboloid fitted to the "
                   "active cells' loads where they determine it, else the contact ellipse) or "
-                  "ellipse (the seed's contact ellipse of the active cells)")
+                  "ellipse (the seed's contact ellipse of the active cells; the default with "
+                  "--fit seed8)")
       ->check(CLI::IsMember({"footprint", "ellipse"}));
   sub->add_flag("--free-scale", args->free_scale,
                 "Also fit P = pi A B (keeping A/B); identifiable mode only");
