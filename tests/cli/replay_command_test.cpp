@@ -49,16 +49,6 @@ std::vector<Message> decode(const std::vector<test::LogEvent>& events, const std
   return out;
 }
 
-// What an exited child printed on stderr, for a failure message (a sanitizer's report).
-std::string stderr_of(test::ChildProcess& child) {
-  std::string text;
-  for (const std::string& line :
-       child.read_rest(test::ChildProcess::Stderr, Clock::now() + std::chrono::seconds(2))) {
-    text += line + '\n';
-  }
-  return text;
-}
-
 std::vector<std::string> split(const std::string& line) {
   std::vector<std::string> fields;
   std::stringstream in(line);
@@ -224,7 +214,7 @@ TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {
   const auto status = replay.wait(sent + std::chrono::seconds(10));
   const double took_s = std::chrono::duration<double>(Clock::now() - sent).count();
   ASSERT_TRUE(status.has_value()) << "still running 10 s after SIGINT";
-  EXPECT_EQ(*status, 0) << stderr_of(replay);
+  EXPECT_EQ(*status, 0) << replay.stderr_text(Clock::now() + std::chrono::seconds(2));
   EXPECT_LT(took_s, 2.0);
   const auto statuses = decode<gaitmon::status_t>(test::read_lcm_log(log), "GAITMON_STATUS");
   ASSERT_FALSE(statuses.empty());
@@ -245,7 +235,7 @@ TEST(RunCommand, UsbWithoutADeviceWaitsAndStopsOnSigint) {
   run.signal(SIGINT);
   const auto status = run.wait(Clock::now() + std::chrono::seconds(10));
   ASSERT_TRUE(status.has_value()) << "still running 10 s after SIGINT";
-  EXPECT_EQ(*status, 0) << stderr_of(run);
+  EXPECT_EQ(*status, 0) << run.stderr_text(Clock::now() + std::chrono::seconds(2));
 
   int refused = -1;
   std::string out;

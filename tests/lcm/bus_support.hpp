@@ -160,6 +160,13 @@ class ChildProcess {
     return lines;
   }
 
+  /// What is left on stderr as one text, for a failure message (a sanitizer's report, say).
+  std::string stderr_text(Clock::time_point deadline) {
+    std::string text;
+    for (const std::string& line : read_rest(Stderr, deadline)) text += line + '\n';
+    return text;
+  }
+
   void signal(int signo) {
     if (pid_ > 0) ::kill(pid_, signo);
   }

@@ -92,7 +92,11 @@ void warm_up(LcmPublisher& publisher, std::vector<Listener*> listeners,
     }
     if (all) return;
   }
-  FAIL() << "the listeners heard nothing for 20 s";
+  std::string said;
+  for (Listener* l : listeners) {
+    said += l->process->stderr_text(Clock::now() + std::chrono::seconds(1));
+  }
+  FAIL() << "the listeners heard nothing for 20 s; on stderr they said:\n" << said;
 }
 
 void publish_samples(LcmPublisher& publisher) {
@@ -391,7 +395,7 @@ TEST_F(LcmBus, SpyFiltersChannelsAndStopsAtCount) {
     publisher.publish(test::sample_fit());
     exit_code = spy.wait(Clock::now() + std::chrono::milliseconds(50));
   }
-  ASSERT_EQ(exit_code, 0);
+  ASSERT_EQ(exit_code, 0) << spy.stderr_text(Clock::now() + std::chrono::seconds(1));
   const auto lines = spy.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(5));
   ASSERT_EQ(lines.size(), 4U);
   for (const std::string& line : lines) {
