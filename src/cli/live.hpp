@@ -55,9 +55,9 @@ class StepPrinter final : public Publisher {
   std::mutex print_mutex_;
 };
 
-/// From its construction on, SIGINT and SIGTERM do not kill the process: while it lives the
-/// first one calls `on_signal` (on a thread of its own) and later ones are ignored; they stay
-/// blocked after it ends, as the command is then finishing. Construct it before starting any
+/// From its construction on, SIGINT and SIGTERM do not kill the process: until finish() (or its
+/// end) the first one calls `on_signal` (on a thread of its own) and later ones are ignored; they
+/// stay blocked after that, as the command is then finishing. Construct it before starting any
 /// other thread: it blocks both signals in the calling thread, and threads started later
 /// inherit that.
 class StopOnSignal {
