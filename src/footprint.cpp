@@ -12,6 +12,9 @@ namespace {
 
 constexpr double kMinAreaOfSensorArea = 0.5;
 constexpr double kMaxAreaOfSensorArea = 2.0;
+// A cell whose centre the footprint covers reads; well inside the rim (a quarter of the peak
+// pressure is 87 % of the way out) a reading of nothing means the fit is wrong, not the cell.
+constexpr double kMaxUnloadedPressureOfPeak = 0.25;
 // Relative pivot below which the normal equations count as singular: far above rounding
 // (~1e-16) and far below the weakest determinable layout (three rows, one cell in one of them).
 constexpr double kRankThreshold = 1e-9;
@@ -42,8 +45,11 @@ std::optional<Eigen::Matrix<double, Terms, 1>> least_squares(std::span<const Loa
   return lu.solve(rhs);
 }
 
-/// The cap's area, or nullopt if the quadratic is not a cap or the area is implausible.
-std::optional<double> cap_area_mm2(const Quadratic& q, std::size_t cells, CellSize size) {
+/// The cap's area, or nullopt if the quadratic is not a cap, the area is implausible, or the cap
+/// covers the centre of a cell that reads nothing.
+std::optional<double> cap_area_mm2(const Quadratic& q, std::size_t cells,
+                                   std::span<const CellCentre> unloaded, double mean_x,
+                                   double mean_y, CellSize size) {
   if (!(q.q3 < 0.0) || !(q.q4 < 0.0)) return std::nullopt;
   const double peak = q.q0 - q.q1 * q.q1 / (4.0 * q.q3) - q.q2 * q.q2 / (4.0 * q.q4);
   if (!(peak > 0.0)) return std::nullopt;
@@ -55,13 +61,19 @@ std::optional<double> cap_area_mm2(const Quadratic& q, std::size_t cells, CellSi
   if (!(area >= kMinAreaOfSensorArea * sensor_area && area <= kMaxAreaOfSensorArea * sensor_area)) {
     return std::nullopt;
   }
+  for (const CellCentre& c : unloaded) {
+    const double u = (c.x_mm - mean_x) / size.width_mm;
+    const double v = (c.y_mm - mean_y) / size.height_mm;
+    const double p = q.q0 + q.q1 * u + q.q2 * v + q.q3 * u * u + q.q4 * v * v;
+    if (p > kMaxUnloadedPressureOfPeak * peak) return std::nullopt;
+  }
   return area;
 }
 
 }  // namespace
 
 std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size,
-                                         double aspect) {
+                                         double aspect, std::span<const CellCentre> unloaded) {
   if (!(size.width_mm > 0.0) || !(size.height_mm > 0.0) || !std::isfinite(size.width_mm) ||
       !std::isfinite(size.height_mm)) {
     throw std::invalid_argument("footprint_area_mm2: the cell size must be finite and positive");
@@ -87,8 +99,8 @@ std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, Cell
   if (const auto q = least_squares<5>(cells, mean_x, mean_y, size, [](double u, double v) {
         return Row5(1.0, u, v, u * u, v * v);
       })) {
-    if (const auto area =
-            cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), (*q)(4)}, cells.size(), size)) {
+    if (const auto area = cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), (*q)(4)}, cells.size(),
+                                       unloaded, mean_x, mean_y, size)) {
       return area;
     }
   }
@@ -100,7 +112,7 @@ std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, Cell
         return Row4(1.0, u, v, u * u + kappa * v * v);
       })) {
     if (const auto area = cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), kappa * (*q)(3)},
-                                       cells.size(), size)) {
+                                       cells.size(), unloaded, mean_x, mean_y, size)) {
       return area;
     }
   }

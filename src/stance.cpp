@@ -30,6 +30,7 @@ std::array<RegionSample, kRegionCount> measure_frame(
     double bits = 0.0;
     scratch.cells.clear();
     scratch.loaded.clear();
+    scratch.unloaded.clear();
     double x_lo = std::numeric_limits<double>::infinity();
     double x_hi = -x_lo;
     double y_lo = x_lo;
@@ -40,7 +41,10 @@ std::array<RegionSample, kRegionCount> measure_frame(
       x_hi = std::max(x_hi, s.grid_x_mm);
       y_lo = std::min(y_lo, s.grid_y_mm);
       y_hi = std::max(y_hi, s.grid_y_mm);
-      if (scratch.zeroed[i] <= 0.0) continue;
+      if (scratch.zeroed[i] <= 0.0) {
+        scratch.unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
+        continue;
+      }
       bits += scratch.zeroed[i];
       scratch.cells.push_back({s.grid_x_mm, s.grid_y_mm, s.row == layout.outermost_heel_row()});
       scratch.loaded.push_back({s.grid_x_mm, s.grid_y_mm, scratch.zeroed[i]});
@@ -54,7 +58,8 @@ std::array<RegionSample, kRegionCount> measure_frame(
     // The footprint grows into its region in the region's shape: where the loads cannot give
     // the ellipse's aspect, the region's box does.
     const double box_aspect = (x_hi - x_lo + cell.width_mm) / (y_hi - y_lo + cell.height_mm);
-    sample.footprint_area_mm2 = footprint_area_mm2(scratch.loaded, cell, box_aspect);
+    sample.footprint_area_mm2 =
+        footprint_area_mm2(scratch.loaded, cell, box_aspect, scratch.unloaded);
   }
   return samples;
 }

@@ -1,6 +1,6 @@
 // Tests of the load-fitted footprint: exact on a sampled paraboloid, close to the model's own
 // contact area on its pressure field, exact on two rows given the aspect, and nullopt wherever
-// the cells cannot determine it.
+// the cells cannot determine it or a cell that reads nothing contradicts it.
 #include "gaitmon/footprint.hpp"
 
 #include <gtest/gtest.h>
@@ -128,6 +128,25 @@ TEST(Footprint, AnAreaFarFromTheActiveSensorAreaIsRejected) {
   auto cells = sampled_cap(22.5, 30.0, 400.0, 600.0, 50.0, 6, 5);
   ASSERT_EQ(cells.size(), 30u);
   EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect).has_value());
+}
+
+// A cell that reads nothing where the fitted cap puts half its peak pressure contradicts the
+// fit; one outside the cap, or on its rim, does not.
+TEST(Footprint, ACapOverACellThatReadsNothingIsRejected) {
+  const double cx = 30.0, cy = 45.0, rA = 20.0, rB = 35.0;
+  const auto cells = sampled_cap(cx, cy, rA, rB, 50.0, 9, 7);
+  const auto free = footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect);
+  ASSERT_TRUE(free.has_value());
+  const std::vector<CellCentre> outside{{cx + 1.2 * rA, cy}, {cx, cy - 1.1 * rB}};
+  const auto with_outside = footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect, outside);
+  ASSERT_TRUE(with_outside.has_value());
+  EXPECT_EQ(*with_outside, *free);
+  // rho^2 = 0.9: a tenth of the peak, within the margin the rim's noisy cells need.
+  const std::vector<CellCentre> rim{{cx + std::sqrt(0.9) * rA, cy}};
+  EXPECT_TRUE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect, rim).has_value());
+  // rho^2 = 0.5: half the peak.
+  const std::vector<CellCentre> inside{{cx, cy + std::sqrt(0.5) * rB}};
+  EXPECT_FALSE(footprint_area_mm2(cells, CellSize{kW, kH}, kAnyAspect, inside).has_value());
 }
 
 TEST(Footprint, NonFiniteCellsGiveNothing) {

@@ -26,9 +26,14 @@
 // It is undetermined, and nullopt is returned, when even that fit is not determined (one row;
 // fewer than four cells, as a toe of one to three cells: their loads carry no curvature, and the
 // loads of cells placed symmetrically about the footprint carry no size), when the fit is not a
-// cap (c3 or c4 >= 0, or p_max <= 0: a plateau or a saturated region), or when the area is
+// cap (c3 or c4 >= 0, or p_max <= 0: a plateau or a saturated region), when the area is
 // outside 0.5-2 times the active sensor area, the seed's plausibility rule for its ellipses
-// (4.1.3). The caller then uses the contact ellipse.
+// (4.1.3), or when the cap puts more than a quarter of its peak pressure on the centre of a
+// region cell that reads nothing. A covered cell reads; a quarter of the peak is 87 % of the way
+// to the rim, which leaves the rim's cells, whose few bits noise and zeroing can take, their
+// margin. Without that last rule a frame whose loads are nearly flat now and then extrapolated
+// to twice its neighbours' area, a spike the fit and the discrepancy workflow took for physics.
+// The caller then uses the contact ellipse.
 #pragma once
 
 #include <optional>
@@ -45,11 +50,18 @@ struct LoadedCell {
   double load = 0.0;
 };
 
+/// The centre of a region cell that reads nothing.
+struct CellCentre {
+  double x_mm = 0.0;
+  double y_mm = 0.0;
+};
+
 /// The area (mm^2) of the paraboloid footprint fitted to the cells, or nullopt when the cells do
-/// not determine it (see above); `aspect` (rA / rB) is used only where the cells do not give it.
+/// not determine it or `unloaded`, the region's cells that read nothing, contradict it (see
+/// above); `aspect` (rA / rB) is used only where the cells do not give it.
 /// Never throws for any cell values; non-finite cells give nullopt. Throws std::invalid_argument
 /// if the cell size or the aspect is not finite and positive.
 std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size,
-                                         double aspect);
+                                         double aspect, std::span<const CellCentre> unloaded = {});
 
 }  // namespace gaitmon

@@ -46,6 +46,7 @@ struct FrameScratch {
   std::vector<double> zeroed;
   std::vector<ActiveCell> cells;
   std::vector<LoadedCell> loaded;
+  std::vector<CellCentre> unloaded;
 };
 
 /// One frame: zeroes the raw bits with `zero`, applies the adaptive threshold and measures every
