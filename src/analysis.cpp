@@ -9,6 +9,7 @@
 #include <numbers>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
 
 #include "gaitmon/stance.hpp"
 
@@ -31,12 +32,23 @@ std::optional<AreaSource> parse_area_source(std::string_view text) {
   return std::nullopt;
 }
 
-double fit_area_mm2(const RegionSample& sample, AreaSource source) {
-  const double ellipse = sample.ellipse.area_mm2;
-  if (source == AreaSource::Footprint && ellipse > 0.0 && sample.footprint_area_mm2) {
-    return *sample.footprint_area_mm2;
+std::pair<std::vector<double>, AreaSource> fit_areas_mm2(const StanceSeries& stance, Region region,
+                                                         AreaSource source) {
+  std::vector<double> ellipse(stance.size(), 0.0);
+  std::vector<double> footprint(stance.size(), 0.0);
+  int determined = 0;
+  for (std::size_t f = 0; f < stance.size(); ++f) {
+    const RegionSample& s = stance.at(f, region);
+    ellipse[f] = s.ellipse.area_mm2;
+    if (ellipse[f] > 0.0 && s.footprint_area_mm2) {
+      footprint[f] = *s.footprint_area_mm2;
+      ++determined;
+    }
   }
-  return ellipse;
+  if (source == AreaSource::Footprint && determined >= kMinFootprintFrames) {
+    return {std::move(footprint), AreaSource::Footprint};
+  }
+  return {std::move(ellipse), AreaSource::Ellipse};
 }
 
 Spread spread_of(std::vector<double> values) {
@@ -85,18 +97,17 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
     RegionAnalysis& r = out.regions[index_of(region)];
     r.region = region;
     r.series.t_s = stance.t_s;
-    r.series.area_mm2.resize(frames);
+    std::tie(r.series.area_mm2, r.area) = fit_areas_mm2(stance, region, settings.area);
     r.series.force_n.resize(frames);
     aspects.clear();
     for (std::size_t f = 0; f < frames; ++f) {
       const RegionSample& s = stance.at(f, region);
-      r.series.area_mm2[f] = fit_area_mm2(s, settings.area);
       r.series.force_n[f] = s.force_n;
       r.peak_force_n = std::max(r.peak_force_n, s.force_n);
       r.peak_area_mm2 = std::max(r.peak_area_mm2, r.series.area_mm2[f]);
       out.measured_total_force_n[f] += s.force_n;
       if (s.ellipse.kase != EllipseCase::None && s.ellipse.rb_mm > 0.0) {
-        ++r.frames;
+        if (r.frames++ == 0) r.t_contact_s = stance.t_s[f];
         aspects.push_back(s.ellipse.ra_mm / s.ellipse.rb_mm);
       }
     }

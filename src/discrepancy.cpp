@@ -26,7 +26,8 @@ constexpr std::array<double, 9> kExponentGrid{0.01, 0.12, 0.25, 0.38, 0.5, 0.62,
 
 // One region of one step: the measured series and the baseline's shapes.
 struct Unit {
-  int ordinal = 0;  // the step's place in time order (both feet)
+  int ordinal = 0;           // the step's place in time order (both feet)
+  double t_contact_s = 0.0;  // the region's first frame with a contact, fitted or not
   Foot foot = Foot::Left;
   int step = 0;
   Region region = Region::Heel;
@@ -218,7 +219,7 @@ class ImpactEffect final : public Applied {
   bool affects(const Unit& u) const override { return u.region == Region::Heel && a_ != 0.0; }
   void apply(std::size_t, const Unit& u, std::span<const double> F,
              std::span<double> out) const override {
-    const double t0 = u.t.front() - onset_ * u.dt_s;
+    const double t0 = u.t_contact_s - onset_ * u.dt_s;
     for (std::size_t i = 0; i < F.size(); ++i) {
       const double tau = u.t[i] - t0;
       out[i] = F[i];
@@ -691,6 +692,7 @@ struct Prepared {
   std::vector<Unit> units;
   Pooled pooled;
   int steps = 0;
+  int left_out = 0;  // region-steps fitted on the contact ellipse while others had a footprint
   std::vector<std::pair<Foot, int>> step_ids;  // by ordinal
 };
 
@@ -722,6 +724,15 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
   std::array<std::array<int, kRegionCount>, 2> last{};
   for (auto& f : last) f.fill(-1);
   const double dt = 1.0 / input.sample_rate_hz;
+  // A contact ellipse moves in whole cells; its misfit (toes: 20-30 % NRMSE) would swamp the
+  // effects sought, so where the session has footprints only they are compared.
+  bool footprints = false;
+  for (const DiscrepancyStep& ds : input.steps) {
+    for (const RegionAnalysis& ra : ds.analysis.regions) {
+      footprints =
+          footprints || (ra.fit.status == FitStatus::Ok && ra.area == AreaSource::Footprint);
+    }
+  }
   for (std::size_t o = 0; o < order.size(); ++o) {
     const DiscrepancyStep& ds = input.steps[order[o]];
     const StepAnalysis& sa = ds.analysis;
@@ -731,13 +742,18 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
       const RegionAnalysis& ra = sa.at(region);
       if (ra.fit.status != FitStatus::Ok || ra.frames < kMinContactFrames) continue;
       if (ra.series.t_s.empty() || !(ra.peak_force_n > 0.0)) continue;
+      if (footprints && ra.area == AreaSource::Ellipse) {
+        ++out.left_out;
+        continue;
+      }
       Unit u;
       u.ordinal = static_cast<int>(o);
+      u.t_contact_s = ra.t_contact_s;
       u.foot = sa.foot;
       u.step = sa.step;
       u.region = region;
-      // Only frames with a contact ellipse: without a measured area the model has nothing to say
-      // (the tissue fit leaves them out too).
+      // Only the frames the tissue fit was given: without a measured area the model has nothing
+      // to say.
       RegionSeries contact;
       for (std::size_t i = 0; i < ra.series.t_s.size(); ++i) {
         if (!(ra.series.area_mm2[i] > 0.0)) continue;
@@ -1089,6 +1105,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   DiscrepancyResult out;
   out.steps = prep.steps;
   out.step_regions = static_cast<int>(units.size());
+  out.step_regions_left_out = prep.left_out;
   out.frames = pooled.frames;
   double floor_sum = 0;
   for (const Unit& u : units) floor_sum += sum(u.floor2);

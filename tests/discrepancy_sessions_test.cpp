@@ -96,6 +96,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   std::string shrinks;
   int wrong_names = 0;
   int none_named = 0;
+  int right_names = 0;
   std::uint64_t seed = 100;
   for (const std::string& effect : classes) {
     for (std::size_t i = 0; i < 3; ++i) {
@@ -110,6 +111,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       ++ranked_matrix[effect][r.candidates[best].name];
       if (effect == "none" && first != "none") ++none_named;
       if (effect != "none" && first != "none" && first != effect) ++wrong_names;
+      if (effect != "none" && first == effect) ++right_names;
       shrinks += fmt::format(
           "  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> "
           "{:6.2f} % (gap shrink {:5.1f} %; best candidate {} {:+.1f} %)\n",
@@ -132,13 +134,16 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   print("Confusion matrix (named effect; 3 sessions per row)", named_matrix);
   print("Best candidate by held-out error, named or not", ranked_matrix);
   fmt::print("Sessions:\n{}", shrinks);
-  // The naming threshold (15 %) sits above the largest false improvement seen on sessions
-  // without an effect, so none of these is named, and no effect session is named wrongly; the
-  // issue's targets for the effect sessions (90 % named, 40 % shrink) are not met through the
+  // The naming threshold (5 %) is about three times the largest false improvement seen on 15
+  // sessions without an effect (these three and twelve others, README), so none of these is
+  // named and no effect session is named wrongly. 11 of the 15 effect sessions were named right
+  // when measured; the targets for them (90 % named, 40 % shrink) are not met through the
   // simulated measurement chain (README, "Model-data discrepancy").
-  fmt::print("effect sessions with a wrong effect named: {}\n", wrong_names);
+  fmt::print("effect sessions named right: {} of 15; with a wrong effect named: {}\n", right_names,
+             wrong_names);
   EXPECT_EQ(none_named, 0);
   EXPECT_EQ(wrong_names, 0);
+  EXPECT_GE(right_names, 11);
 }
 
 TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {

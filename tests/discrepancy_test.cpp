@@ -104,7 +104,7 @@ DiscrepancyInput clean_session(const CleanCase& c, int steps, unsigned seed) {
         ra.series.area_mm2.push_back(area);
         ra.series.force_n.push_back(area > 0.0 ? force : 0.0);
         ra.peak_force_n = std::max(ra.peak_force_n, force);
-        ra.frames += area > 0.0 ? 1 : 0;
+        if (area > 0.0 && ra.frames++ == 0) ra.t_contact_s = t;
       }
       ra.aspect = p.A_mm / p.B_mm;
       ra.declared = declared_params(seed_stats, ra.aspect);

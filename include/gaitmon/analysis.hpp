@@ -6,6 +6,7 @@
 #include <optional>
 #include <span>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "gaitmon/config.hpp"
@@ -20,11 +21,19 @@ namespace gaitmon {
 
 /// Which contact area Ae(t) the fit is given. `Ellipse` is the seed's contact ellipse of the
 /// active cells (chapter 4). `Footprint` is the paraboloid fitted to the active cells' loads
-/// (footprint.hpp) wherever they determine it, and the contact ellipse elsewhere: it recovers
-/// simulated truths better (README, "How the fit works"), so it is the default.
+/// (footprint.hpp): a region-step with at least kMinFootprintFrames frames whose cells determine
+/// it is fitted on those frames alone, and one with fewer on its contact ellipse throughout. It
+/// recovers simulated truths better (README, "How the fit works"), so it is the default.
+///
+/// Why not the footprint where determined and the ellipse elsewhere: the two disagree by up to a
+/// cell's area where they meet, early and late in the contact, and that step in the area is a
+/// spike in its rate, which the fit took for damping and the discrepancy workflow for physics.
 enum class AreaSource { Ellipse, Footprint };
 std::string_view area_source_name(AreaSource source);  ///< "ellipse", "footprint"
 std::optional<AreaSource> parse_area_source(std::string_view text);
+
+/// Twice the four free parameters of the default fit.
+inline constexpr int kMinFootprintFrames = 8;
 
 /// The fit's bounds come from Config::fit_bounds.
 struct AnalysisSettings {
@@ -35,13 +44,16 @@ struct AnalysisSettings {
 /// One region of one step: what was measured, what was declared and what was fitted.
 struct RegionAnalysis {
   Region region = Region::Heel;
-  RegionSeries series;       ///< per stance frame: time, contact area (AreaSource), force
+  /// Per stance frame: time, contact area (AreaSource; 0 in a frame left out of the fit), force.
+  RegionSeries series;
+  AreaSource area = AreaSource::Ellipse;  ///< the area the fit was given
   EllipsoidParams declared;  ///< A, B from P and the step's aspect; C, d0 from Appendix I
   double aspect = 0.0;       ///< A/B used: median ra/rb over contact frames, else Appendix I's
   RegionFit fit;
   double peak_force_n = 0.0;
   double peak_area_mm2 = 0.0;
-  int frames = 0;  ///< stance frames in which the region has a contact ellipse
+  int frames = 0;            ///< stance frames in which the region has a contact ellipse
+  double t_contact_s = 0.0;  ///< the first of those frames (0 if none)
 };
 
 struct StepAnalysis {
@@ -64,8 +76,10 @@ struct StepAnalysis {
 /// std::invalid_argument unless aspect is positive and finite.
 EllipsoidParams declared_params(const SeedTissueStats& seed, double aspect);
 
-/// The contact area the fit uses for one region at one instant: 0 without a contact ellipse.
-double fit_area_mm2(const RegionSample& sample, AreaSource source);
+/// The contact area the fit is given for one region over a stance (0 in frames without a contact
+/// ellipse and in frames it leaves out), and which area that is (see AreaSource).
+std::pair<std::vector<double>, AreaSource> fit_areas_mm2(const StanceSeries& stance, Region region,
+                                                         AreaSource source);
 
 /// Measures the stance (measure_stance) and fits every region. Regions without contact come
 /// back with status NoContact; a region whose fit fails or has no model force contributes zero

@@ -139,7 +139,7 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses) {
   std::string out =
       "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
       "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct,aspect_a_over_b,"
-      "at_bound,iterations,final_cost\n";
+      "at_bound,iterations,final_cost,area,frames_fitted\n";
   for (const StepAnalysis& s : analyses) {
     for (const RegionAnalysis& r : s.regions) {
       const RegionFit& f = r.fit;
@@ -149,14 +149,15 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses) {
       if (f.status == FitStatus::Ok) {
         fmt::format_to(std::back_inserter(out),
                        "{:.4g},{:.4g},{:.4g},{:.4g},{:.6g},{:.6g},{:.6g},{:.6g},{:.3g},{:.3g},"
-                       "{:.3g},{:.3g},{:.3f},{:.4f},{},{},{:.6g}\n",
+                       "{:.3g},{:.3g},{:.3f},{:.4f},{},{},{:.6g},{},{}\n",
                        f.A_mm.value, f.B_mm.value, f.C_mm.value, f.d0_mm.value,
                        f.kbar_n_per_mm3.value, f.n.value, f.cbar_ns_per_mm3.value, f.m.value,
                        f.kbar_n_per_mm3.se, f.n.se, f.cbar_ns_per_mm3.se, f.m.se, f.nrmse_pct,
-                       r.aspect, at_bound_list(f), f.iterations, f.final_cost);
+                       r.aspect, at_bound_list(f), f.iterations, f.final_cost,
+                       area_source_name(r.area), f.frames);
       } else {
-        fmt::format_to(std::back_inserter(out), ",,,,,,,,,,,,,{:.4f},,{},\n", r.aspect,
-                       f.iterations);
+        fmt::format_to(std::back_inserter(out), ",,,,,,,,,,,,,{:.4f},,{},,{},{}\n", r.aspect,
+                       f.iterations, area_source_name(r.area), f.frames);
       }
     }
   }

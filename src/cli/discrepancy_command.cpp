@@ -98,7 +98,10 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
       {"min_delta_bic", args.settings.min_delta_bic},
       {"second_effect", args.settings.second_effect},
       {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
-  j["data"] = {{"steps", r.steps}, {"step_regions", r.step_regions}, {"frames", r.frames}};
+  j["data"] = {{"steps", r.steps},
+               {"step_regions", r.step_regions},
+               {"step_regions_left_out_ellipse_area", r.step_regions_left_out},
+               {"frames", r.frames}};
   nlohmann::json where = nlohmann::json::array();
   for (const ResidualCell& c : r.where) where.push_back(cell_json(c, args.settings.phase_bins));
   j["where"] = where;
@@ -161,8 +164,11 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
 
-  fmt::print("{}: {} steps, {} step-regions; noise floor {:.1f} %\n", args.session.string(),
-             result.steps, result.step_regions, result.noise_floor_nrmse_pct);
+  fmt::print(
+      "{}: {} steps, {} step-regions ({} left out: their cells give no footprint); noise floor "
+      "{:.1f} %\n",
+      args.session.string(), result.steps, result.step_regions, result.step_regions_left_out,
+      result.noise_floor_nrmse_pct);
   fmt::print("{:<20}{:>14}{:>12}{:>12}\n", "candidate", "held-out %", "shrink %", "dBIC");
   for (const CandidateResult& c : result.candidates) {
     fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.0f}\n", c.name, c.heldout_nrmse_pct, c.shrink_pct,

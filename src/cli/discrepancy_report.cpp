@@ -203,9 +203,10 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
   html += "</head><body>";
   html += "<h1>Model-data discrepancy: " + escape(session_name) + "</h1>";
   html += fmt::format(
-      "<p>{} steps, {} step-regions, {} frames. Pooled NRMSE (eq 58, regions weighted by their "
-      "force). Noise floor {:.2f} %.</p>",
-      r.steps, r.step_regions, r.frames, r.noise_floor_nrmse_pct);
+      "<p>{} steps, {} step-regions, {} frames ({} step-regions left out: their cells give no "
+      "footprint, and their contact ellipse moves in whole cells). Pooled NRMSE (eq 58, regions "
+      "weighted by their force). Noise floor {:.2f} %.</p>",
+      r.steps, r.step_regions, r.frames, r.step_regions_left_out, r.noise_floor_nrmse_pct);
   html += "<h2>Named effects</h2><ul>" + named + "</ul>";
   html += fmt::format(
       "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.</p>",

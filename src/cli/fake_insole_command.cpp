@@ -193,6 +193,9 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
                               std::chrono::duration<double>(args.reopen_after_s)) {
       reopen_pending = false;
       if (!flush()) break;
+      // Unplugged, as udev drops a /dev/serial/by-id link: a link left on the old pty could lead
+      // a reader into whichever process gets that pty number next.
+      fs::remove(args.link);
       pty.reset();  // the device disappears: the reader sees EIO
       std::this_thread::sleep_for(std::chrono::milliseconds(args.reopen_gap_ms));
       open_pty();
@@ -251,7 +254,7 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_flag("--pty", args->pty, "Create a pseudo-terminal and print its path");
   sub->add_option("--link", args->link,
                   "Keep a symlink at this path pointing to the current pty (a reopened pty gets "
-                  "a new path)");
+                  "a new path; the link is gone while there is no pty, as a by-id link unplugged)");
   sub->add_flag("--hold", args->hold,
                 "Keep the pty open after the session until SIGINT or SIGTERM");
   sub->add_option("--seed", args->faults.seed, "Seed of the fault injection")

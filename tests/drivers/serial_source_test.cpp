@@ -186,7 +186,10 @@ TEST(SerialSource, ReconnectsWhenThePtyComesBackUnderTheLink) {
   first->write_all(frames_bytes(Foot::Right, 0, 50));
   ASSERT_TRUE(harness.wait_frames(50));
 
-  first->close();  // the device disappears
+  // The device disappears, its link first (as udev's): a link left on the closed pty could be
+  // reopened onto another process's pty that got the same number.
+  fs::remove(link);
+  first->close();
   ASSERT_TRUE(harness.wait_states(3));
   EXPECT_EQ(harness.states()[2].first, LinkState::Disconnected);
   std::this_thread::sleep_for(100ms);  // a few failed reopen attempts
