@@ -57,6 +57,48 @@ TEST(Spread, IsNumpysLinearQuantile) {
   EXPECT_EQ(spread_of({}).count, 0);
 }
 
+// A heel stance of 14 frames: contact ellipses in frames 1-12, footprints in `with_footprint`.
+StanceSeries heel_stance(std::span<const std::size_t> with_footprint) {
+  StanceSeries s;
+  for (std::size_t f = 0; f < 14; ++f) {
+    s.t_s.push_back(0.01 * static_cast<double>(f));
+    s.frames.emplace_back();
+    RegionSample& heel = s.frames.back()[index_of(Region::Heel)];
+    if (f >= 1 && f <= 12) heel.ellipse.area_mm2 = 100.0 * static_cast<double>(f);
+  }
+  for (std::size_t f : with_footprint) {
+    s.frames[f][index_of(Region::Heel)].footprint_area_mm2 = 100.0 * static_cast<double>(f) + 7.0;
+  }
+  s.total_force_n.assign(s.t_s.size(), 0.0);
+  return s;
+}
+
+TEST(FitAreas, OneAreaPerRegionStepNeverTheTwoMixed) {
+  // Eight frames with a footprint: those alone, the others left out (0), even the frame whose
+  // footprint has no contact ellipse.
+  const std::vector<std::size_t> eight{3, 4, 5, 6, 7, 8, 9, 10, 13};
+  const auto [areas, used] = fit_areas_mm2(heel_stance(eight), Region::Heel, AreaSource::Footprint);
+  EXPECT_EQ(used, AreaSource::Footprint);
+  const std::vector<double> want{0, 0, 0, 307, 407, 507, 607, 707, 807, 907, 1007, 0, 0, 0};
+  EXPECT_EQ(areas, want);
+  // Seven, and the footprint without an ellipse does not count: the contact ellipse throughout.
+  const std::vector<std::size_t> seven{3, 4, 5, 6, 7, 8, 9, 13};
+  const auto [ellipse, fallback] =
+      fit_areas_mm2(heel_stance(seven), Region::Heel, AreaSource::Footprint);
+  EXPECT_EQ(fallback, AreaSource::Ellipse);
+  EXPECT_EQ(ellipse[0], 0.0);
+  EXPECT_EQ(ellipse[3], 300.0);
+  EXPECT_EQ(ellipse[12], 1200.0);
+  EXPECT_EQ(ellipse[13], 0.0);
+  // Asked for the ellipse, the ellipse whatever the footprints; no contact, no area.
+  EXPECT_EQ(fit_areas_mm2(heel_stance(eight), Region::Heel, AreaSource::Ellipse).second,
+            AreaSource::Ellipse);
+  const auto [none, none_used] =
+      fit_areas_mm2(heel_stance(eight), Region::Met1_2, AreaSource::Footprint);
+  EXPECT_EQ(none_used, AreaSource::Ellipse);
+  EXPECT_EQ(none, std::vector<double>(14, 0.0));
+}
+
 TEST(DeclaredParams, KeepsAppendixIScaleAndCAndD0AndSplitsByAspect) {
   SeedTissueStats seed;
   seed.mean = {80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};

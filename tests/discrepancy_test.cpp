@@ -178,6 +178,22 @@ TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
   EXPECT_THROW(fit_extended_model(input, effects, {}, stop.get_token()), FitStopped);
 }
 
+TEST(Discrepancy, LeavesOutRegionStepsFittedOnTheEllipseWhenOthersHaveFootprints) {
+  DiscrepancyInput input = clean_session({"none", {}}, 10, 5);
+  const DiscrepancyResult all_ellipse = find_discrepancy(input);
+  EXPECT_EQ(all_ellipse.step_regions, 20);
+  EXPECT_EQ(all_ellipse.step_regions_left_out, 0);
+  for (DiscrepancyStep& ds : input.steps) {
+    ds.analysis.regions[index_of(Region::Met3_5)].area = AreaSource::Footprint;
+  }
+  const DiscrepancyResult mixed = find_discrepancy(input);
+  EXPECT_EQ(mixed.step_regions, 10);
+  EXPECT_EQ(mixed.step_regions_left_out, 10);
+  for (const RegionComparison& c : mixed.regions) {
+    EXPECT_EQ(c.step_regions, c.region == Region::Met3_5 ? 10 : 0) << region_name(c.region);
+  }
+}
+
 TEST(Discrepancy, RefusesBadSettingsAndTooFewSteps) {
   const DiscrepancyInput input = clean_session({"none", {}}, 4, 1);
   EXPECT_THROW(find_discrepancy(input), std::invalid_argument);  // 4 steps, 5 folds
