@@ -134,8 +134,10 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   std::vector<RegionSeries> stances;
   std::vector<double> aspects;
   std::array<std::vector<double>, 9> values;
-  for (const StepAnalysis& s : steps) {
-    const RegionAnalysis& ra = s.at(region);
+  std::vector<MaterialEstimate> estimates;
+  std::vector<std::size_t> estimated_steps;
+  for (std::size_t si = 0; si < steps.size(); ++si) {
+    const RegionAnalysis& ra = steps[si].at(region);
     if (ra.frames == 0) continue;
     ++r.steps_with_contact;
     stances.push_back(ra.series);
@@ -153,6 +155,17 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
                                   f.m.value,
                                   f.nrmse_pct};
     for (std::size_t i = 0; i < v.size(); ++i) values[i].push_back(v[i]);
+    if (const auto e = material_estimate(f)) {
+      estimates.push_back(*e);
+      estimated_steps.push_back(si);
+    }
+  }
+  r.pooling = pool_steps(estimates, material_bounds(config.fit_bounds));
+  r.pooled_per_step.resize(steps.size());
+  if (r.pooling.pooled) {
+    for (std::size_t k = 0; k < estimated_steps.size(); ++k) {
+      r.pooled_per_step[estimated_steps[k]] = material_params(r.pooling.steps[k]);
+    }
   }
   const SeedTissueStats& seed = config.tissue(size, region);
   r.aspect = aspects.empty() ? seed.mean.A_mm / seed.mean.B_mm : median_of(aspects);

@@ -212,6 +212,8 @@ void validate(const SimulationOptions& o) {
           "must be in [0, 10]");
   require(o.noise_sd_bits >= 0.0 && o.noise_sd_bits <= 50.0, "noise_sd_bits", "must be in [0, 50]");
   require(o.max_bias_bits >= 0 && o.max_bias_bits <= 50, "max_bias_bits", "must be in [0, 50]");
+  require(o.tissue_step_sd_pct >= 0.0 && o.tissue_step_sd_pct <= 100.0, "tissue_step_sd_pct",
+          "must be in [0, 100]");
   for (Region r : kRegions) {
     const auto& p = o.region_params[index_of(r)];
     if (!p) continue;
@@ -297,6 +299,7 @@ struct StanceTally {
   std::int64_t last_above = -1;
   std::array<double, kRegionCount> peak_force_n{};
   double peak_total_force_n = 0.0;
+  std::array<double, kRegionCount> kbar_factor{}, cbar_factor{};
 };
 
 /// Every effect applied, in order, with every parameter (defaults filled in).
@@ -327,6 +330,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                   {"jitter_pct", o.timing.jitter_pct},
                   {"noise_sd_bits", o.noise_sd_bits},
                   {"max_bias_bits", o.max_bias_bits},
+                  {"tissue_step_sd_pct", o.tissue_step_sd_pct},
                   {"effects", effects_json(o)},
                   {"subject", o.subject}};
   j["sample_rate_hz"] = truth.sample_rate_hz;
@@ -363,7 +367,12 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
   }
   for (const SimulatedStep& s : truth.steps) {
     nlohmann::json peaks = nlohmann::json::object();
-    for (Region r : kRegions) peaks[std::string(region_name(r))] = s.peak_force_n[index_of(r)];
+    nlohmann::json factors = nlohmann::json::object();
+    for (Region r : kRegions) {
+      peaks[std::string(region_name(r))] = s.peak_force_n[index_of(r)];
+      factors[std::string(region_name(r))] = {{"kbar", s.kbar_factor[index_of(r)]},
+                                              {"cbar", s.cbar_factor[index_of(r)]}};
+    }
     steps[std::string(foot_name(s.foot))].push_back({{"index", s.index},
                                                      {"t_heel_strike_s", s.t_heel_strike_s},
                                                      {"t_toe_off_s", s.t_toe_off_s},
@@ -374,6 +383,10 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                                                      {"t_contact_end_s", s.t_contact_end_s},
                                                      {"peak_total_force_n", s.peak_total_force_n},
                                                      {"peak_force_n", peaks}});
+    // Only when the tissue varies: otherwise every factor is 1.
+    if (o.tissue_step_sd_pct > 0.0) {
+      steps[std::string(foot_name(s.foot))].back()["tissue_factors"] = factors;
+    }
   }
   j["dc_bias_bits"] = biases;
   j["steps"] = steps;
@@ -474,6 +487,20 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
     for (int& b : bias) b = rng.uniform_int(0, options.max_bias_bits);
   }
 
+  std::array<std::vector<StanceTally>, 2> tallies{std::vector<StanceTally>(stances[0].size()),
+                                                  std::vector<StanceTally>(stances[1].size())};
+  // Drawn only when asked for, so that sessions without variation keep their bytes.
+  const double step_sd = options.tissue_step_sd_pct / 100.0;
+  for (auto& foot_tallies : tallies) {
+    for (StanceTally& tally : foot_tallies) {
+      for (Region r : kRegions) {
+        const std::size_t ri = index_of(r);
+        tally.kbar_factor[ri] = step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0;
+        tally.cbar_factor[ri] = step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0;
+      }
+    }
+  }
+
   SessionHeader header;
   header.insole_size = options.size;
   header.sample_rate_hz = config.sample_rate_hz;
@@ -485,8 +512,6 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
   SessionWriter writer(csv_out, header);
 
   const double t_last_s = static_cast<double>(truth.frames_per_foot - 1) / config.sample_rate_hz;
-  std::array<std::vector<StanceTally>, 2> tallies{std::vector<StanceTally>(stances[0].size()),
-                                                  std::vector<StanceTally>(stances[1].size())};
   std::array<std::size_t, 2> cursor{0, 0};
   std::vector<double> cell_n(sensor_count);
   std::vector<double> region_n;
@@ -510,7 +535,10 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
           const SimulatedRegion& sr = truth.regions[ri];
           const auto contact = contact_at(sr, kWindows[ri], stance, t);
           if (!contact) continue;
-          double force = force_n(sr.params, contact->d_mm, contact->ddot_mm_per_s, options.model);
+          EllipsoidParams params = sr.params;
+          params.kbar_n_per_mm3 *= tally.kbar_factor[ri];
+          params.cbar_ns_per_mm3 *= tally.cbar_factor[ri];
+          double force = force_n(params, contact->d_mm, contact->ddot_mm_per_s, options.model);
           const TissueSample sample{
               foot, r, t, stance.start_s, contact->area_mm2, contact->d_mm, contact->ddot_mm_per_s};
           for (auto& effect : effects) force = effect->tissue_force_n(sample, force);
@@ -519,7 +547,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
             force = 0.0;
           }
           region_n.resize(cells[ri].sensors.size());
-          rasterise_into(cells[ri], sr.params, contact->d_mm, contact->ddot_mm_per_s, options.model,
+          rasterise_into(cells[ri], params, contact->d_mm, contact->ddot_mm_per_s, options.model,
                          options.rasterisation, force, region_n);
           for (std::size_t i = 0; i < region_n.size(); ++i) {
             cell_n[cells[ri].sensors[i]] = region_n[i];
@@ -568,6 +596,8 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
       step.partial = step.t_contact_start_s < 0.0 || step.t_contact_end_s > t_last_s;
       step.peak_force_n = tally.peak_force_n;
       step.peak_total_force_n = tally.peak_total_force_n;
+      step.kbar_factor = tally.kbar_factor;
+      step.cbar_factor = tally.cbar_factor;
       truth.steps.push_back(step);
     }
   }

@@ -944,6 +944,15 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     const Eigen::MatrixXd cov =
         sigma2 *
         (Jk.transpose() * Jk).ldlt().solve(Eigen::MatrixXd::Identity(Jk.cols(), Jk.cols()));
+    if (settings.mode == FitMode::Identifiable && layout.log_p < 0 && kept.size() == 4) {
+      MaterialCovariance c{};
+      for (std::size_t a = 0; a < 4; ++a) {
+        for (std::size_t b = 0; b < 4; ++b) {
+          c[a][b] = cov(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+        }
+      }
+      fit.material_covariance = c;
+    }
     for (std::size_t k = 0; k < kept.size(); ++k) {
       const double var = cov(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));
       se_theta[static_cast<std::size_t>(kept[k])] =

@@ -1,6 +1,7 @@
 // `gaitmon analyze` end to end: its files, their headers, the report, and its errors.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -147,6 +148,47 @@ TEST(AnalyzeCommand, WritesTheSessionLevelFitsAsJson) {
     EXPECT_GT(fit.at("nrmse_pct").get<double>(), 0.0);
   }
   EXPECT_DOUBLE_EQ(j.at("regions").at("heel").at("appendix_i").at("mean").at("d0_mm"), 16.4);
+}
+
+// The heel's steps are pooled (pooling.hpp): every heel row fitted Ok carries its pooled kbar, n,
+// cbar, m, session.json counts the same steps, and the pooled standard errors are smaller than
+// the steps' own because each step borrows from the others.
+TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto lines = lines_of(a.dir / "out" / "regions.csv");
+  ASSERT_FALSE(lines.empty());
+  const auto header = fields(lines[0]);
+  const auto column = [&](const std::string& name) {
+    const auto it = std::find(header.begin(), header.end(), name);
+    EXPECT_NE(it, header.end()) << name;
+    return static_cast<std::size_t>(it - header.begin());
+  };
+  const std::size_t se_kbar = column("se_kbar");
+  const std::size_t pooled_columns[] = {column("kbar_pooled"), column("n_pooled"),
+                                        column("cbar_pooled"), column("m_pooled")};
+  const std::size_t se_kbar_pooled = column("se_kbar_pooled");
+  int heel_pooled = 0;
+  std::vector<double> own_se, pooled_se;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const auto f = fields(lines[i]);
+    if (f[2] != "heel" || f[3] != "ok") continue;
+    for (std::size_t c : pooled_columns) ASSERT_FALSE(f[c].empty()) << lines[i];
+    ++heel_pooled;
+    EXPECT_GT(std::stod(f[pooled_columns[0]]), 0.0);
+    own_se.push_back(std::stod(f[se_kbar]));
+    pooled_se.push_back(std::stod(f[se_kbar_pooled]));
+  }
+  const auto j = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
+  const auto& pooling = j.at("regions").at("heel").at("pooling");
+  EXPECT_TRUE(pooling.at("pooled").get<bool>());
+  EXPECT_EQ(pooling.at("steps").get<int>(), heel_pooled);
+  EXPECT_GE(heel_pooled, 6);
+  EXPECT_TRUE(pooling.at("mean").at("cbar_ns_per_mm3").is_number());
+  EXPECT_GE(pooling.at("between_step_sd").at("ln_kbar").get<double>(), 0.0);
+  std::sort(own_se.begin(), own_se.end());
+  std::sort(pooled_se.begin(), pooled_se.end());
+  EXPECT_LT(pooled_se[pooled_se.size() / 2], own_se[own_se.size() / 2]);
 }
 
 TEST(AnalyzeCommand, ReportIsSelfContained) {

@@ -330,6 +330,65 @@ TEST(Simulator, SameSeedSameBytesOtherSeedOtherBytes) {
   }
 }
 
+// The step-to-step tissue variation draws its factors only when asked for: without it the session
+// keeps its bytes and every factor is 1; with it the factors' logarithms scatter by the SD asked
+// for, and the peak forces follow them.
+TEST(Simulator, TissueStepVariationScattersKbarAndCbarByTheSdAskedFor) {
+  const auto dir = test::scratch_dir("sim-step-sd");
+  SimulationOptions o = short_options(5);
+  o.duration_s = 60.0;
+  const SimulationTruth fixed =
+      simulate_session(shipped_config(), o, dir / "fixed.csv", dir / "fixed.json");
+  o.tissue_step_sd_pct = 0.0;
+  simulate_session(shipped_config(), o, dir / "zero.csv", dir / "zero.json");
+  EXPECT_EQ(slurp(dir / "fixed.csv"), slurp(dir / "zero.csv"));
+  for (const SimulatedStep& step : fixed.steps) {
+    for (Region r : kRegions) {
+      EXPECT_EQ(step.kbar_factor[index_of(r)], 1.0);
+      EXPECT_EQ(step.cbar_factor[index_of(r)], 1.0);
+    }
+  }
+
+  o.tissue_step_sd_pct = 20.0;
+  const SimulationTruth varied =
+      simulate_session(shipped_config(), o, dir / "varied.csv", dir / "varied.json");
+  ASSERT_EQ(varied.steps.size(), fixed.steps.size());
+  std::vector<double> log_k, log_c;
+  const std::size_t heel = index_of(Region::Heel);
+  for (std::size_t i = 0; i < varied.steps.size(); ++i) {
+    const SimulatedStep& step = varied.steps[i];
+    for (Region r : kRegions) {
+      log_k.push_back(std::log(step.kbar_factor[index_of(r)]));
+      log_c.push_back(std::log(step.cbar_factor[index_of(r)]));
+    }
+    if (step.partial || fixed.steps[i].partial) continue;
+    // The heel's contact area keeps its course, so its peak force, elastic plus damping, scales
+    // by a mix of the two factors (the peak's frame may move a little).
+    const double ratio = step.peak_force_n[heel] / fixed.steps[i].peak_force_n[heel];
+    const auto [lo, hi] = std::minmax(step.kbar_factor[heel], step.cbar_factor[heel]);
+    EXPECT_GE(ratio, 0.98 * lo) << i;
+    EXPECT_LE(ratio, 1.02 * hi) << i;
+  }
+  const auto sd = [](const std::vector<double>& v) {
+    double mean = 0.0;
+    for (double x : v) mean += x / static_cast<double>(v.size());
+    double ss = 0.0;
+    for (double x : v) ss += (x - mean) * (x - mean);
+    return std::sqrt(ss / static_cast<double>(v.size() - 1));
+  };
+  ASSERT_GE(log_k.size(), 500u);
+  EXPECT_NEAR(sd(log_k), 0.20, 0.02);
+  EXPECT_NEAR(sd(log_c), 0.20, 0.02);
+  const nlohmann::json truth = nlohmann::json::parse(slurp(dir / "varied.json"));
+  EXPECT_EQ(truth["options"]["tissue_step_sd_pct"].get<double>(), 20.0);
+  const auto first_left = std::find_if(varied.steps.begin(), varied.steps.end(),
+                                       [](const SimulatedStep& s) { return s.foot == Foot::Left; });
+  ASSERT_NE(first_left, varied.steps.end());
+  const nlohmann::json& factors = truth["steps"]["L"][0]["tissue_factors"]["heel"];
+  EXPECT_EQ(factors["kbar"].get<double>(), first_left->kbar_factor[heel]);
+  EXPECT_EQ(factors["cbar"].get<double>(), first_left->cbar_factor[heel]);
+}
+
 TEST(Simulator, WrittenSessionReadsBackAndTheTruthIsPlausible) {
   const auto dir = test::scratch_dir("sim-readback");
   SimulationOptions o = short_options(11);
@@ -481,6 +540,9 @@ TEST(Simulator, RejectsBadOptions) {
   EllipsoidParams soft = seed_means(Region::Heel);
   soft.kbar_n_per_mm3 = -0.1;
   o.region_params[index_of(Region::Heel)] = soft;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.tissue_step_sd_pct = 101.0;
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   EllipsoidParams flat = seed_means(Region::Toe1);

@@ -12,6 +12,7 @@
 #include "gaitmon/config.hpp"
 #include "gaitmon/contact_ellipse.hpp"
 #include "gaitmon/insole.hpp"
+#include "gaitmon/pooling.hpp"
 #include "gaitmon/segmentation.hpp"
 #include "gaitmon/stance.hpp"
 #include "gaitmon/tissue_fit.hpp"
@@ -107,6 +108,12 @@ struct RegionSessionAnalysis {
   double aspect = 0.0;   ///< median of the steps' aspects (Appendix I's if none)
   EllipsoidParams declared;
   RegionFit session_fit;  ///< one parameter set for every stance with contact
+  /// The per-step fits pooled across the steps (pooling.hpp), over the steps fitted Ok whose four
+  /// parameters the data determine; `pooling.steps` holds their posteriors in step order.
+  PooledEstimates pooling;
+  /// Aligned with analyse_session's `steps`: each step's pooled kbar, n, cbar, m, or nothing
+  /// where the step was not pooled (no contact, a failed fit, or too few steps to pool).
+  std::vector<std::optional<MaterialParams>> pooled_per_step;
   /// Across the steps fitted Ok.
   Spread A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m, nrmse_pct;
 };
@@ -117,7 +124,8 @@ struct SessionAnalysis {
 };
 
 /// The session-level fit per region (fit_region_session over the series of every step with
-/// contact in that region) and the spread of the per-step fits. `steps` are analysed Ok steps.
+/// contact in that region), the spread of the per-step fits and their pooling across steps (both
+/// feet together, as the session fit). `steps` are analysed Ok steps.
 /// The regions are fitted in parallel on every core; the result does not depend on it.
 SessionAnalysis analyse_session(std::span<const StepAnalysis> steps, const Config& config,
                                 InsoleSize size, const AnalysisSettings& settings);

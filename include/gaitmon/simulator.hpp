@@ -99,7 +99,12 @@ struct SimulationOptions {
   ModelVariant model = ModelVariant::Correct;
   Rasterisation rasterisation = Rasterisation::CellCentre;
   double noise_sd_bits = 0.5;  ///< Gaussian noise on every reading, [0, 50]
-  int max_bias_bits = 2;       ///< per-sensor dc bias, uniform integer in 0..max, [0, 50]
+  /// Step-to-step variation of the tissue: each stance and region multiplies kbar and cbar by
+  /// independent log-normal factors with this SD of their logarithm, in % ([0, 100]; 0 keeps
+  /// every step at the region's parameters). The contact area keeps its course, so the force
+  /// follows the factors. For checking estimators that pool the steps (pooling.hpp).
+  double tissue_step_sd_pct = 0.0;
+  int max_bias_bits = 2;  ///< per-sensor dc bias, uniform integer in 0..max, [0, 50]
   /// Per region; empty means the seed's Appendix I means for the size (Config::seed_tissue).
   std::array<std::optional<EllipsoidParams>, kRegionCount> region_params;
   /// Named physical effects (simulation_effect_names()), applied in this order.
@@ -125,6 +130,9 @@ struct SimulatedStep {
   bool partial = false;  ///< the contact began before the first or ended after the last frame
   std::array<double, kRegionCount> peak_force_n{};  ///< per region, over the recorded frames
   double peak_total_force_n = 0.0;
+  /// Per region, the factors on kbar and cbar of this stance
+  /// (SimulationOptions::tissue_step_sd_pct).
+  std::array<double, kRegionCount> kbar_factor{}, cbar_factor{};
 };
 
 struct SimulatedRegion {

@@ -5,6 +5,7 @@
 // reason. Exceptions are only for misuse (inconsistent series lengths, bad settings).
 #pragma once
 
+#include <array>
 #include <optional>
 #include <span>
 #include <string>
@@ -74,6 +75,8 @@ struct Estimate {
   bool free = false;      ///< fitted (false: declared)
 };
 
+using MaterialCovariance = std::array<std::array<double, 4>, 4>;
+
 struct RegionFit {
   FitStatus status = FitStatus::NoContact;
   std::string reason;  ///< why it failed, for fit_failed:<reason>
@@ -85,6 +88,9 @@ struct RegionFit {
   double nrmse_pct = 0.0;                 ///< eq 58: RMS error / max measured force x 100
   std::vector<double> model_force_n;      ///< per input frame (0 where no contact)
   std::vector<std::string> undetermined;  ///< parameters the data cannot determine (seed8)
+  /// In the default mode (Identifiable, P declared) with all four determined: the covariance of
+  /// (ln kbar, n, ln cbar, m), sigma^2 (J^T J)^-1 as for the standard errors.
+  std::optional<MaterialCovariance> material_covariance;
 
   EllipsoidParams params() const {
     return {A_mm.value,

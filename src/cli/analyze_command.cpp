@@ -5,11 +5,13 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <exception>
 #include <functional>
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <string>
 #include <thread>
@@ -21,6 +23,7 @@
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/json.hpp"
+#include "gaitmon/pooling.hpp"
 #include "gaitmon/session.hpp"
 #include "output_file.hpp"
 #include "progress.hpp"
@@ -135,29 +138,42 @@ std::string steps_csv(const std::vector<StepRow>& steps) {
   return out;
 }
 
-std::string regions_csv(const std::vector<StepAnalysis>& analyses) {
+// The pooled columns of one region-step (pooling.hpp), empty where it was not pooled.
+std::string pooled_columns(const std::optional<MaterialParams>& p) {
+  if (!p) return ",,,,,,,";
+  return fmt::format("{:.6g},{:.6g},{:.6g},{:.6g},{:.3g},{:.3g},{:.3g},{:.3g}",
+                     p->kbar_n_per_mm3.value, p->n.value, p->cbar_ns_per_mm3.value, p->m.value,
+                     p->kbar_n_per_mm3.se, p->n.se, p->cbar_ns_per_mm3.se, p->m.se);
+}
+
+// `analyses` in the order analyse_session was given them.
+std::string regions_csv(const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session) {
   std::string out =
       "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
       "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct,aspect_a_over_b,"
-      "at_bound,iterations,final_cost,area,frames_fitted\n";
-  for (const StepAnalysis& s : analyses) {
+      "at_bound,iterations,final_cost,area,frames_fitted,kbar_pooled,n_pooled,cbar_pooled,"
+      "m_pooled,se_kbar_pooled,se_n_pooled,se_cbar_pooled,se_m_pooled\n";
+  for (std::size_t si = 0; si < analyses.size(); ++si) {
+    const StepAnalysis& s = analyses[si];
     for (const RegionAnalysis& r : s.regions) {
       const RegionFit& f = r.fit;
+      const std::string pooled =
+          pooled_columns(session.regions[index_of(r.region)].pooled_per_step[si]);
       fmt::format_to(std::back_inserter(out), "{},{},{},{},{},{:.3f},{:.2f},", foot_name(s.foot),
                      s.step, region_name(r.region), status_text(f), r.frames, r.peak_force_n,
                      r.peak_area_mm2);
       if (f.status == FitStatus::Ok) {
         fmt::format_to(std::back_inserter(out),
                        "{:.4g},{:.4g},{:.4g},{:.4g},{:.6g},{:.6g},{:.6g},{:.6g},{:.3g},{:.3g},"
-                       "{:.3g},{:.3g},{:.3f},{:.4f},{},{},{:.6g},{},{}\n",
+                       "{:.3g},{:.3g},{:.3f},{:.4f},{},{},{:.6g},{},{},{}\n",
                        f.A_mm.value, f.B_mm.value, f.C_mm.value, f.d0_mm.value,
                        f.kbar_n_per_mm3.value, f.n.value, f.cbar_ns_per_mm3.value, f.m.value,
                        f.kbar_n_per_mm3.se, f.n.se, f.cbar_ns_per_mm3.se, f.m.se, f.nrmse_pct,
                        r.aspect, at_bound_list(f), f.iterations, f.final_cost,
-                       area_source_name(r.area), f.frames);
+                       area_source_name(r.area), f.frames, pooled);
       } else {
-        fmt::format_to(std::back_inserter(out), ",,,,,,,,,,,,,{:.4f},,{},,{},{}\n", r.aspect,
-                       f.iterations, area_source_name(r.area), f.frames);
+        fmt::format_to(std::back_inserter(out), ",,,,,,,,,,,,,{:.4f},,{},,{},{},{}\n", r.aspect,
+                       f.iterations, area_source_name(r.area), f.frames, pooled);
       }
     }
   }
@@ -183,6 +199,26 @@ nlohmann::json fit_json(const RegionFit& f) {
           {"final_cost", f.final_cost},
           {"solver_message", f.solver_message},
           {"undetermined", f.undetermined}};
+}
+
+nlohmann::json pooling_json(const PooledEstimates& p) {
+  if (!p.pooled) {
+    return {{"pooled", false}, {"steps", p.steps.size()}, {"note", p.not_pooled}};
+  }
+  const MaterialParams mean = material_params({p.mean, {}});
+  const auto sd = [&](std::size_t i) { return std::sqrt(p.between_step[i][i]); };
+  return {{"pooled", p.pooled},
+          {"steps", p.steps.size()},
+          {"iterations", p.iterations},
+          {"mean",
+           {{"kbar_n_per_mm3", mean.kbar_n_per_mm3.value},
+            {"n", mean.n.value},
+            {"cbar_ns_per_mm3", mean.cbar_ns_per_mm3.value},
+            {"m", mean.m.value}}},
+          {"between_step_sd", {{"ln_kbar", sd(0)}, {"n", sd(1)}, {"ln_cbar", sd(2)}, {"m", sd(3)}}},
+          {"note",
+           "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
+           "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp)"}};
 }
 
 nlohmann::json bounds_json(const FitBounds& b) {
@@ -253,6 +289,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
         {"aspect_a_over_b", r.aspect},
         {"declared", nlohmann::json(r.declared)},
         {"session_fit", fit_json(r.session_fit)},
+        {"pooling", pooling_json(r.pooling)},
         {"across_steps",
          {{"A_mm", spread_json(r.A_mm)},
           {"B_mm", spread_json(r.B_mm)},
@@ -401,7 +438,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   std::filesystem::create_directories(args.out_dir);
   OutputSet outputs(args.out_dir);
   outputs.add("steps.csv", steps_csv(steps));
-  outputs.add("regions.csv", regions_csv(analyses));
+  outputs.add("regions.csv", regions_csv(analyses, session));
   outputs.add("session.json",
               session_json(args, header, config, settings, steps, analyses, session, extended));
   if (args.report) {

@@ -187,6 +187,11 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--noise", args->options.noise_sd_bits, "Sensor noise SD, bits")
       ->check(CLI::Range(0.0, 50.0))
       ->capture_default_str();
+  sub->add_option("--tissue-step-sd", args->options.tissue_step_sd_pct,
+                  "Step-to-step SD of kbar and cbar (log-normal, % of the value); 0 keeps every "
+                  "step at the region's parameters")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
   sub->add_option("--max-bias", args->options.max_bias_bits,
                   "Per-sensor dc bias, uniform integer 0..MAX bits")
       ->check(CLI::Range(0, 50))

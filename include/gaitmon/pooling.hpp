@@ -1,0 +1,76 @@
+// Partial pooling of per-step tissue fits across a session: a normal random-effects model that
+// lets each step borrow strength from the others as far as the steps agree.
+//
+// One step's stance determines the damping poorly: damping is about 4 % RMS of a region's force
+// on the Appendix I parameters, while the contact area the cells give leaves 1-2 % residuals, so a
+// per-step fit's cbar scatters by tens of per cent around the truth with hardly any bias (README,
+// "Per-step estimates pooled across steps"). Step i's fitted vector theta_i (ln kbar, n, ln cbar,
+// m) is modelled as
+//
+//   theta_i = phi_i + e_i,  e_i ~ N(0, S_i)  (S_i: the fit's covariance from its Jacobian)
+//   phi_i ~ N(mu, T)                          (T: how the tissue itself varies from step to step)
+//
+// mu and T are estimated from the steps (weighted mean; T by the method of moments, sample
+// covariance less the mean S_i, clipped to positive semi-definite), and each step gets the
+// posterior mean mu + T (T + S_i)^-1 (theta_i - mu). Where the steps scatter no more than their
+// own errors say, T is 0 and every step gets mu; where the tissue really varies, T takes it up and
+// the steps keep their own values. The posterior covariance includes mu's own uncertainty.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "gaitmon/tissue_fit.hpp"
+
+namespace gaitmon {
+
+/// (ln kbar, n, ln cbar, m): the default fit's free parameters on the scale it fits them (their
+/// covariance is a MaterialCovariance, tissue_fit.hpp).
+using MaterialVector = std::array<double, 4>;
+
+struct MaterialEstimate {
+  MaterialVector value{};
+  MaterialCovariance covariance{};
+};
+
+/// The fit's bounds on the same scale.
+struct MaterialBounds {
+  MaterialVector lower{}, upper{};
+};
+MaterialBounds material_bounds(const FitBounds& bounds);
+
+/// Fewer steps than this are returned as they are: T needs a sample covariance.
+inline constexpr std::size_t kMinPoolingSteps = 3;
+
+struct PooledEstimates {
+  bool pooled = false;
+  std::string not_pooled;               ///< why not, when not
+  MaterialVector mean{};                ///< mu
+  MaterialCovariance between_step{};    ///< T
+  int iterations = 0;                   ///< of the mu-T fixed point
+  std::vector<MaterialEstimate> steps;  ///< the posterior per input, in input order
+};
+
+/// The pooled posteriors of `steps`. Steps with a parameter at a fit bound take part with the
+/// covariance their Jacobian gives: leaving them out would bias mu away from the bound. If mu
+/// falls outside `bounds` the normal approximation has failed (steps whose covariances are
+/// degenerate in different directions, as on the toes' one to three cells) and the steps are
+/// returned unpooled. Deterministic. Throws std::invalid_argument if a value is not finite or a
+/// covariance is not symmetric positive definite.
+PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const MaterialBounds& bounds);
+
+/// A fit's free material parameters and their covariance, if it has them: an Ok fit in the
+/// default (Identifiable, declared scale) mode whose four parameters the data determine.
+std::optional<MaterialEstimate> material_estimate(const RegionFit& fit);
+
+/// kbar, n, cbar, m and their standard errors (delta method for kbar and cbar) of an estimate.
+struct MaterialParams {
+  Estimate kbar_n_per_mm3, n, cbar_ns_per_mm3, m;
+};
+MaterialParams material_params(const MaterialEstimate& estimate);
+
+}  // namespace gaitmon

@@ -1,0 +1,152 @@
+// Partial pooling of per-step material estimates: the mu-T fixed point and the posteriors.
+#include "gaitmon/pooling.hpp"
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace gaitmon {
+namespace {
+
+using Vec = Eigen::Vector4d;
+using Mat = Eigen::Matrix4d;
+
+constexpr int kMaxIterations = 200;
+constexpr double kTolerance = 1e-12;
+
+Vec to_eigen(const MaterialVector& v) {
+  return Vec(v[0], v[1], v[2], v[3]);
+}
+
+Mat to_eigen(const MaterialCovariance& m) {
+  Mat out;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c)
+      out(r, c) = m[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)];
+  return out;
+}
+
+MaterialVector from_eigen(const Vec& v) {
+  return {v(0), v(1), v(2), v(3)};
+}
+
+MaterialCovariance from_eigen(const Mat& m) {
+  MaterialCovariance out{};
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c)
+      out[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)] = m(r, c);
+  return out;
+}
+
+void check(const MaterialEstimate& e, std::size_t index) {
+  const Vec v = to_eigen(e.value);
+  const Mat s = to_eigen(e.covariance);
+  const std::string where = "pool_steps: step " + std::to_string(index);
+  if (!v.allFinite() || !s.allFinite()) throw std::invalid_argument(where + " is not finite");
+  if (!s.isApprox(s.transpose(), 1e-9)) {
+    throw std::invalid_argument(where + " has a covariance that is not symmetric");
+  }
+  if (Eigen::LLT<Mat>(s).info() != Eigen::Success) {
+    throw std::invalid_argument(where + " has a covariance that is not positive definite");
+  }
+}
+
+// The positive semi-definite part of a symmetric matrix.
+Mat psd_part(const Mat& m) {
+  const Eigen::SelfAdjointEigenSolver<Mat> eig(0.5 * (m + m.transpose()));
+  const Vec values = eig.eigenvalues().cwiseMax(0.0);
+  return eig.eigenvectors() * values.asDiagonal() * eig.eigenvectors().transpose();
+}
+
+}  // namespace
+
+PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const MaterialBounds& bounds) {
+  for (std::size_t i = 0; i < steps.size(); ++i) check(steps[i], i);
+  PooledEstimates out;
+  out.steps.assign(steps.begin(), steps.end());
+  if (steps.size() < kMinPoolingSteps) {
+    out.not_pooled = "fewer than " + std::to_string(kMinPoolingSteps) + " steps";
+    return out;
+  }
+  std::vector<Vec> theta;
+  std::vector<Mat> S;
+  for (const MaterialEstimate& e : steps) {
+    theta.push_back(to_eigen(e.value));
+    S.push_back(to_eigen(e.covariance));
+  }
+  const auto count = static_cast<double>(theta.size());
+  Mat mean_S = Mat::Zero();
+  for (const Mat& s : S) mean_S += s / count;
+
+  Mat T = Mat::Zero();
+  Vec mu = Vec::Zero();
+  Mat mu_covariance = Mat::Zero();
+  for (out.iterations = 1; out.iterations <= kMaxIterations; ++out.iterations) {
+    Mat weight_sum = Mat::Zero();
+    Vec weighted = Vec::Zero();
+    for (std::size_t i = 0; i < theta.size(); ++i) {
+      const Mat W = (S[i] + T).ldlt().solve(Mat::Identity());
+      weight_sum += W;
+      weighted += W * theta[i];
+    }
+    mu_covariance = weight_sum.ldlt().solve(Mat::Identity());
+    mu = mu_covariance * weighted;
+    Mat scatter = Mat::Zero();
+    for (const Vec& t : theta) scatter += (t - mu) * (t - mu).transpose();
+    const Mat next = psd_part(scatter / (count - 1.0) - mean_S);
+    const double change = (next - T).norm();
+    T = next;
+    if (change <= kTolerance * (1.0 + T.norm())) break;
+  }
+  out.iterations = std::min(out.iterations, kMaxIterations);
+  for (std::size_t i = 0; i < 4; ++i) {
+    if (!(mu(static_cast<Eigen::Index>(i)) >= bounds.lower[i] &&
+          mu(static_cast<Eigen::Index>(i)) <= bounds.upper[i])) {
+      out.not_pooled = "the pooled mean leaves the fit bounds";
+      return out;
+    }
+  }
+
+  for (MaterialEstimate& step : out.steps) {
+    // B = T (T + S)^-1, computed as ((T + S)^-1 T)^T because T and S are symmetric.
+    const Mat Si = to_eigen(step.covariance);
+    const Mat B = (T + Si).ldlt().solve(T).transpose();
+    const Mat shrink = Mat::Identity() - B;
+    const Mat covariance = T - B * T + shrink * mu_covariance * shrink.transpose();
+    step.value = from_eigen(Vec(mu + B * (to_eigen(step.value) - mu)));
+    step.covariance = from_eigen(Mat(0.5 * (covariance + covariance.transpose())));
+  }
+  out.pooled = true;
+  out.mean = from_eigen(mu);
+  out.between_step = from_eigen(T);
+  return out;
+}
+
+MaterialBounds material_bounds(const FitBounds& b) {
+  return {
+      {std::log(b.kbar_n_per_mm3.lower), b.n.lower, std::log(b.cbar_ns_per_mm3.lower), b.m.lower},
+      {std::log(b.kbar_n_per_mm3.upper), b.n.upper, std::log(b.cbar_ns_per_mm3.upper), b.m.upper}};
+}
+
+std::optional<MaterialEstimate> material_estimate(const RegionFit& fit) {
+  if (fit.status != FitStatus::Ok || !fit.material_covariance) return std::nullopt;
+  MaterialEstimate e;
+  e.value = {std::log(fit.kbar_n_per_mm3.value), fit.n.value, std::log(fit.cbar_ns_per_mm3.value),
+             fit.m.value};
+  e.covariance = *fit.material_covariance;
+  return e;
+}
+
+MaterialParams material_params(const MaterialEstimate& estimate) {
+  const auto& v = estimate.value;
+  const auto se = [&](std::size_t i) { return std::sqrt(estimate.covariance[i][i]); };
+  MaterialParams p;
+  p.kbar_n_per_mm3 = {std::exp(v[0]), std::exp(v[0]) * se(0), false, true};
+  p.n = {v[1], se(1), false, true};
+  p.cbar_ns_per_mm3 = {std::exp(v[2]), std::exp(v[2]) * se(2), false, true};
+  p.m = {v[3], se(3), false, true};
+  return p;
+}
+
+}  // namespace gaitmon
