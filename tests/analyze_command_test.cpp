@@ -201,6 +201,7 @@ TEST(AnalyzeCommand, ReportIsSelfContained) {
   EXPECT_EQ(html.find("<script"), std::string::npos);
   EXPECT_NE(html.find("force (N)"), std::string::npos) << "axes carry units";
   EXPECT_NE(html.find("Appendix I"), std::string::npos);
+  EXPECT_NE(html.find("pooled mean (between-step SD)"), std::string::npos);
   EXPECT_NE(html.find("</html>"), std::string::npos);
 }
 

@@ -276,15 +276,16 @@ struct ParamView {
   double EllipsoidParams::*field;
   const Estimate RegionFit::*estimate;
   const Spread RegionSessionAnalysis::*spread;
+  int pooled = -1;  ///< index in MaterialVector (pooling.hpp), -1 for the declared geometry
 };
 
 constexpr ParamView kFitted[] = {
     {"kbar", "N/mm\u00b3", &EllipsoidParams::kbar_n_per_mm3, &RegionFit::kbar_n_per_mm3,
-     &RegionSessionAnalysis::kbar_n_per_mm3},
-    {"n", "", &EllipsoidParams::n, &RegionFit::n, &RegionSessionAnalysis::n},
+     &RegionSessionAnalysis::kbar_n_per_mm3, 0},
+    {"n", "", &EllipsoidParams::n, &RegionFit::n, &RegionSessionAnalysis::n, 1},
     {"cbar", "N s/mm\u00b3", &EllipsoidParams::cbar_ns_per_mm3, &RegionFit::cbar_ns_per_mm3,
-     &RegionSessionAnalysis::cbar_ns_per_mm3},
-    {"m", "", &EllipsoidParams::m, &RegionFit::m, &RegionSessionAnalysis::m},
+     &RegionSessionAnalysis::cbar_ns_per_mm3, 2},
+    {"m", "", &EllipsoidParams::m, &RegionFit::m, &RegionSessionAnalysis::m, 3},
 };
 
 constexpr ParamView kAll[] = {
@@ -331,10 +332,22 @@ std::string num(double v) {
   return fmt::format("{:.4g}", v);
 }
 
+// The pooled mean of one fitted parameter and the between-step SD the pooling found: relative
+// for kbar and cbar, which are pooled as logarithms.
+std::string pooled_cell(const PooledEstimates& pool, int index) {
+  if (index < 0 || !pool.pooled) return "&ndash;";
+  const auto k = static_cast<std::size_t>(index);
+  const double sd = std::sqrt(pool.between_step[k][k]);
+  const bool log_scale = k == 0 || k == 2;
+  return log_scale ? fmt::format("{} ({:.0f} %)", num(std::exp(pool.mean[k])), 100.0 * sd)
+                   : fmt::format("{} ({})", num(pool.mean[k]), num(sd));
+}
+
 std::string param_table(const RegionSessionAnalysis& r, const SeedTissueStats& seed) {
-  std::string out =
+  std::string out = fmt::format(
       "<table><tr><th>parameter</th><th>session fit (SE)</th><th>median across steps "
-      "(IQR)</th><th>Appendix I mean (SD)</th></tr>";
+      "(IQR)</th><th>pooled mean (between-step SD){}</th><th>Appendix I mean (SD)</th></tr>",
+      r.pooling.pooled ? "" : "<br>not pooled: " + escape(r.pooling.not_pooled));
   for (const ParamView& p : kAll) {
     const Estimate& e = r.session_fit.*p.estimate;
     const Spread& s = r.*p.spread;
@@ -345,15 +358,15 @@ std::string param_table(const RegionSessionAnalysis& r, const SeedTissueStats& s
       if (e.at_bound) session += " <b>at bound</b>";
     }
     const std::string unit = *p.unit ? fmt::format(" ({})", p.unit) : "";
-    fmt::format_to(std::back_inserter(out),
-                   "<tr><td>{}{}</td><td>{}</td><td>{}</td><td>{} ({})</td></tr>", p.label, unit,
-                   session,
-                   s.count > 0 ? fmt::format("{} ({})", num(s.median), num(s.iqr())) : "&ndash;",
-                   num(seed.mean.*p.field), num(seed.sd.*p.field));
+    fmt::format_to(
+        std::back_inserter(out),
+        "<tr><td>{}{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} ({})</td></tr>", p.label, unit,
+        session, s.count > 0 ? fmt::format("{} ({})", num(s.median), num(s.iqr())) : "&ndash;",
+        pooled_cell(r.pooling, p.pooled), num(seed.mean.*p.field), num(seed.sd.*p.field));
   }
   fmt::format_to(
       std::back_inserter(out),
-      "<tr><td>NRMSE (%)</td><td>{}</td><td>{}</td><td>{} ({})</td></tr></table>",
+      "<tr><td>NRMSE (%)</td><td>{}</td><td>{}</td><td>&ndash;</td><td>{} ({})</td></tr></table>",
       r.session_fit.status == FitStatus::Ok ? fmt::format("{:.1f}", r.session_fit.nrmse_pct)
                                             : "&ndash;",
       r.nrmse_pct.count > 0 ? fmt::format("{:.1f} ({:.1f})", r.nrmse_pct.median, r.nrmse_pct.iqr())
@@ -456,7 +469,10 @@ std::string render_report_html(const ReportInput& in) {
                    "Appendix I. kbar and cbar are derived under those declared values, so compare "
                    "them with Appendix I only with that in mind. Per region: the typical step is "
                    "the one with the median NRMSE; boxes span the interquartile range with the "
-                   "median; orange marks Appendix I's mean &plusmn; SD.</p>",
+                   "median; orange marks Appendix I's mean &plusmn; SD. The pooled mean comes "
+                   "from pooling the steps' fits, each with its own uncertainty; the "
+                   "between-step SD is how much the tissue itself seems to vary beyond those "
+                   "uncertainties (in % for kbar and cbar).</p>",
                    insole_size_name(in.size));
   }
   out += "<p>Regions:";
