@@ -161,6 +161,9 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
     }
   }
   r.pooling = pool_steps(estimates, material_bounds(config.fit_bounds));
+  if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
+    r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
+  }
   r.pooled_per_step.resize(steps.size());
   if (r.pooling.pooled) {
     for (std::size_t k = 0; k < estimated_steps.size(); ++k) {

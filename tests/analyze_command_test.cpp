@@ -260,6 +260,11 @@ TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
   const std::string line = out.substr(warning, out.find('\n', warning) - warning);
   EXPECT_NE(line.find("C_mm"), std::string::npos) << line;
   EXPECT_NE(line.find("d0_mm"), std::string::npos) << line;
+  // Pooling needs the default fit's covariance, and says so.
+  const auto j = nlohmann::json::parse(read_all(a.dir / "seed8" / "session.json"));
+  const auto& pooling = j.at("regions").at("heel").at("pooling");
+  EXPECT_FALSE(pooling.at("pooled").get<bool>());
+  EXPECT_NE(pooling.at("note").get<std::string>().find("default fit"), std::string::npos);
 }
 
 // --fit seed8 reproduces the seed's fit, inputs included, unless they are asked for.
