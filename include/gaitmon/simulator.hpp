@@ -24,11 +24,11 @@
 // the force still grows. Force against area, all the fit sees, is unchanged by the stretch. The
 // force grows about as area^(2+n), so the 40 N events span about 85 % of the contact: with the
 // defaults a stance from heel strike to toe off lasts about 0.50-0.66 s, like the seed's 52-60
-// frames.
+// frames. The tissue is the same in every step unless tissue_step_sd_pct says otherwise.
 //
 // Determinism: one std::mt19937_64 seeded with the seed drives every draw in a fixed order
-// (phase, gait durations, dc biases of L then R sensors, then noise per frame, L then R, in
-// sensor order); uniform doubles are the top 53 bits of a draw, normals come from Box-Muller.
+// (phase, gait durations, dc biases of L then R sensors, the tissue's step factors if asked
+// for, then noise per frame, L then R, in sensor order); uniform doubles are the top 53 bits of a draw, normals come from Box-Muller.
 // So the draws are the same on every machine. The physics uses libm's pow, cos and log, which
 // can differ in the last bit between C libraries; the bytes are identical for a given build
 // and library.
