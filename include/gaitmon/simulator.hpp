@@ -29,9 +29,9 @@
 // Determinism: one std::mt19937_64 seeded with the seed drives every draw in a fixed order
 // (phase, gait durations, dc biases of L then R sensors, the tissue's step factors if asked
 // for, then noise per frame, L then R, in sensor order); uniform doubles are the top 53 bits
-// of a draw, normals come from Box-Muller. So the draws are the same on every machine. The physics uses libm's pow, cos and log, which
-// can differ in the last bit between C libraries; the bytes are identical for a given build
-// and library.
+// of a draw, normals come from Box-Muller. So the draws are the same on every machine. The physics
+// uses libm's pow, cos and log, which can differ in the last bit between C libraries; the bytes are
+// identical for a given build and library.
 #pragma once
 
 #include <array>
