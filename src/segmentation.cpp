@@ -170,12 +170,25 @@ void StepSegmenter::end_start_up(std::vector<Step>& out) {
 }
 
 void StepSegmenter::process(std::int64_t index, std::vector<Step>& out) {
+  // A raise restarts from the open contact's start, which the raised floor ends at the dip
+  // (floors added later are not below it until a later swing), so the next raise restarts from
+  // a later contact: this ends.
+  std::int64_t i = index;
+  while (i <= index) {
+    const std::optional<std::int64_t> again = classify(i, out);
+    i = again ? *again : i + 1;
+  }
+}
+
+std::optional<std::int64_t> StepSegmenter::classify(std::int64_t index, std::vector<Step>& out) {
   switch (detector_.step(index, above(index, baseline()))) {
     case ContactDetector::Event::Start:
       on_contact_start(detector_.contact_start, out);
+      watch_contact(index);
       break;
     case ContactDetector::Event::End:
       on_contact_end(detector_.last_above);
+      watch_.active = false;
       break;
     case ContactDetector::Event::None:
       break;
@@ -187,11 +200,69 @@ void StepSegmenter::process(std::int64_t index, std::vector<Step>& out) {
           make_step(*pending_, detector_.last_above, std::nullopt, StepStatus::Incomplete));
       pending_.reset();
       skipping_ = true;
+      watch_.active = false;
     }
   } else if (pending_ && detector_.earliest_start(index + 1) > swing_start_ + 2 * half) {
-    // The swing is certainly longer than 2 H + 1 frames: the post-swing midpoint is g0 + H.
-    finalise(window(swing_start_ + half, swing_start_, index, Side::AfterStep), out);
+    if (restarting_) {
+      drop_restarted_contact();
+    } else {
+      // The swing is certainly longer than 2 H + 1 frames: the post-swing midpoint is g0 + H.
+      finalise(window(swing_start_ + half, swing_start_, index, Side::AfterStep), out);
+    }
   }
+  if (!watch_.active) return std::nullopt;
+
+  const double load = static_cast<double>(at(index).sum) - baseline();
+  std::optional<double> missed;
+  if (2.0 * load > watch_.peak) {
+    if (watch_.dip_begin >= 0 && index - watch_.dip_begin >= limits_.min_first_swing_frames) {
+      missed = missed_swing_floor(watch_.dip_begin, index - 1);
+    }
+    watch_.dip_begin = -1;
+    watch_.peak = std::max(watch_.peak, load);
+  } else {
+    if (watch_.dip_begin < 0) watch_.dip_begin = index;
+    if (index - watch_.dip_begin == 2 * half) missed = missed_swing_floor(watch_.dip_begin, index);
+  }
+  if (!missed) return std::nullopt;
+  recent_floors_.assign(1, *missed);
+  detector_ = ContactDetector{};
+  detector_.debounce = settings_.debounce_frames;
+  watch_.active = false;
+  restarting_ = true;
+  return pending_->heel_strike;
+}
+
+void StepSegmenter::watch_contact(std::int64_t confirmed) {
+  watch_.active = true;
+  watch_.dip_begin = -1;
+  watch_.peak = 0.0;
+  for (std::int64_t i = detector_.contact_start; i <= confirmed; ++i) {
+    watch_.peak = std::max(watch_.peak, static_cast<double>(at(i).sum) - baseline());
+  }
+}
+
+std::optional<double> StepSegmenter::missed_swing_floor(std::int64_t first,
+                                                        std::int64_t last) const {
+  const double floor = quietest_mean(
+      first, last, std::min<std::int64_t>(settings_.swing_window_frames, last - first + 1));
+  // A foot still carrying more than twice the contact threshold is in contact, whatever it did
+  // before: the real recordings' deep dips inside a contact are 410 and 580 bits above it.
+  if (floor - baseline() > std::min(watch_.peak / 4.0, 2.0 * settings_.event_threshold_bits)) {
+    return std::nullopt;
+  }
+  int quiet = 0;
+  for (std::int64_t i = first; i <= last; ++i) {
+    quiet = above(i, floor) ? 0 : quiet + 1;
+    if (quiet >= settings_.debounce_frames) return floor;
+  }
+  return std::nullopt;
+}
+
+void StepSegmenter::drop_restarted_contact() {
+  next_index_ = pending_->index;
+  pending_.reset();
+  restarting_ = false;
 }
 
 void StepSegmenter::on_contact_start(std::int64_t heel_strike, std::vector<Step>& out) {
@@ -200,18 +271,20 @@ void StepSegmenter::on_contact_start(std::int64_t heel_strike, std::vector<Step>
   const std::int64_t swing = heel_strike - g0;
   const std::int64_t half = limits_.max_swing_half_frames;
   Pending next;
-  next.index = next_index_++;
+  next.index = restarting_ ? pending_->index : next_index_++;
   next.heel_strike = heel_strike;
   next.complete_start = swing >= settings_.debounce_frames;
   if (swing > 0) {
     const std::int64_t middle = g0 + (swing - 1) / 2;
-    if (pending_) {
+    if (pending_ && !restarting_) {
       finalise(window(std::min(middle, g0 + half), g0, g1, Side::AfterStep), out);
     }
     next.pre = window(std::max(middle, g1 - half), g0, g1, Side::BeforeStep);
-    if (next.complete_start) add_floor(next.pre->floor_bits);
+    // A restarted contact's swing was counted before the floor was raised past it.
+    if (next.complete_start && !restarting_) add_floor(next.pre->floor_bits);
   }
   pending_ = std::move(next);
+  restarting_ = false;
 }
 
 void StepSegmenter::on_contact_end(std::int64_t toe_off) {
@@ -254,17 +327,21 @@ StepSegmenter::Window StepSegmenter::window(std::int64_t midpoint, std::int64_t 
   for (double& z : w.zero_bits) z /= static_cast<double>(count);
 
   // The quietest run of `count` frames between this window and the step.
-  const std::int64_t from = side == Side::BeforeStep ? lo : g0;
-  const std::int64_t to = side == Side::BeforeStep ? g1 : hi;
-  std::int64_t run = 0;
-  std::int64_t lowest = sum;
-  for (std::int64_t i = from; i <= to; ++i) {
-    run += at(i).sum;
-    if (i - from >= count) run -= at(i - count).sum;
-    if (i - from >= count - 1) lowest = std::min(lowest, run);
-  }
-  w.floor_bits = static_cast<double>(lowest) / static_cast<double>(count);
+  w.floor_bits =
+      side == Side::BeforeStep ? quietest_mean(lo, g1, count) : quietest_mean(g0, hi, count);
   return w;
+}
+
+double StepSegmenter::quietest_mean(std::int64_t first, std::int64_t last,
+                                    std::int64_t width) const {
+  std::int64_t run = 0;
+  std::int64_t lowest = 0;
+  for (std::int64_t i = first; i <= last; ++i) {
+    run += at(i).sum;
+    if (i - first >= width) run -= at(i - width).sum;
+    if (i - first == width - 1 || (i - first >= width && run < lowest)) lowest = run;
+  }
+  return static_cast<double>(lowest) / static_cast<double>(width);
 }
 
 Step StepSegmenter::make_step(const Pending& pending, std::int64_t toe_off,
@@ -335,7 +412,9 @@ Step StepSegmenter::make_step(const Pending& pending, std::int64_t toe_off,
 void StepSegmenter::trim() {
   std::int64_t keep = first_;
   if (pending_) {
-    keep = pending_->pre ? pending_->pre->midpoint + 1 : pending_->heel_strike;
+    // A contact classified again keeps its swing, whose window may be taken again.
+    keep = pending_->pre ? pending_->pre->midpoint - (settings_.swing_window_frames - 1) / 2
+                         : pending_->heel_strike;
   } else if (detector_.in_contact) {
     keep = detector_.last_above + 1;
   } else {
@@ -360,6 +439,8 @@ void StepSegmenter::finish(std::vector<Step>& finalised) {
       finalised.push_back(
           make_step(*pending_, detector_.last_above, std::nullopt, StepStatus::Incomplete));
     }
+  } else if (pending_ && restarting_) {
+    drop_restarted_contact();
   } else if (pending_) {
     // The swing after the last toe off ends with the recording (or a run too short to count).
     const std::int64_t g0 = swing_start_;

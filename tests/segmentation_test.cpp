@@ -437,6 +437,108 @@ TEST(StepSegmenter, ALongPauseFinalisesTheStepBeforeTheNextContact) {
   }
 }
 
+TEST(StepSegmenter, ABaselineThatRisesFasterThanTheFloorFollowsIsFound) {
+  // From frame 225, in the swing after the second step (toe off 208, next heel strike 252), every
+  // loaded sensor reads 10 bits more: the swings read 54 + 160 summed bits, 160 above the floor
+  // learnt so far and so above the 142-bit threshold. The floor follows only over ~10 swings, so
+  // without the watch for missed swings every contact from frame 215 on would merge into one.
+  const std::vector<Bump> bumps = walking(50, 6);
+  const auto rise = [](std::int64_t k, std::size_t s) {
+    return noise(k, s) + (k >= 225 && s < kLoaded ? 10 : 0);
+  };
+  const std::vector<Step> steps = segment(make_frames(700, bumps, rise));
+  ASSERT_EQ(steps.size(), bumps.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    // The frames 225..251, above the old floor, were no contact against the new one: the step
+    // that starts at 252 takes their place and index.
+    EXPECT_EQ(steps[i].index, static_cast<int>(i));
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    EXPECT_EQ(steps[i].heel_strike_frame, analytic_heel_strike(bumps[i]));
+    EXPECT_EQ(steps[i].toe_off_frame, analytic_toe_off(bumps[i]));
+    // The zero follows the baseline: 54 bits before the rise and 214 after it, each within the
+    // 5-frame noise (at most 3.2 bits).
+    EXPECT_NEAR(steps[i].bias_bits, i < 2 ? 54.0 : 214.0, 3.3);
+    EXPECT_NEAR(steps[i].max_summed_bits, 2016.0, 3.3);
+  }
+}
+
+TEST(StepSegmenter, AContactThatTheRaisedFloorDoesNotConfirmIsForgotten) {
+  // The baseline rises by 160 summed bits at frame 225 as above, but the only load after it is a
+  // 3-frame spike of 800 bits, then nothing for 475 frames. Against the old floor frames 225 on
+  // are one contact; once the dip after the spike has lasted 2 H + 1 frames it raises the floor,
+  // and against that floor the spike is shorter than the debounce: no contact, no step.
+  const std::vector<Bump> bumps = walking(50, 2);
+  const auto rise = [](std::int64_t k, std::size_t s) {
+    if (s >= kLoaded || k < 225) return 0;
+    return k >= 240 && k <= 242 ? 60 : 10;
+  };
+  const std::vector<Step> steps = segment(make_frames(700, bumps, rise));
+  ASSERT_EQ(steps.size(), 2U);
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    EXPECT_EQ(steps[i].index, static_cast<int>(i));
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    EXPECT_EQ(steps[i].heel_strike_frame, analytic_heel_strike(bumps[i]));
+    EXPECT_EQ(steps[i].toe_off_frame, analytic_toe_off(bumps[i]));
+  }
+}
+
+TEST(StepSegmenter, ASensorThatCreepsUnderLoadDoesNotMergeTheSteps) {
+  // A reading that creeps: each loaded sensor adds 40 % of its load low-passed with a 0.5-s time
+  // constant, so the swings read 100-200 summed bits above the quiet start of the recording.
+  // Against the floor learnt there, the contacts would merge.
+  std::vector<Bump> bumps;
+  for (int i = 0; i < 10; ++i) bumps.push_back({60 + 110 * i, 68, 2000.0});
+  std::vector<Frame> frames = make_frames(1200, bumps, noise);
+  std::vector<double> lag(kLoaded, 0.0);
+  const double keep = std::exp(-0.01 / 0.5);
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    for (std::size_t s = 0; s < kLoaded; ++s) {
+      const double load = frames[k].bits[s] - kBias[s];
+      lag[s] = lag[s] * keep + load * (1.0 - keep);
+      frames[k].bits[s] = static_cast<std::uint8_t>(
+          std::clamp(std::lround(frames[k].bits[s] + 0.4 * lag[s]), 0L, 255L));
+    }
+  }
+  const std::vector<Step> steps = segment(frames);
+  ASSERT_EQ(steps.size(), bumps.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    // The first contact, classified again against the raised floor, starts up to 2 frames after
+    // the bump's crossing; the creep then rises with the load and the later ones start on it.
+    EXPECT_GE(steps[i].heel_strike_frame, analytic_heel_strike(bumps[i]));
+    EXPECT_LE(steps[i].heel_strike_frame, analytic_heel_strike(bumps[i]) + 2);
+    // The creep's tail keeps the reading above the raised floor for up to 19 frames after the
+    // bump has ended, inside the 42-frame swing.
+    EXPECT_GE(steps[i].toe_off_frame, analytic_toe_off(bumps[i]));
+    EXPECT_LE(steps[i].toe_off_frame, analytic_toe_off(bumps[i]) + 20);
+  }
+}
+
+TEST(StepSegmenter, AMidStanceValleyAboveAQuarterOfThePeakIsNotASwing) {
+  // Two humps of 2000 bits per stance joined by a plateau of 608 summed bits (30 % of the peak):
+  // the load stays below half the peak for about 25 frames, longer than the shortest swing, but
+  // does not fall to a quarter of it.
+  std::vector<Bump> bumps;
+  for (int i = 0; i < 4; ++i) {
+    bumps.push_back({50 + 150 * i, 40, 2000.0});
+    bumps.push_back({50 + 150 * i + 60, 40, 2000.0});
+  }
+  const auto plateau = [](std::int64_t k, std::size_t s) {
+    const std::int64_t in_stride = (k - 50) % 150;
+    return s < kLoaded && k >= 50 && k < 650 && in_stride >= 30 && in_stride < 70 ? 38 : 0;
+  };
+  const std::vector<Step> steps = segment(make_frames(700, bumps, plateau));
+  ASSERT_EQ(steps.size(), 4U);
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    EXPECT_EQ(steps[i].heel_strike_frame, analytic_heel_strike(bumps[2 * i]));
+    EXPECT_EQ(steps[i].toe_off_frame, analytic_toe_off(bumps[2 * i + 1]));
+  }
+}
+
 TEST(StepSegmenter, NoContactsNoSteps) {
   EXPECT_TRUE(segment(make_frames(300, {}, noise)).empty());
   EXPECT_TRUE(segment({}).empty());

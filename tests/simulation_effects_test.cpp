@@ -1,5 +1,6 @@
 // Tests of the simulator's physical effects: each changes the force or reading in the expected
-// direction by an amount computed here from its definition, and bad names or parameters fail.
+// direction by an amount computed here from its definition, bad names or parameters fail, and a
+// session with strong sensor creep still segments into its strides.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,8 +10,11 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
+#include "gaitmon/batch.hpp"
 #include "gaitmon/config.hpp"
+#include "gaitmon/segmentation.hpp"
 #include "gaitmon/session.hpp"
 #include "gaitmon/simulator.hpp"
 #include "test_support.hpp"
@@ -121,6 +125,45 @@ TEST(SimulationEffects, SaturatedSessionNeverReadsAboveTheCeilingAndTheTruthSays
   const auto truth = nlohmann::json::parse(in);
   EXPECT_EQ(truth["options"]["effects"][0]["name"], "sensor_saturation");
   EXPECT_EQ(truth["options"]["effects"][0]["params"]["ceiling_bits"], 70.0);
+}
+
+TEST(SimulationEffects, StrongSensorCreepStillGivesOneStepPerStride) {
+  // Creep of gain 0.4 and tau 0.5 s lifts the swings 145-190 summed bits above the quiet start
+  // of the recording; the segmenter must raise its floor rather than merge the contacts (it
+  // merged the right foot's into one 11.6-s contact before it watched for missed swings).
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const auto dir = test::scratch_dir("sim-effects-creep");
+  SimulationOptions o;
+  o.duration_s = 12.0;
+  o.seed = 403;
+  o.size = InsoleSize::S45_46;
+  o.effects = {"sensor_creep"};
+  o.effect_params["sensor_creep"] = {{"gain", 0.4}, {"tau_s", 0.5}};
+  const SimulationTruth truth = simulate_session(config, o, dir / "c.csv", dir / "c.truth.json");
+  std::vector<Step> steps;
+  segment_session(dir / "c.csv", config, [&](Step&& s) { steps.push_back(std::move(s)); });
+  const auto same_step = [](const Step& s, const SimulatedStep& t) {
+    return s.foot == t.foot && std::abs(s.t_heel_strike_s - t.t_heel_strike_s) <= 0.021;
+  };
+  std::size_t whole = 0;
+  for (const SimulatedStep& t : truth.steps) {
+    // The creep's tail keeps a contact open up to 0.2 s after the stance: a stance ending later
+    // than 0.3 s before the end of the recording may be cut by it.
+    if (t.partial || t.t_toe_off_s > o.duration_s - 0.3) continue;
+    ++whole;
+    SCOPED_TRACE(std::string(foot_name(t.foot)) + " step at " + std::to_string(t.t_heel_strike_s));
+    EXPECT_EQ(
+        std::count_if(steps.begin(), steps.end(),
+                      [&](const Step& s) { return s.status == StepStatus::Ok && same_step(s, t); }),
+        1);
+  }
+  EXPECT_GE(whole, 20U);
+  for (const Step& s : steps) {
+    if (s.status != StepStatus::Ok) continue;
+    EXPECT_TRUE(std::any_of(truth.steps.begin(), truth.steps.end(),
+                            [&](const SimulatedStep& t) { return same_step(s, t); }))
+        << foot_name(s.foot) << " step at " << s.t_heel_strike_s << " s was not simulated";
+  }
 }
 
 }  // namespace

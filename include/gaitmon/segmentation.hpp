@@ -23,6 +23,20 @@
 //   consecutive frames as the bias window, between the midpoint window and the step; the floor in
 //   use is the lowest of the last kFloorHistory (20) of them, i.e. of the last ~10 swings: a few
 //   loaded swings in a row do not raise it, and a drifting dc bias is followed within 10 swings.
+//   A baseline that rises faster than that (a sensor that creeps under load) would leave the
+//   next swings above floor + threshold, and the foot's contacts would merge. So an open contact
+//   is watched for a swing the floor missed: a dip of at least min_first_swing_frames frames in
+//   which the load above the floor stays at most half the contact's peak before it, whose
+//   quietest window is at most a quarter of that peak and at most twice the event threshold
+//   above the floor, and which holds debounce_frames frames within the event threshold of that
+//   window. The dip is judged when the load rises above half the peak again, or once it has
+//   lasted 2 H + 1 frames. Such a dip becomes the floor (the history restarts from it) and the
+//   contact is classified again from its start: the dip ends it as a swing, and it starts where
+//   the load first exceeds the new floor by the threshold (if it never does before the dip, it
+//   was no contact and is forgotten). A mid-stance valley does not fall to a quarter of the
+//   peak, nor does a weight shift while standing; the two contacts of the real recordings that
+//   dip deeper (to 10 and 15 % of their peaks, for 0.6-0.7 s) still carry about 410 and 580
+//   bits there (115 and 165 N).
 //   Heel strike and toe off are final once the swing after the step is known: the contact rule
 //   runs again over the frames between the two midpoints against the floor then in use, and the
 //   step spans the contacts found there that overlap it (on the real recordings this moved one
@@ -47,11 +61,12 @@
 // Latency: a step is final once its post-swing midpoint is known, i.e. when the next contact of
 // the same foot is confirmed, debounce_frames - 1 frames after that heel strike (one swing plus
 // 4 frames after toe off: ~0.45 s in walking at 100 Hz), or, after a long pause, 2 H + 1 frames
-// after toe off. A contact reaching max_stance_frames is emitted at once as Incomplete and the
-// rest of it is skipped. At finish(), a step followed by at least debounce_frames swing frames is
-// final with its post-swing midpoint at the middle of that remaining swing.
+// after toe off; after a swing the floor missed, once the load of the next stance passes half
+// the peak before the dip. A contact reaching max_stance_frames is emitted at once as Incomplete
+// and the rest of it is skipped. At finish(), a step followed by at least debounce_frames swing
+// frames is final with its post-swing midpoint at the middle of that remaining swing.
 //
-// Memory: the frames from the current step's pre-swing midpoint on, at most max_stance_frames +
+// Memory: the frames from the current step's pre-swing window on, at most max_stance_frames +
 // 2 H + swing_window_frames frames; during start-up at most max_stance_frames frames.
 #pragma once
 
@@ -161,6 +176,13 @@ class StepSegmenter {
     std::int64_t swing_begin = 0;  ///< first frame of the latest swing
   };
 
+  /// The watch over the open contact for a swing the floor missed.
+  struct MissedSwingWatch {
+    bool active = false;
+    double peak = 0.0;            ///< highest S - floor of the contact before the current dip
+    std::int64_t dip_begin = -1;  ///< first frame of the current dip, -1 outside one
+  };
+
   /// The contact being tracked, from its confirmed start until it becomes a Step.
   struct Pending {
     int index = 0;
@@ -174,7 +196,16 @@ class StepSegmenter {
   /// The floor contacts are found against: the lowest recent swing floor, or the minimum of S.
   double baseline() const;
   bool above(std::int64_t index, double baseline) const;
+  /// Classifies frame `index`, and again the frames of a contact the floor was too low for.
   void process(std::int64_t index, std::vector<Step>& out);
+  /// Classifies one frame; returns the frame to continue from when the floor has been raised
+  /// and the open contact must be classified again from its start.
+  std::optional<std::int64_t> classify(std::int64_t index, std::vector<Step>& out);
+  void watch_contact(std::int64_t confirmed);
+  /// Forgets the contact being classified again when the raised floor finds none in it.
+  void drop_restarted_contact();
+  /// The floor of a dip over frames first..last if it is a swing the floor missed.
+  std::optional<double> missed_swing_floor(std::int64_t first, std::int64_t last) const;
   /// Classifies frames from..next_ - 1 against the running minimum (from first_ = afresh);
   /// returns true once a swing (falling to half the peak before it) between two contacts, or
   /// longer than 2 H + 1 frames after a contact, is confirmed.
@@ -183,6 +214,8 @@ class StepSegmenter {
   void on_contact_start(std::int64_t heel_strike, std::vector<Step>& out);
   void on_contact_end(std::int64_t toe_off);
   Window window(std::int64_t midpoint, std::int64_t g0, std::int64_t g1, Side side) const;
+  /// The lowest mean S of `width` consecutive frames in first..last (at least `width` frames).
+  double quietest_mean(std::int64_t first, std::int64_t last, std::int64_t width) const;
   void add_floor(double floor_bits);
   /// Turns pending_ into a Step with its post-swing window and clears it.
   void finalise(const Window& post, std::vector<Step>& out);
@@ -214,6 +247,10 @@ class StepSegmenter {
   std::deque<double> recent_floors_;
   std::int64_t swing_start_ = 0;  ///< first frame of the current or next swing
   std::optional<Pending> pending_;
+  MissedSwingWatch watch_;
+  /// The open contact is classified again against a raised floor: the next contact start takes
+  /// its place (and index) instead of ending it.
+  bool restarting_ = false;
   bool skipping_ = false;  ///< inside a contact already emitted for reaching max_stance_frames
   int next_index_ = 0;
 };
