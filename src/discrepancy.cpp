@@ -1031,6 +1031,41 @@ void check_discrepancy_effect(std::string_view name) {
   throw std::invalid_argument("unknown effect '" + std::string(name) + "' (known: " + known + ")");
 }
 
+std::vector<ZeroLevelDrift> zero_level_drift(const DiscrepancyInput& input) {
+  std::vector<ZeroLevelDrift> out;
+  for (Foot foot : {Foot::Left, Foot::Right}) {
+    std::vector<const DiscrepancyStep*> steps;
+    for (const DiscrepancyStep& s : input.steps) {
+      if (s.analysis.foot == foot) steps.push_back(&s);
+    }
+    if (steps.size() < 3) continue;
+    std::sort(steps.begin(), steps.end(), [](const DiscrepancyStep* a, const DiscrepancyStep* b) {
+      return a->analysis.t_heel_strike_s < b->analysis.t_heel_strike_s;
+    });
+    ZeroLevelDrift z;
+    z.foot = foot;
+    z.steps = static_cast<int>(steps.size());
+    z.first_bits = steps.front()->zero_bits;
+    z.last_bits = steps.back()->zero_bits;
+    std::vector<double> changes, peaks;
+    z.lowest_bits = z.highest_bits = z.first_bits;
+    for (std::size_t i = 0; i < steps.size(); ++i) {
+      z.lowest_bits = std::min(z.lowest_bits, steps[i]->zero_bits);
+      z.highest_bits = std::max(z.highest_bits, steps[i]->zero_bits);
+      peaks.push_back(steps[i]->peak_summed_bits);
+      if (i > 0) changes.push_back(std::abs(steps[i]->zero_bits - steps[i - 1]->zero_bits));
+    }
+    z.scatter_bits = 1.4826 * spread_of(std::move(changes)).median / std::sqrt(2.0);
+    const double range = z.highest_bits - z.lowest_bits;
+    const double peak = spread_of(std::move(peaks)).median;
+    z.range_pct_of_peak = peak > 0.0 ? 100.0 * range / peak : 0.0;
+    z.drifting = range > kZeroDriftScatters * std::max(z.scatter_bits, 1.0) &&
+                 z.range_pct_of_peak >= kZeroDriftPctOfPeak;
+    out.push_back(z);
+  }
+  return out;
+}
+
 AnalysisSettings discrepancy_analysis_settings() {
   AnalysisSettings settings;
   settings.fit.smoothing = Smoothing::None;
@@ -1065,6 +1100,8 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
   input.steps.resize(steps.size());
   for (std::size_t i = 0; i < steps.size(); ++i) {
     input.steps[i].analysis = std::move(analyses[i]);
+    input.steps[i].zero_bits = steps[i].bias_bits;
+    input.steps[i].peak_summed_bits = steps[i].max_summed_bits;
   }
   double highest = 0.0;
   for (const Step& s : steps) {
@@ -1119,6 +1156,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.baseline_bic = bic(base_sse, pooled, base_params);
   out.map_before = residual_map(units, base_preds, settings.phase_bins);
   out.diagnostics = diagnose(prep, base_preds, settings.phase_bins);
+  out.zero_levels = zero_level_drift(input);
 
   std::vector<CandidateOutcome> outcomes;
   for (const CandidateSpec& spec : specs) {

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <array>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -97,6 +98,8 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   int wrong_names = 0;
   int none_named = 0;
   int right_names = 0;
+  // Sessions whose zero level was reported drifting on a foot [0]: no, [1]: yes.
+  std::array<int, 2> drift_in_creep{}, drift_elsewhere{};
   std::uint64_t seed = 100;
   for (const std::string& effect : classes) {
     for (std::size_t i = 0; i < 3; ++i) {
@@ -112,12 +115,17 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       if (effect == "none" && first != "none") ++none_named;
       if (effect != "none" && first != "none" && first != effect) ++wrong_names;
       if (effect != "none" && first == effect) ++right_names;
+      std::string drifting;
+      for (const ZeroLevelDrift& z : r.zero_levels) {
+        if (z.drifting) drifting += foot_name(z.foot);
+      }
+      ++(effect == "sensor_creep" ? drift_in_creep : drift_elsewhere)[!drifting.empty()];
       shrinks += fmt::format(
           "  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> "
-          "{:6.2f} % (gap shrink {:5.1f} %; best candidate {} {:+.1f} %)\n",
+          "{:6.2f} % (gap shrink {:5.1f} %; best candidate {} {:+.1f} %; zero drifting: {})\n",
           effect, insole_size_name(c.size), c.seed, first, r.baseline_heldout_nrmse_pct,
           r.extended_heldout_nrmse_pct, r.gap_shrink_pct, r.candidates[best].name,
-          r.candidates[best].shrink_pct);
+          r.candidates[best].shrink_pct, drifting.empty() ? "-" : drifting);
     }
   }
   const auto print = [&](const char* title, std::map<std::string, std::map<std::string, int>>& m) {
@@ -144,6 +152,12 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   EXPECT_EQ(none_named, 0);
   EXPECT_EQ(wrong_names, 0);
   EXPECT_GE(right_names, 11);
+  // Creep that the zeroing takes out of the force still shows in the zero levels, and nothing
+  // else moves them.
+  fmt::print("zero level drifting: {} of 3 creep sessions, {} of 15 others\n", drift_in_creep[1],
+             drift_elsewhere[1]);
+  EXPECT_EQ(drift_in_creep[1], 3);
+  EXPECT_EQ(drift_elsewhere[1], 0);
 }
 
 TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
@@ -173,13 +187,46 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
     }
     EXPECT_EQ(j["candidates"].size(), 5u);
     EXPECT_GE(j["where"].size(), 1u);
+    ASSERT_EQ(j["diagnostics"]["zero_levels"].size(), 2u);
+    for (const auto& z : j["diagnostics"]["zero_levels"]) EXPECT_FALSE(z["drifting"].get<bool>());
+    EXPECT_EQ(output.find("zero level of foot"), std::string::npos) << output;
     std::ifstream html(out / "discrepancy.html");
     std::stringstream page;
     page << html.rdbuf();
     EXPECT_NE(page.str().find("<svg"), std::string::npos);
+    EXPECT_NE(page.str().find("Zero level per foot"), std::string::npos);
     EXPECT_EQ(page.str().find("<script"), std::string::npos);
   }
   EXPECT_EQ(texts[0], texts[1]);
+}
+
+TEST(DiscrepancySessions, ReportsTheZeroLevelsOfACreepingInsole) {
+  // Creep of gain 0.3 and tau 2 s: the zeroing takes it out of the force, and no candidate is
+  // named, but the zero levels rise by 3.7 % (left) and 6.5 % (right) of the peak when measured.
+  const auto dir = test::scratch_dir("discrepancy-zero-levels");
+  SimulationOptions o;
+  o.duration_s = 12.0;
+  o.seed = 402;
+  o.size = InsoleSize::S41_42;
+  o.effects = {"sensor_creep"};
+  o.effect_params["sensor_creep"] = {{"gain", 0.3}, {"tau_s", 2.0}};
+  simulate_session(shipped_config(), o, dir / "c.csv", dir / "c.truth.json");
+  std::string output;
+  ASSERT_EQ(
+      test::run_command(fmt::format("{} discrepancy {} --out {}", test::gaitmon_binary().string(),
+                                    (dir / "c.csv").string(), (dir / "out").string()),
+                        &output),
+      0)
+      << output;
+  EXPECT_NE(output.find("zero level of foot L"), std::string::npos) << output;
+  EXPECT_NE(output.find("zero level of foot R"), std::string::npos) << output;
+  std::ifstream in(dir / "out" / "discrepancy.json");
+  const auto j = nlohmann::json::parse(in);
+  ASSERT_EQ(j["diagnostics"]["zero_levels"].size(), 2u);
+  for (const auto& z : j["diagnostics"]["zero_levels"]) {
+    EXPECT_TRUE(z["drifting"].get<bool>()) << z.dump();
+    EXPECT_GT(z["last_bits"].get<double>() - z["first_bits"].get<double>(), 40.0) << z.dump();
+  }
 }
 
 }  // namespace

@@ -210,5 +210,49 @@ TEST(Discrepancy, RefusesBadSettingsAndTooFewSteps) {
   EXPECT_EQ(a.per_step.size(), 4u);
 }
 
+TEST(Discrepancy, ZeroLevelDriftStandsOutOfTheStepToStepScatter) {
+  // Left: zeros 100, 101, 99, 100, 130, 131 bits (given out of time order). Successive changes
+  // 1, 2, 1, 30, 1: median 1, scatter 1.4826 / sqrt 2 = 1.0483 bits; range 32 bits, over 10
+  // scatters and 3.2 % of the 1000-bit peak: drifting. Right: 100, 102, 101, 100, range 2: not.
+  DiscrepancyInput input;
+  const auto add = [&](Foot foot, double t_s, double zero_bits) {
+    DiscrepancyStep s;
+    s.analysis.foot = foot;
+    s.analysis.t_heel_strike_s = t_s;
+    s.zero_bits = zero_bits;
+    s.peak_summed_bits = 1000.0;
+    input.steps.push_back(s);
+  };
+  const std::vector<double> left{100, 101, 99, 100, 130, 131};
+  for (std::size_t i = left.size(); i-- > 0;)
+    add(Foot::Left, 1.1 * static_cast<double>(i), left[i]);
+  const std::vector<double> right{100, 102, 101, 100};
+  for (std::size_t i = 0; i < right.size(); ++i)
+    add(Foot::Right, 0.5 + 1.1 * static_cast<double>(i), right[i]);
+  std::vector<ZeroLevelDrift> z = zero_level_drift(input);
+  ASSERT_EQ(z.size(), 2u);
+  EXPECT_EQ(z[0].foot, Foot::Left);
+  EXPECT_EQ(z[0].steps, 6);
+  EXPECT_EQ(z[0].first_bits, 100.0);
+  EXPECT_EQ(z[0].last_bits, 131.0);
+  EXPECT_EQ(z[0].lowest_bits, 99.0);
+  EXPECT_EQ(z[0].highest_bits, 131.0);
+  EXPECT_NEAR(z[0].scatter_bits, 1.4826 / std::sqrt(2.0), 1e-12);
+  EXPECT_DOUBLE_EQ(z[0].range_pct_of_peak, 3.2);
+  EXPECT_TRUE(z[0].drifting);
+  EXPECT_EQ(z[1].foot, Foot::Right);
+  EXPECT_DOUBLE_EQ(z[1].range_pct_of_peak, 0.2);
+  EXPECT_FALSE(z[1].drifting);
+
+  // The same rise over a peak of 2000 bits is 1.6 % of it: too small to matter to the force.
+  for (DiscrepancyStep& s : input.steps) s.peak_summed_bits = 2000.0;
+  EXPECT_FALSE(zero_level_drift(input)[0].drifting);
+  // Fewer than 3 steps of a foot: no zero levels for it.
+  input.steps.resize(8);
+  z = zero_level_drift(input);
+  ASSERT_EQ(z.size(), 1u);
+  EXPECT_EQ(z[0].foot, Foot::Left);
+}
+
 }  // namespace
 }  // namespace gaitmon

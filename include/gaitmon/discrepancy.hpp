@@ -38,6 +38,10 @@
 // are left out when the session has footprints: the ellipse moves in whole cells, and its misfit
 // would swamp the effects sought.
 //
+// Zero levels. Each step is zeroed at the swings around it, so a slow drift of the readings (a
+// sensor that creeps under load, or a thermal drift) is mostly gone from the force the workflow
+// compares; zero_level_drift reports it from the steps' zeros instead, as a diagnostic.
+//
 // NRMSE here is pooled eq 58: 100 sqrt(sum of squared residuals / sum over step-regions of
 // frames x (max measured force)^2), so regions weigh by their force.
 #pragma once
@@ -70,6 +74,8 @@ struct DiscrepancyStep {
   /// Per region and stance frame: cells within kSaturationBandBits of the session's highest
   /// zeroed reading (a reading that has stopped rising). Empty means unknown (all zero).
   std::array<std::vector<int>, kRegionCount> saturated_cells;
+  double zero_bits = 0.0;         ///< the step's summed-bits zero (Step::bias_bits)
+  double peak_summed_bits = 0.0;  ///< its highest zeroed summed bits (Step::max_summed_bits)
 };
 
 /// A cell counts as saturated within this many bits of the session's highest zeroed reading.
@@ -172,6 +178,36 @@ struct ResidualDiagnostics {
   std::vector<StateCorrelation> correlations;
 };
 
+/// The zero level of one foot's steps over the session. The segmenter zeroes each step at the
+/// swings around it (seed 3.3.1), which takes a reading's slow drift out of the force: a sensor
+/// that creeps under load, or a thermal drift, shows here instead, as a zero that moves by more
+/// than it scatters from step to step. A diagnostic: it names no effect.
+struct ZeroLevelDrift {
+  Foot foot = Foot::Left;
+  int steps = 0;
+  double first_bits = 0.0;  ///< the zero of the foot's first complete step
+  double last_bits = 0.0;
+  double lowest_bits = 0.0;
+  double highest_bits = 0.0;
+  /// Robust SD of one zero level about the next: 1.4826 x the median absolute difference of
+  /// successive zeros / sqrt 2.
+  double scatter_bits = 0.0;
+  double range_pct_of_peak = 0.0;  ///< 100 (highest - lowest) / the median step's peak
+  /// highest - lowest is more than kZeroDriftScatters x max(scatter, 1 bit) and at least
+  /// kZeroDriftPctOfPeak % of the peak.
+  bool drifting = false;
+};
+
+/// A drift must stand out of the step-to-step scatter of the zero...
+inline constexpr double kZeroDriftScatters = 10.0;
+/// ...and be large enough to matter to the force. On 16 simulated sessions without an effect
+/// (12 and 60 s, sizes 37-38 to 45-46) the range stayed within 0.7 % of the peak; on 5 with
+/// sensor creep (gain 0.15-0.4, tau 0.5-2 s) it reached 3.9-6.5 % on the more drifting foot.
+inline constexpr double kZeroDriftPctOfPeak = 2.0;
+
+/// The zero levels of each foot with at least 3 steps, in time order of heel strike.
+std::vector<ZeroLevelDrift> zero_level_drift(const DiscrepancyInput& input);
+
 struct DiscrepancyResult {
   int steps = 0;
   int step_regions = 0;
@@ -194,6 +230,7 @@ struct DiscrepancyResult {
   std::vector<RegionComparison> regions;
   std::vector<StepComparison> per_step;
   ResidualDiagnostics diagnostics;
+  std::vector<ZeroLevelDrift> zero_levels;  ///< per foot with at least 3 complete steps
 };
 
 /// Runs the workflow. Deterministic. Throws std::invalid_argument for bad settings or fewer

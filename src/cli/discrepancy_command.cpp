@@ -133,6 +133,19 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
                       {"runs_test_z", d.runs_z},
                       {"effective_sample_fraction", d.effective_sample_fraction},
                       {"correlation_with_state", corr}};
+  nlohmann::json zeros = nlohmann::json::array();
+  for (const ZeroLevelDrift& z : r.zero_levels) {
+    zeros.push_back({{"foot", foot_name(z.foot)},
+                     {"steps", z.steps},
+                     {"first_bits", z.first_bits},
+                     {"last_bits", z.last_bits},
+                     {"lowest_bits", z.lowest_bits},
+                     {"highest_bits", z.highest_bits},
+                     {"scatter_bits", z.scatter_bits},
+                     {"range_pct_of_peak", z.range_pct_of_peak},
+                     {"drifting", z.drifting}});
+  }
+  j["diagnostics"]["zero_levels"] = zeros;
   return j.dump(2) + "\n";
 }
 
@@ -182,6 +195,14 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
     }
   }
   fmt::print("named: {}\n", named.empty() ? "none (no missing effect found)" : named);
+  for (const ZeroLevelDrift& z : result.zero_levels) {
+    if (!z.drifting) continue;
+    fmt::print(
+        "zero level of foot {}: {:.0f} -> {:.0f} bits over {} steps, range {:.1f} % of the peak, "
+        "step-to-step scatter {:.1f} bits: the readings drift (sensor creep or thermal drift); "
+        "the zeroing at each step's swings takes it out of the force\n",
+        foot_name(z.foot), z.first_bits, z.last_bits, z.steps, z.range_pct_of_peak, z.scatter_bits);
+  }
   fmt::print("held-out NRMSE {:.2f} % -> {:.2f} % (gap shrink {:.1f} %)\n",
              result.baseline_heldout_nrmse_pct, result.extended_heldout_nrmse_pct,
              result.gap_shrink_pct);

@@ -228,7 +228,22 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
       r.diagnostics.lag1_autocorrelation, r.diagnostics.runs_z,
       r.diagnostics.effective_sample_fraction, bias);
   html += diag;
-  html += "</body></html>\n";
+  html += fmt::format(
+      "<h2>Zero level per foot</h2><p>Each step is zeroed at the swings around it (seed 3.3.1), "
+      "which takes a slow drift of the readings out of the force; a sensor that creeps under "
+      "load, or a thermal drift, shows here instead. Drifting: the range is over {:g} "
+      "step-to-step scatters (at least 1 bit) and at least {:g} % of the peak.</p><table><tr>"
+      "<th>foot</th><th>steps</th><th>first bits</th><th>last bits</th><th>lowest</th>"
+      "<th>highest</th><th>scatter bits</th><th>range % of peak</th><th>drifting</th></tr>",
+      kZeroDriftScatters, kZeroDriftPctOfPeak);
+  for (const ZeroLevelDrift& z : r.zero_levels) {
+    html += fmt::format(
+        "<tr><td>{}</td><td>{}</td><td>{:.1f}</td><td>{:.1f}</td><td>{:.1f}</td><td>{:.1f}</td>"
+        "<td>{:.1f}</td><td>{:.2f}</td><td>{}</td></tr>",
+        foot_name(z.foot), z.steps, z.first_bits, z.last_bits, z.lowest_bits, z.highest_bits,
+        z.scatter_bits, z.range_pct_of_peak, z.drifting ? "<b>yes</b>" : "no");
+  }
+  html += "</table></body></html>\n";
   return html;
 }
 
