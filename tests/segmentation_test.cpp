@@ -441,7 +441,7 @@ TEST(StepSegmenter, ABaselineThatRisesFasterThanTheFloorFollowsIsFound) {
   // From frame 225, in the swing after the second step (toe off 208, next heel strike 252), every
   // loaded sensor reads 10 bits more: the swings read 54 + 160 summed bits, 160 above the floor
   // learnt so far and so above the 142-bit threshold. The floor follows only over ~10 swings, so
-  // without the watch for missed swings every contact from frame 215 on would merge into one.
+  // without the watch for missed swings every contact from frame 225 on would merge into one.
   const std::vector<Bump> bumps = walking(50, 6);
   const auto rise = [](std::int64_t k, std::size_t s) {
     return noise(k, s) + (k >= 225 && s < kLoaded ? 10 : 0);
@@ -485,8 +485,8 @@ TEST(StepSegmenter, AContactThatTheRaisedFloorDoesNotConfirmIsForgotten) {
 
 TEST(StepSegmenter, ASensorThatCreepsUnderLoadDoesNotMergeTheSteps) {
   // A reading that creeps: each loaded sensor adds 40 % of its load low-passed with a 0.5-s time
-  // constant, so the swings read 100-200 summed bits above the quiet start of the recording.
-  // Against the floor learnt there, the contacts would merge.
+  // constant, so the swings bottom out 152-168 summed bits above the quiet start of the
+  // recording. Against the floor learnt there, the contacts would merge.
   std::vector<Bump> bumps;
   for (int i = 0; i < 10; ++i) bumps.push_back({60 + 110 * i, 68, 2000.0});
   std::vector<Frame> frames = make_frames(1200, bumps, noise);
