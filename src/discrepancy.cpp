@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <exception>
 #include <functional>
 #include <limits>
@@ -41,6 +42,17 @@ struct Unit {
   double peak_n = 0.0;
   double dt_s = 0.01;
   int prev = -1;  // the foot's previous unit of the same region, in time order
+  // The zero channel. What the per-step zeroing took off this region (its cells' mean reading
+  // in the swing windows around the step, N) and when those windows were read. Units of the
+  // foot's consecutive steps form a chain, and the change of the zero from the unit before in
+  // the chain is observed. A chain that does not start at the foot's first contact carries a
+  // lag from loads nobody analysed (a recording that starts in stance): unknown, and solved for.
+  double zero_n = 0.0;
+  double t_pre_zero_s = std::numeric_limits<double>::quiet_NaN();
+  double t_post_zero_s = std::numeric_limits<double>::quiet_NaN();
+  int chain = -1;  // the unit that starts its chain
+  bool zero_change = false;
+  bool unknown_start = false;  // on a chain's first unit
   double norm() const { return static_cast<double>(y.size()) * peak_n * peak_n; }
 };
 
@@ -127,6 +139,12 @@ class Applied {
   virtual void apply(std::size_t ui, const Unit& u, std::span<const double> F,
                      std::span<double> out) const = 0;
   virtual bool affine() const { return true; }
+  /// What the effect adds to unit `ui`'s reading in the swing windows its zero was taken from
+  /// (N): the share of it that the per-step zeroing took off. Only a sensor effect that reads
+  /// without a load has one.
+  virtual double swing_reading(std::size_t /*ui*/) const { return 0.0; }
+  /// What it adds there per unit of lag at the start of the unit's chain, where that is unknown.
+  virtual double swing_reading_per_start_lag(std::size_t /*ui*/) const { return 0.0; }
 };
 
 struct ParamSpec {
@@ -140,10 +158,16 @@ struct CandidateSpec {
   int stage = 0;  // 0 tissue, 1 sensor: the order in which effects chain
   std::vector<ParamSpec> params;
   std::function<std::unique_ptr<Applied>(const std::vector<Unit>&, std::span<const double>)> make;
+  bool reads_in_swing = false;  // solves each chain's unknown start lag (Pooled::unknown_starts)
 };
 
-// The lag carried into each unit: the foot's earlier measured force of that region, low-passed.
-std::vector<double> carried_lag(const std::vector<Unit>& units, double tau_s) {
+// The foot's measured force of one region, low-passed through its steps: the lag carried into
+// each unit from the earlier ones (decayed over the swing) and the lag at each unit's end.
+struct CarriedLag {
+  std::vector<double> r0, r_end;
+};
+
+CarriedLag carried_lag(const std::vector<Unit>& units, double tau_s) {
   std::vector<double> r0(units.size(), 0.0);
   std::vector<double> r_end(units.size(), 0.0);
   std::vector<std::size_t> order(units.size());
@@ -163,14 +187,55 @@ std::vector<double> carried_lag(const std::vector<Unit>& units, double tau_s) {
     for (double v : u.y) r = r * keep + v * (1.0 - keep);
     r_end[ui] = r;
   }
-  return r0;
+  return {std::move(r0), std::move(r_end)};
 }
 
+// The lag's mean over a unit's two zero windows: it decays from the end of the unit before to
+// the window before the step, and from the unit's own end to the window after it (`level`);
+// and that of a unit lag at its chain's first window, decayed (`per_start_lag`: the lag is
+// linear, so an unknown start adds that times its size). 0 where a window's time is unknown.
+struct ZeroWindowLag {
+  std::vector<double> level, per_start_lag;
+};
+
+ZeroWindowLag lag_in_zero_windows(const std::vector<Unit>& units, const CarriedLag& lag,
+                                  double tau_s) {
+  ZeroWindowLag out{std::vector<double>(units.size(), 0.0), std::vector<double>(units.size(), 0.0)};
+  for (std::size_t ui = 0; ui < units.size(); ++ui) {
+    const Unit& u = units[ui];
+    if (u.chain < 0) continue;
+    double before = 0.0;
+    if (u.prev >= 0) {
+      const auto p = static_cast<std::size_t>(u.prev);
+      before = lag.r_end[p] * std::exp(-std::max(0.0, u.t_pre_zero_s - units[p].t.back()) / tau_s);
+    }
+    const double after =
+        lag.r_end[ui] * std::exp(-std::max(0.0, u.t_post_zero_s - u.t.back()) / tau_s);
+    out.level[ui] = 0.5 * (before + after);
+    const double t0 = units[static_cast<std::size_t>(u.chain)].t_pre_zero_s;
+    out.per_start_lag[ui] = 0.5 * (std::exp(-(u.t_pre_zero_s - t0) / tau_s) +
+                                   std::exp(-(u.t_post_zero_s - t0) / tau_s));
+  }
+  return out;
+}
+
+// F + gain x F low-passed: stress relaxation in the tissue (gain < 0) or creep of the sensor
+// (gain > 0). A sensor also reads its lag without a load, in the swing windows the segmenter
+// takes each step's zero from, and the zero channel sees that. A step zeroed at those windows
+// has the creep's level taken off its stance; the rise within one stance that is left is about
+// proportional to the load and the step's own stiffness takes it up, so the sensor's stance
+// force is left to the baseline there. (Modelled as gain x (lag - its mean in the windows), it
+// made the held-out force error of a creep session worse by 6-12 % at the true gain and tau.)
 class LagEffect final : public Applied {
  public:
-  LagEffect(const std::vector<Unit>& units, double sign_gain, double tau_s)
-      : gain_(sign_gain), tau_s_(tau_s), r0_(carried_lag(units, tau_s)) {}
-  bool affects(const Unit&) const override { return gain_ != 0.0; }
+  enum class Stage : std::uint8_t { Tissue, Sensor };
+  LagEffect(const std::vector<Unit>& units, double sign_gain, double tau_s, Stage stage)
+      : gain_(sign_gain), tau_s_(tau_s), sensor_(stage == Stage::Sensor) {
+    const CarriedLag lag = carried_lag(units, tau_s);
+    r0_ = lag.r0;
+    if (sensor_) zero_lag_ = lag_in_zero_windows(units, lag, tau_s);
+  }
+  bool affects(const Unit& u) const override { return gain_ != 0.0 && !(sensor_ && zeroed(u)); }
   void apply(std::size_t ui, const Unit& u, std::span<const double> F,
              std::span<double> out) const override {
     double r = r0_[ui];
@@ -180,11 +245,22 @@ class LagEffect final : public Applied {
       out[i] = F[i] + gain_ * r;
     }
   }
+  double swing_reading(std::size_t ui) const override {
+    return sensor_ ? gain_ * zero_lag_.level[ui] : 0.0;
+  }
+  double swing_reading_per_start_lag(std::size_t ui) const override {
+    return sensor_ ? gain_ * zero_lag_.per_start_lag[ui] : 0.0;
+  }
 
  private:
+  static bool zeroed(const Unit& u) {
+    return std::isfinite(u.t_pre_zero_s) && std::isfinite(u.t_post_zero_s);
+  }
   double gain_;
   double tau_s_;
+  bool sensor_;
   std::vector<double> r0_;
+  ZeroWindowLag zero_lag_;
 };
 
 class HysteresisEffect final : public Applied {
@@ -277,7 +353,7 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
        0,
        {{"strength", 0.0, 0.95, linspace(0.07, 0.7, 10)}, {"tau_s", 0.005, 10.0, fast_tau}},
        [](const std::vector<Unit>& units, std::span<const double> th) {
-         return std::make_unique<LagEffect>(units, -th[0], th[1]);
+         return std::make_unique<LagEffect>(units, -th[0], th[1], LagEffect::Stage::Tissue);
        }});
   specs.push_back({"hysteresis",
                    0,
@@ -305,8 +381,10 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
                    1,
                    {{"gain", 0.0, 2.0, linspace(0.05, 0.5, 10)}, {"tau_s", 0.02, 60.0, slow_tau}},
                    [](const std::vector<Unit>& units, std::span<const double> th) {
-                     return std::make_unique<LagEffect>(units, th[0], th[1]);
-                   }});
+                     return std::make_unique<LagEffect>(units, th[0], th[1],
+                                                        LagEffect::Stage::Sensor);
+                   },
+                   true});
   return specs;
 }
 
@@ -496,23 +574,62 @@ Model build(const std::vector<Unit>& units, std::span<const FixedEffect> effects
   return m;
 }
 
-std::vector<double> unit_costs(const std::vector<Unit>& units, std::span<const FixedEffect> fx,
-                               std::vector<std::vector<double>>* preds = nullptr) {
-  const Model m = build(units, fx);
-  const Chain chain = m.chain();
-  std::vector<double> cost(units.size());
-  Workspace w;
-  if (preds != nullptr) preds->resize(units.size());
-  for (std::size_t ui = 0; ui < units.size(); ++ui) {
-    cost[ui] = solve_unit(chain, ui, units[ui], w, preds != nullptr ? &(*preds)[ui] : nullptr);
-  }
-  return cost;
-}
-
 double sum(std::span<const double> v) {
   double s = 0;
   for (double x : v) s += x;
   return s;
+}
+
+// Squared residuals per unit of the two channels: the stance force, and the change of the
+// unit's zero from the foot's step before (0 where it is not observed).
+struct Costs {
+  std::vector<double> force, zero;
+  double force_sse() const { return sum(force); }
+  double zero_sse() const { return sum(zero); }
+};
+
+Costs unit_costs(const std::vector<Unit>& units, std::span<const FixedEffect> fx,
+                 std::vector<std::vector<double>>* preds = nullptr) {
+  const Model m = build(units, fx);
+  const Chain chain = m.chain();
+  Costs cost{std::vector<double>(units.size(), 0.0), std::vector<double>(units.size(), 0.0)};
+  Workspace w;
+  if (preds != nullptr) preds->resize(units.size());
+  // Per unit with an observed change: the change less the chain's prediction without an
+  // unknown start (rest), and the prediction per unit of start lag (slope).
+  std::vector<double> rest(units.size(), 0.0), slope(units.size(), 0.0);
+  const auto reading = [&](std::size_t ui) {
+    double level = 0.0, per_start = 0.0;
+    for (const Applied* e : chain) {
+      level += e->swing_reading(ui);
+      per_start += e->swing_reading_per_start_lag(ui);
+    }
+    return std::pair{level, per_start};
+  };
+  std::vector<double> ss(units.size(), 0.0), sr(units.size(), 0.0);  // per chain start
+  for (std::size_t ui = 0; ui < units.size(); ++ui) {
+    const Unit& u = units[ui];
+    cost.force[ui] = solve_unit(chain, ui, u, w, preds != nullptr ? &(*preds)[ui] : nullptr);
+    if (!u.zero_change) continue;
+    const auto p = static_cast<std::size_t>(u.prev);
+    const auto [level, per_start] = reading(ui);
+    const auto [p_level, p_per_start] = reading(p);
+    rest[ui] = (u.zero_n - units[p].zero_n) - (level - p_level);
+    slope[ui] = per_start - p_per_start;
+    const auto c = static_cast<std::size_t>(u.chain);
+    ss[c] += slope[ui] * slope[ui];
+    sr[c] += slope[ui] * rest[ui];
+  }
+  // The unknown start lag of each chain: least squares, at least 0 (a load leaves no less).
+  for (std::size_t ui = 0; ui < units.size(); ++ui) {
+    const Unit& u = units[ui];
+    if (!u.zero_change) continue;
+    const auto c = static_cast<std::size_t>(u.chain);
+    const double start = units[c].unknown_start && ss[c] > 0.0 ? std::max(0.0, sr[c] / ss[c]) : 0.0;
+    const double r = rest[ui] - start * slope[ui];
+    cost.zero[ui] = r * r;
+  }
+  return cost;
 }
 
 struct Pooled {
@@ -522,26 +639,58 @@ struct Pooled {
   double neff_fraction = 1.0;
   int folds = 5;
   std::vector<int> fold_of;  // per unit
+  // The zero channel: observed changes, their sum of peak^2, and whether it takes part (it
+  // does not when nothing is observed or every change is exactly zero, as in synthetic input).
+  long zero_changes = 0;
+  double zero_norm = 0.0;
+  bool zero_channel = false;
+  int unknown_starts = 0;  // chains with an observed change whose start lag is unknown
 };
+
+// Shared parameters a candidate adds, with the start lags it solves.
+int param_count(const CandidateSpec& spec, const Pooled& p) {
+  return static_cast<int>(spec.params.size()) +
+         (spec.reads_in_swing && p.zero_channel ? p.unknown_starts : 0);
+}
 
 double nrmse(double sse, double norm) {
   return norm > 0 ? 100.0 * std::sqrt(sse / norm) : 0.0;
 }
 
-double bic(double sse, const Pooled& p, int params) {
+double effective_frames(const Pooled& p) {
+  return std::max(2.0, static_cast<double>(p.frames) * p.neff_fraction);
+}
+
+// -2 log-likelihood (up to a constant) of the two channels, each with its own residual
+// variance: the force residuals' effective sample size and the zero changes' count weigh them.
+// The zero channel's residuals are some hundred times smaller than the force's; summing squares
+// would let the force decide alone.
+double deviance(double force_sse, double zero_sse, const Pooled& p) {
+  double d = effective_frames(p) * std::log(std::max(force_sse, 1e-300));
+  if (p.zero_channel)
+    d += static_cast<double>(p.zero_changes) * std::log(std::max(zero_sse, 1e-300));
+  return d;
+}
+
+double bic(const Costs& c, const Pooled& p, int params) {
   const double n = static_cast<double>(p.frames);
-  const double neff = std::max(2.0, n * p.neff_fraction);
-  return neff * std::log(std::max(sse, 1e-300) / n) + params * std::log(neff);
+  const double neff = effective_frames(p);
+  double b = neff * std::log(std::max(c.force_sse(), 1e-300) / n);
+  double count = neff;
+  if (p.zero_channel) {
+    const auto z = static_cast<double>(p.zero_changes);
+    b += z * std::log(std::max(c.zero_sse(), 1e-300) / z);
+    count += z;
+  }
+  return b + params * std::log(count);
 }
 
 struct CandidateOutcome {
   const CandidateSpec* spec = nullptr;
-  std::vector<double> theta;      // full data, refined
-  std::vector<double> se;         // of theta
-  std::vector<double> heldout;    // per unit
-  std::vector<double> in_sample;  // per unit at theta
-  double heldout_sse = 0.0;
-  double in_sample_sse = 0.0;
+  std::vector<double> theta;  // full data, refined
+  std::vector<double> se;     // of theta
+  Costs heldout;              // per unit, under the parameters fitted on the other folds
+  Costs in_sample;            // per unit at theta
 };
 
 std::vector<std::vector<double>> grid_of(const CandidateSpec& spec) {
@@ -569,7 +718,7 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     if (stop.stop_requested()) throw FitStopped();
   };
   const auto grid = grid_of(spec);
-  std::vector<std::vector<double>> costs(grid.size());
+  std::vector<Costs> costs(grid.size());
   parallel_for(grid.size(), [&](std::size_t gi) {
     check_stop();
     std::vector<FixedEffect> fx(base.begin(), base.end());
@@ -577,41 +726,54 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     costs[gi] = unit_costs(units, fx);
   });
   const int k = pooled.folds;
-  std::vector<std::vector<double>> fold_sse(grid.size(), std::vector<double>(k, 0.0));
-  std::vector<double> total(grid.size(), 0.0);
+  // Per grid point and fold: the two channels' sums of squares.
+  using Channels = std::array<double, 2>;
+  std::vector<std::vector<Channels>> fold_sse(grid.size(), std::vector<Channels>(k, {0.0, 0.0}));
+  std::vector<Channels> total(grid.size(), {0.0, 0.0});
   for (std::size_t gi = 0; gi < grid.size(); ++gi) {
     for (std::size_t ui = 0; ui < units.size(); ++ui) {
-      fold_sse[gi][static_cast<std::size_t>(pooled.fold_of[ui])] += costs[gi][ui];
+      Channels& f = fold_sse[gi][static_cast<std::size_t>(pooled.fold_of[ui])];
+      f[0] += costs[gi].force[ui];
+      f[1] += costs[gi].zero[ui];
     }
-    total[gi] = sum(fold_sse[gi]);
+    for (const Channels& f : fold_sse[gi]) {
+      total[gi][0] += f[0];
+      total[gi][1] += f[1];
+    }
   }
+  const auto training = [&](std::size_t gi, int f) {
+    return deviance(total[gi][0] - fold_sse[gi][f][0], total[gi][1] - fold_sse[gi][f][1], pooled);
+  };
   CandidateOutcome out;
   out.spec = &spec;
-  out.heldout.assign(units.size(), 0.0);
+  out.heldout = {std::vector<double>(units.size(), 0.0), std::vector<double>(units.size(), 0.0)};
   for (int f = 0; f < k; ++f) {
     std::size_t best = 0;
     for (std::size_t gi = 1; gi < grid.size(); ++gi) {
-      if (total[gi] - fold_sse[gi][f] < total[best] - fold_sse[best][f]) best = gi;
+      if (training(gi, f) < training(best, f)) best = gi;
     }
     for (std::size_t ui = 0; ui < units.size(); ++ui) {
-      if (pooled.fold_of[ui] == f) out.heldout[ui] = costs[best][ui];
+      if (pooled.fold_of[ui] != f) continue;
+      out.heldout.force[ui] = costs[best].force[ui];
+      out.heldout.zero[ui] = costs[best].zero[ui];
     }
   }
-  out.heldout_sse = sum(out.heldout);
 
   // Refinement on all steps: coordinate search in shrinking steps from the best grid point.
+  const auto all = [&](std::size_t gi) { return deviance(total[gi][0], total[gi][1], pooled); };
   std::size_t best = 0;
   for (std::size_t gi = 1; gi < grid.size(); ++gi) {
-    if (total[gi] < total[best]) best = gi;
+    if (all(gi) < all(best)) best = gi;
   }
   std::vector<double> theta = grid[best];
   const auto objective = [&](const std::vector<double>& th) {
     check_stop();
     std::vector<FixedEffect> fx(base.begin(), base.end());
     fx.push_back({&spec, th});
-    return sum(unit_costs(units, fx));
+    const Costs c = unit_costs(units, fx);
+    return deviance(c.force_sse(), c.zero_sse(), pooled);
   };
-  double value = total[best];
+  double value = all(best);
   std::vector<double> step(theta.size());
   for (std::size_t p = 0; p < theta.size(); ++p) {
     const auto& g = spec.params[p].grid;
@@ -637,11 +799,10 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   std::vector<FixedEffect> fx(base.begin(), base.end());
   fx.push_back({&spec, theta});
   out.in_sample = unit_costs(units, fx);
-  out.in_sample_sse = sum(out.in_sample);
 
-  // Standard errors from the curvature of the profiled SSE: cov = 2 s^2 H^-1 (diagonal of the
-  // inverse for up to three parameters), s^2 = SSE / (N_eff - p), N_eff inflating for
-  // autocorrelated residuals.
+  // Standard errors from the curvature of the profiled deviance: cov = 2 H^-1 (diagonal of the
+  // inverse). With the force alone that is 2 s^2 H_SSE^-1, s^2 = SSE / N_eff, N_eff inflating
+  // for autocorrelated residuals.
   const std::size_t np = theta.size();
   out.se.assign(np, 0.0);
   std::vector<std::size_t> free;
@@ -667,8 +828,6 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
       H[i * q + j] = H[j * q + i] = v;
     }
   }
-  const double neff = std::max(2.0, static_cast<double>(pooled.frames) * pooled.neff_fraction);
-  const double s2 = value / std::max(1.0, neff - static_cast<double>(q));
   // Invert H (q <= 2 here; a three-parameter candidate has a discrete onset).
   std::vector<double> inv(q * q, 0.0);
   if (q == 1 && H[0] > 0) {
@@ -680,7 +839,7 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     }
   }
   for (std::size_t i = 0; i < q; ++i) {
-    const double var = 2.0 * s2 * inv[i * q + i];
+    const double var = 2.0 * inv[i * q + i];
     out.se[free[i]] = var > 0 ? std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
   }
   return out;
@@ -798,8 +957,18 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
         const double q = u.K0 * dE_dg * dg_dA * input.cell_area_mm2 / std::sqrt(12.0);
         u.floor2[i] += q * q;
       }
+      u.zero_n = ds.region_zero_n[index_of(region)];
+      u.t_pre_zero_s = ds.pre_zero_t_s;
+      u.t_post_zero_s = ds.post_zero_t_s;
       int& prev = last[static_cast<std::size_t>(sa.foot)][index_of(region)];
       u.prev = prev;
+      if (std::isfinite(u.t_pre_zero_s) && std::isfinite(u.t_post_zero_s)) {
+        const auto self = static_cast<int>(out.units.size());
+        const Unit* p = prev >= 0 ? &out.units[static_cast<std::size_t>(prev)] : nullptr;
+        u.zero_change = p != nullptr && p->chain >= 0 && p->step + 1 == u.step;
+        u.chain = u.zero_change ? p->chain : self;
+        u.unknown_start = !u.zero_change && u.step != 0;
+      }
       prev = static_cast<int>(out.units.size());
       out.units.push_back(std::move(u));
     }
@@ -814,11 +983,20 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
   }
   Pooled& p = out.pooled;
   p.folds = folds;
+  double zero_sse = 0.0;
   for (const Unit& u : out.units) {
     p.norm += u.norm();
     p.frames += static_cast<long>(u.y.size());
     p.fold_of.push_back(u.ordinal % folds);
+    if (!u.zero_change) continue;
+    const Unit& start = out.units[static_cast<std::size_t>(u.chain)];
+    if (start.unknown_start && u.prev == u.chain) ++p.unknown_starts;
+    const double dz = u.zero_n - out.units[static_cast<std::size_t>(u.prev)].zero_n;
+    zero_sse += dz * dz;
+    ++p.zero_changes;
+    p.zero_norm += u.peak_n * u.peak_n;
   }
+  p.zero_channel = p.zero_changes > 0 && zero_sse > 0.0;
   // Lag-1 autocorrelation of the baseline residuals, within units.
   double c0 = 0, c1 = 0;
   for (const Unit& u : out.units) {
@@ -980,17 +1158,27 @@ EffectEstimate estimate_of(const CandidateOutcome& c) {
   return e;
 }
 
-CandidateResult result_of(const CandidateOutcome& c, const Pooled& pooled, double base_heldout,
-                          double base_sse, int base_params) {
+double shrink(double before, double after) {
+  return before > 0.0 ? 100.0 * (1.0 - after / before) : 0.0;
+}
+
+// One candidate against the model it extends (`base`: its held-out and in-sample costs).
+CandidateResult result_of(const CandidateOutcome& c, const Pooled& pooled,
+                          const CandidateOutcome& base, int base_params) {
   CandidateResult r;
   r.name = c.spec->name;
   r.params = estimate_of(c).params;
-  r.in_sample_nrmse_pct = nrmse(c.in_sample_sse, pooled.norm);
-  r.heldout_nrmse_pct = nrmse(c.heldout_sse, pooled.norm);
-  r.shrink_pct = base_heldout > 0.0 ? 100.0 * (1.0 - r.heldout_nrmse_pct / base_heldout) : 0.0;
-  const int params = base_params + static_cast<int>(c.theta.size());
-  r.bic = bic(c.in_sample_sse, pooled, params);
-  r.delta_bic = r.bic - bic(base_sse, pooled, base_params);
+  r.in_sample_nrmse_pct = nrmse(c.in_sample.force_sse(), pooled.norm);
+  r.heldout_nrmse_pct = nrmse(c.heldout.force_sse(), pooled.norm);
+  r.shrink_pct = shrink(nrmse(base.heldout.force_sse(), pooled.norm), r.heldout_nrmse_pct);
+  r.zero_heldout_nrmse_pct = nrmse(c.heldout.zero_sse(), pooled.zero_norm);
+  r.zero_shrink_pct =
+      shrink(nrmse(base.heldout.zero_sse(), pooled.zero_norm), r.zero_heldout_nrmse_pct);
+  r.heldout_deviance_drop = deviance(base.heldout.force_sse(), base.heldout.zero_sse(), pooled) -
+                            deviance(c.heldout.force_sse(), c.heldout.zero_sse(), pooled);
+  const int params = base_params + param_count(*c.spec, pooled);
+  r.bic = bic(c.in_sample, pooled, params);
+  r.delta_bic = r.bic - bic(base.in_sample, pooled, base_params);
   return r;
 }
 
@@ -1100,8 +1288,18 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
   input.steps.resize(steps.size());
   for (std::size_t i = 0; i < steps.size(); ++i) {
     input.steps[i].analysis = std::move(analyses[i]);
-    input.steps[i].zero_bits = steps[i].bias_bits;
-    input.steps[i].peak_summed_bits = steps[i].max_summed_bits;
+    DiscrepancyStep& ds = input.steps[i];
+    ds.zero_bits = steps[i].bias_bits;
+    ds.peak_summed_bits = steps[i].max_summed_bits;
+    ds.pre_zero_t_s = steps[i].pre_zero_t_s;
+    ds.post_zero_t_s = steps[i].post_zero_t_s;
+    for (Region region : kRegions) {
+      double bits = 0.0;
+      for (std::size_t c : layout.region_sensors(region)) {
+        if (c < steps[i].sensor_zero_bits.size()) bits += steps[i].sensor_zero_bits[c];
+      }
+      ds.region_zero_n[index_of(region)] = bits * input.newtons_per_bit;
+    }
   }
   double highest = 0.0;
   for (const Step& s : steps) {
@@ -1149,11 +1347,15 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.noise_floor_nrmse_pct = nrmse(floor_sum, pooled.norm);
 
   std::vector<std::vector<double>> base_preds;
-  const std::vector<double> base = unit_costs(units, {}, &base_preds);
-  const double base_sse = sum(base);
-  out.baseline_in_sample_nrmse_pct = nrmse(base_sse, pooled.norm);
+  CandidateOutcome baseline;
+  baseline.in_sample = unit_costs(units, {}, &base_preds);
+  baseline.heldout = baseline.in_sample;  // nothing shared to hold out
+  const std::vector<double>& base = baseline.in_sample.force;
+  out.baseline_in_sample_nrmse_pct = nrmse(baseline.in_sample.force_sse(), pooled.norm);
   out.baseline_heldout_nrmse_pct = out.baseline_in_sample_nrmse_pct;
-  out.baseline_bic = bic(base_sse, pooled, base_params);
+  out.baseline_bic = bic(baseline.in_sample, pooled, base_params);
+  out.zero_changes = pooled.zero_channel ? pooled.zero_changes : 0;
+  out.zero_baseline_heldout_nrmse_pct = nrmse(baseline.heldout.zero_sse(), pooled.zero_norm);
   out.map_before = residual_map(units, base_preds, settings.phase_bins);
   out.diagnostics = diagnose(prep, base_preds, settings.phase_bins);
   out.zero_levels = zero_level_drift(input);
@@ -1161,52 +1363,60 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   std::vector<CandidateOutcome> outcomes;
   for (const CandidateSpec& spec : specs) {
     outcomes.push_back(fit_candidate(units, pooled, {}, spec));
-    out.candidates.push_back(
-        result_of(outcomes.back(), pooled, out.baseline_heldout_nrmse_pct, base_sse, base_params));
+    out.candidates.push_back(result_of(outcomes.back(), pooled, baseline, base_params));
   }
+  // A candidate is named when it shrinks the held-out error of the force or of the zero clearly
+  // (a creeping sensor shows in the zero only: the zeroing takes it off the stance) and BIC
+  // agrees. The best is the one whose held-out likelihood gains most over both channels.
   const auto passes = [&](const CandidateResult& r) {
-    return r.shrink_pct >= settings.min_shrink_pct && r.delta_bic <= -settings.min_delta_bic;
+    const bool shrinks = r.shrink_pct >= settings.min_shrink_pct ||
+                         (pooled.zero_channel && r.zero_shrink_pct >= settings.min_shrink_pct);
+    return shrinks && r.delta_bic <= -settings.min_delta_bic;
   };
-  std::size_t best = 0;
-  for (std::size_t i = 1; i < out.candidates.size(); ++i) {
-    if (out.candidates[i].heldout_nrmse_pct < out.candidates[best].heldout_nrmse_pct) best = i;
-  }
-  std::vector<double> heldout = base;
+  const auto most_likely = [](const std::vector<CandidateResult>& results) {
+    std::size_t best = 0;
+    for (std::size_t i = 1; i < results.size(); ++i) {
+      if (results[i].heldout_deviance_drop > results[best].heldout_deviance_drop) best = i;
+    }
+    return best;
+  };
+  const std::size_t best = most_likely(out.candidates);
+  const CandidateOutcome* last = &baseline;
   std::vector<FixedEffect> chosen;
+  std::vector<CandidateOutcome> seconds;
   if (passes(out.candidates[best])) {
     const CandidateOutcome& first = outcomes[best];
     out.named_effects.push_back(estimate_of(first));
     chosen.push_back({first.spec, first.theta});
-    heldout = first.heldout;
+    last = &first;
     if (settings.second_effect) {
-      const double first_heldout = out.candidates[best].heldout_nrmse_pct;
-      std::vector<CandidateOutcome> seconds;
+      // A second candidate runs on top of the first at its all-steps parameters, held-out fold
+      // or not, so it is compared with the first at those parameters: against the first's
+      // fold-by-fold error it would gain what the first loses by being held out.
+      CandidateOutcome first_fixed = first;
+      first_fixed.heldout = first.in_sample;
       for (const CandidateSpec& spec : specs) {
         if (spec.name == first.spec->name) continue;
         seconds.push_back(fit_candidate(units, pooled, chosen, spec));
-        out.second_candidates.push_back(
-            result_of(seconds.back(), pooled, first_heldout, first.in_sample_sse,
-                      base_params + static_cast<int>(first.theta.size())));
+        out.second_candidates.push_back(result_of(seconds.back(), pooled, first_fixed,
+                                                  base_params + param_count(*first.spec, pooled)));
       }
-      std::size_t b2 = 0;
-      for (std::size_t i = 1; i < out.second_candidates.size(); ++i) {
-        if (out.second_candidates[i].heldout_nrmse_pct <
-            out.second_candidates[b2].heldout_nrmse_pct) {
-          b2 = i;
+      if (!out.second_candidates.empty()) {
+        const std::size_t b2 = most_likely(out.second_candidates);
+        if (passes(out.second_candidates[b2])) {
+          out.named_effects.push_back(estimate_of(seconds[b2]));
+          chosen.push_back({seconds[b2].spec, seconds[b2].theta});
+          last = &seconds[b2];
         }
-      }
-      if (!out.second_candidates.empty() && passes(out.second_candidates[b2])) {
-        out.named_effects.push_back(estimate_of(seconds[b2]));
-        chosen.push_back({seconds[b2].spec, seconds[b2].theta});
-        heldout = seconds[b2].heldout;
       }
     }
   }
-  out.extended_heldout_nrmse_pct = nrmse(sum(heldout), pooled.norm);
-  out.gap_shrink_pct =
-      out.baseline_heldout_nrmse_pct > 0.0
-          ? 100.0 * (1.0 - out.extended_heldout_nrmse_pct / out.baseline_heldout_nrmse_pct)
-          : 0.0;
+  const std::vector<double>& heldout = last->heldout.force;
+  out.extended_heldout_nrmse_pct = nrmse(last->heldout.force_sse(), pooled.norm);
+  out.gap_shrink_pct = shrink(out.baseline_heldout_nrmse_pct, out.extended_heldout_nrmse_pct);
+  out.zero_extended_heldout_nrmse_pct = nrmse(last->heldout.zero_sse(), pooled.zero_norm);
+  out.zero_gap_shrink_pct =
+      shrink(out.zero_baseline_heldout_nrmse_pct, out.zero_extended_heldout_nrmse_pct);
 
   std::vector<std::vector<double>> ext_preds;
   unit_costs(units, chosen, &ext_preds);
@@ -1258,12 +1468,14 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   const Prepared prep = prepare(input, settings.folds);
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   ExtendedModelFit out;
-  const std::vector<double> base = unit_costs(prep.units, {});
-  out.baseline_nrmse_pct = nrmse(sum(base), prep.pooled.norm);
+  const Costs base = unit_costs(prep.units, {});
+  out.baseline_nrmse_pct = nrmse(base.force_sse(), prep.pooled.norm);
   out.baseline_heldout_nrmse_pct = out.baseline_nrmse_pct;
+  out.zero_changes = prep.pooled.zero_channel ? prep.pooled.zero_changes : 0;
+  out.zero_baseline_heldout_nrmse_pct = nrmse(base.zero_sse(), prep.pooled.zero_norm);
   std::vector<FixedEffect> chosen;
-  std::vector<double> heldout = base;
-  std::vector<double> in_sample = base;
+  Costs heldout = base;
+  Costs in_sample = base;
   for (const std::string& name : effects) {
     const CandidateOutcome c =
         fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name), stop);
@@ -1272,9 +1484,10 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
     heldout = c.heldout;
     in_sample = c.in_sample;
   }
-  out.extended_nrmse_pct = nrmse(sum(in_sample), prep.pooled.norm);
-  out.extended_heldout_nrmse_pct = nrmse(sum(heldout), prep.pooled.norm);
-  out.regions = compare_regions(prep.units, base, heldout);
+  out.extended_nrmse_pct = nrmse(in_sample.force_sse(), prep.pooled.norm);
+  out.extended_heldout_nrmse_pct = nrmse(heldout.force_sse(), prep.pooled.norm);
+  out.zero_extended_heldout_nrmse_pct = nrmse(heldout.zero_sse(), prep.pooled.zero_norm);
+  out.regions = compare_regions(prep.units, base.force, heldout.force);
   return out;
 }
 

@@ -320,10 +320,12 @@ StepSegmenter::Window StepSegmenter::window(std::int64_t midpoint, std::int64_t 
   for (std::int64_t i = lo; i <= hi; ++i) {
     const Entry& e = at(i);
     sum += e.sum;
+    w.t_s += e.frame.t_s;
     for (std::size_t s = 0; s < sensors_; ++s) w.zero_bits[s] += e.frame.bits[s];
   }
   const std::int64_t count = hi - lo + 1;
   w.bias_bits = static_cast<double>(sum) / static_cast<double>(count);
+  w.t_s /= static_cast<double>(count);
   for (double& z : w.zero_bits) z /= static_cast<double>(count);
 
   // The quietest run of `count` frames between this window and the step.
@@ -350,6 +352,8 @@ Step StepSegmenter::make_step(const Pending& pending, std::int64_t toe_off,
   step.foot = foot_;
   step.index = pending.index;
   step.status = status;
+  if (pending.pre) step.pre_zero_t_s = pending.pre->t_s;
+  if (post) step.post_zero_t_s = post->t_s;
   if (pending.pre && post) {
     step.bias_bits = (pending.pre->bias_bits + post->bias_bits) / 2.0;
     step.sensor_zero_bits.resize(sensors_);

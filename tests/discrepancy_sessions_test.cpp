@@ -100,6 +100,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   int right_names = 0;
   // Sessions whose zero level was reported drifting on a foot [0]: no, [1]: yes.
   std::array<int, 2> drift_in_creep{}, drift_elsewhere{};
+  double min_creep_zero_shrink = 100.0;
   std::uint64_t seed = 100;
   for (const std::string& effect : classes) {
     for (std::size_t i = 0; i < 3; ++i) {
@@ -109,7 +110,9 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       ++named_matrix[effect][first];
       std::size_t best = 0;
       for (std::size_t k = 1; k < r.candidates.size(); ++k) {
-        if (r.candidates[k].heldout_nrmse_pct < r.candidates[best].heldout_nrmse_pct) best = k;
+        if (r.candidates[k].heldout_deviance_drop > r.candidates[best].heldout_deviance_drop) {
+          best = k;
+        }
       }
       ++ranked_matrix[effect][r.candidates[best].name];
       if (effect == "none" && first != "none") ++none_named;
@@ -120,12 +123,17 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
         if (z.drifting) drifting += foot_name(z.foot);
       }
       ++(effect == "sensor_creep" ? drift_in_creep : drift_elsewhere)[!drifting.empty()];
+      if (effect == "sensor_creep")
+        min_creep_zero_shrink = std::min(min_creep_zero_shrink, r.zero_gap_shrink_pct);
       shrinks += fmt::format(
-          "  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> "
-          "{:6.2f} % (gap shrink {:5.1f} %; best candidate {} {:+.1f} %; zero drifting: {})\n",
+          "  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> {:6.2f} % (gap shrink "
+          "{:5.1f} %); zero channel {:5.3f} % -> {:5.3f} % ({:5.1f} %); best candidate {} "
+          "{:+.1f} % / zero {:+.1f} %; zero drifting: {}\n",
           effect, insole_size_name(c.size), c.seed, first, r.baseline_heldout_nrmse_pct,
-          r.extended_heldout_nrmse_pct, r.gap_shrink_pct, r.candidates[best].name,
-          r.candidates[best].shrink_pct, drifting.empty() ? "-" : drifting);
+          r.extended_heldout_nrmse_pct, r.gap_shrink_pct, r.zero_baseline_heldout_nrmse_pct,
+          r.zero_extended_heldout_nrmse_pct, r.zero_gap_shrink_pct, r.candidates[best].name,
+          r.candidates[best].shrink_pct, r.candidates[best].zero_shrink_pct,
+          drifting.empty() ? "-" : drifting);
     }
   }
   const auto print = [&](const char* title, std::map<std::string, std::map<std::string, int>>& m) {
@@ -140,18 +148,23 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
     fmt::print("{}", out);
   };
   print("Confusion matrix (named effect; 3 sessions per row)", named_matrix);
-  print("Best candidate by held-out error, named or not", ranked_matrix);
+  print("Best candidate by held-out likelihood (force and zero), named or not", ranked_matrix);
   fmt::print("Sessions:\n{}", shrinks);
   // The naming threshold (5 %) is about three times the largest false improvement seen on 15
   // sessions without an effect (these three and twelve others, README), so none of these is
-  // named and no effect session is named wrongly. 11 of the 15 effect sessions were named right
-  // when measured; the targets for them (90 % named, 40 % shrink) are not met through the
-  // simulated measurement chain (README, "Model-data discrepancy").
+  // named and no effect session is named wrongly. 14 of the 15 effect sessions were named right
+  // when measured (the 90 %; sensor creep through the zero channel); the 40 %
+  // shrink is not met by every effect (README, "Model-data discrepancy"). The weakest impact
+  // (80 N, 30 ms) falls in heel frames that give no footprint and is not seen.
   fmt::print("effect sessions named right: {} of 15; with a wrong effect named: {}\n", right_names,
              wrong_names);
   EXPECT_EQ(none_named, 0);
   EXPECT_EQ(wrong_names, 0);
-  EXPECT_GE(right_names, 11);
+  EXPECT_GE(right_names, 14);
+  // Creep is named on the zeros, and its zero channel gap shrinks by 73-79 % when measured.
+  fmt::print("smallest zero channel shrink of the creep sessions: {:.1f} %\n",
+             min_creep_zero_shrink);
+  EXPECT_GE(min_creep_zero_shrink, 40.0);
   // Creep that the zeroing takes out of the force still shows in the zero levels, and nothing
   // else moves them.
   fmt::print("zero level drifting: {} of 3 creep sessions, {} of 15 others\n", drift_in_creep[1],
@@ -200,9 +213,10 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
   EXPECT_EQ(texts[0], texts[1]);
 }
 
-TEST(DiscrepancySessions, ReportsTheZeroLevelsOfACreepingInsole) {
-  // Creep of gain 0.3 and tau 2 s: the zeroing takes it out of the force, and no candidate is
-  // named, but the zero levels rise by 3.7 % (left) and 6.5 % (right) of the peak when measured.
+TEST(DiscrepancySessions, NamesTheCreepOfAnInsoleFromItsZeros) {
+  // Creep of gain 0.3 and tau 2 s: the zeroing takes it out of the force, but the zero levels
+  // rise by 3.7 % (left) and 6.5 % (right) of the peak when measured, and the zero channel names
+  // it.
   const auto dir = test::scratch_dir("discrepancy-zero-levels");
   SimulationOptions o;
   o.duration_s = 12.0;
@@ -227,6 +241,17 @@ TEST(DiscrepancySessions, ReportsTheZeroLevelsOfACreepingInsole) {
     EXPECT_TRUE(z["drifting"].get<bool>()) << z.dump();
     EXPECT_GT(z["last_bits"].get<double>() - z["first_bits"].get<double>(), 40.0) << z.dump();
   }
+  ASSERT_EQ(j["named_effects"].size(), 1u) << j["named_effects"].dump();
+  EXPECT_EQ(j["named_effects"][0], "sensor_creep");
+  EXPECT_GE(j["zero_channel"]["gap_shrink_pct"].get<double>(), 40.0) << j["zero_channel"].dump();
+  EXPECT_NE(output.find("zero channel ("), std::string::npos) << output;
+  // The truth is gain 0.3 and tau 2 s (0.297 and 2.07 s when measured). The zero channel sees
+  // the lag of the region's thresholded summed force rather than of each cell's reading, so
+  // within 20 %.
+  const auto& params = j["named_effect_params"][0]["params"];
+  fmt::print("creep gain {} tau {}\n", params["gain"].dump(), params["tau_s"].dump());
+  EXPECT_NEAR(params["gain"]["value"].get<double>(), 0.3, 0.06);
+  EXPECT_NEAR(params["tau_s"]["value"].get<double>(), 2.0, 0.4);
 }
 
 }  // namespace

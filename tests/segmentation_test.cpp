@@ -121,6 +121,9 @@ void expect_same(const Step& a, const Step& b) {
   EXPECT_EQ(a.t_toe_off_s, b.t_toe_off_s);
   EXPECT_EQ(a.bias_bits, b.bias_bits);
   EXPECT_EQ(a.sensor_zero_bits, b.sensor_zero_bits);
+  const auto same = [](double x, double y) { return x == y || (std::isnan(x) && std::isnan(y)); };
+  EXPECT_TRUE(same(a.pre_zero_t_s, b.pre_zero_t_s)) << a.pre_zero_t_s << " " << b.pre_zero_t_s;
+  EXPECT_TRUE(same(a.post_zero_t_s, b.post_zero_t_s)) << a.post_zero_t_s << " " << b.post_zero_t_s;
   EXPECT_EQ(a.max_summed_bits, b.max_summed_bits);
   EXPECT_EQ(a.adaptive_threshold_bits, b.adaptive_threshold_bits);
   EXPECT_EQ(a.peak_force_n, b.peak_force_n);
@@ -281,6 +284,15 @@ TEST(StepSegmenter, TheBiasIsTheMeanOfThePreAndPostSwingBiases) {
   EXPECT_EQ(steps[2].bias_bits, 78.0);
   for (std::size_t s = 0; s < kSensors; ++s) {
     EXPECT_EQ(steps[1].sensor_zero_bits[s], kBias[s] + 0.5);
+  }
+  // The windows are centred on the swings' middle frames: 130 (frames 109-151, between the
+  // first toe off and the second heel strike) and 230 (209-251), 10 ms apart.
+  EXPECT_NEAR(steps[1].pre_zero_t_s, 1.30, 1e-9);
+  EXPECT_NEAR(steps[1].post_zero_t_s, 2.30, 1e-9);
+  EXPECT_NEAR(steps[2].pre_zero_t_s, steps[1].post_zero_t_s, 1e-9);
+  for (const Step& s : steps) {
+    EXPECT_LT(s.pre_zero_t_s, s.t_heel_strike_s);
+    EXPECT_GT(s.post_zero_t_s, s.t_toe_off_s);
   }
 }
 

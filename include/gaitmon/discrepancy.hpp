@@ -12,7 +12,8 @@
 // Candidates: named extensions with a few parameters SHARED by all the session's steps, while
 // n, K, D stay per step and region (re-solved for every parameter value):
 //   stress_relaxation  F_meas = F - g LP_tau(F)                (strength g, tau_s)
-//   sensor_creep       F_meas = F + beta LP_tau(F)             (gain beta, tau_s)
+//   sensor_creep       F_meas = F + beta LP_tau(F); zeroed steps: the zeros (below)
+//                                                              (gain beta, tau_s)
 //   hysteresis         F_meas = F (1 + h z(d)), Dahl state z   (strength h, transition_mm)
 //   impact_transient   heel F_meas = F + a sin(pi (t - t0) / T) (amplitude_n, duration_s,
 //                      onset_frames: t0 is that many frames before the heel's first frame
@@ -22,31 +23,47 @@
 //                      (ceiling_bits c)
 // LP_tau is a first-order lag running through the foot's steps in time order (the lag carried
 // into a step is that of the measured force of the foot's earlier steps, decayed over the
-// swing). Each candidate is fitted on a grid of its parameters (profiled over every step's K,
-// D) and refined locally; standard errors come from the curvature of the profiled sum of
-// squares, with the sample size reduced to the effective one of autocorrelated residuals.
+// swing).
+//
+// The zero channel. The segmenter zeroes each step with its cells' mean reading in two swing
+// windows around it (seed 3.3.1). A sensor that creeps reads its lagged load there too, so the
+// zeroing takes the creep's level off the stance and the zeros rise with it instead. The
+// workflow observes the change of each step-region's zero from the foot's step before: 0 for
+// the baseline (an unloaded sensor reads its dc bias), beta times the change of the region's lag
+// averaged over the two windows for sensor_creep. Where a chain of consecutive steps does not
+// start at the foot's first contact (the recording began in stance), the lag it starts with is
+// unknown and is solved for (>= 0, least squares, one per chain, counted in BIC). On a zeroed
+// step the creep's stance force is left to the baseline: the rise within one stance that the
+// zeroing leaves is about proportional to the load, and the step's own K takes it up.
+//
+// Fitting. Each candidate is fitted on a grid of its parameters (profiled over every step's K,
+// D) and refined locally, minimising the deviance N_eff ln SSE_force + N_zero ln SSE_zero: each
+// channel with its own residual variance (the zeros' residuals are some hundred times smaller
+// than the force's, and a plain sum of squares would let the force decide alone). N_eff =
+// N (1 - r1) / (1 + r1), r1 the lag-1 autocorrelation of the baseline's force residuals; N_zero
+// the observed changes. Standard errors come from the curvature of the profiled deviance.
 //
 // Choice. Steps are split into k folds (by time order, step i in fold i mod k); a candidate's
 // held-out error is that of each fold's steps under the parameters fitted on the other folds.
-// The criterion is BIC with the effective sample size N_eff = N (1 - r1) / (1 + r1), r1 the
-// lag-1 autocorrelation of the baseline residuals. The best candidate by held-out error is named
-// when its held-out NRMSE is at least min_shrink_pct below the baseline's AND its BIC is at
-// least min_delta_bic below; a second effect is named on top of the first by the same rules
-// against the one-effect model.
+// The best candidate is the one whose held-out deviance falls most below the baseline's; it is
+// named when its held-out NRMSE of the force or of the zero changes is at least min_shrink_pct
+// below the baseline's AND its BIC (both channels) is at least min_delta_bic below. A second
+// effect is named on top of the first by the same rules against the first at its all-steps
+// parameters (which it runs on).
 //
 // Region-steps fitted on the contact ellipse (a toe whose cells never determine its footprint)
 // are left out when the session has footprints: the ellipse moves in whole cells, and its misfit
 // would swamp the effects sought.
 //
-// Zero levels. Each step is zeroed at the swings around it, so a slow drift of the readings (a
-// sensor that creeps under load, or a thermal drift) is mostly gone from the force the workflow
-// compares; zero_level_drift reports it from the steps' zeros instead, as a diagnostic.
+// Zero levels. zero_level_drift reports each foot's summed zero over the session as a
+// diagnostic: a creeping or thermally drifting insole shows there whatever the candidates say.
 //
 // NRMSE here is pooled eq 58: 100 sqrt(sum of squared residuals / sum over step-regions of
 // frames x (max measured force)^2), so regions weigh by their force.
 #pragma once
 
 #include <array>
+#include <limits>
 #include <span>
 #include <stdexcept>
 #include <stop_token>
@@ -76,6 +93,11 @@ struct DiscrepancyStep {
   std::array<std::vector<int>, kRegionCount> saturated_cells;
   double zero_bits = 0.0;         ///< the step's summed-bits zero (Step::bias_bits)
   double peak_summed_bits = 0.0;  ///< its highest zeroed summed bits (Step::max_summed_bits)
+  /// Per region: its cells' zero summed (N), what the per-step zeroing took off the region.
+  std::array<double, kRegionCount> region_zero_n{};
+  /// When the zero's swing windows were read (Step::pre_zero_t_s, post_zero_t_s); NaN if not.
+  double pre_zero_t_s = std::numeric_limits<double>::quiet_NaN();
+  double post_zero_t_s = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// A cell counts as saturated within this many bits of the session's highest zeroed reading.
@@ -131,6 +153,14 @@ struct CandidateResult {
   double in_sample_nrmse_pct = 0.0;
   double heldout_nrmse_pct = 0.0;
   double shrink_pct = 0.0;  ///< held-out, against the model it extends
+  /// The zero channel (see DiscrepancyResult::zero_changes): held-out NRMSE of the changes of
+  /// the step-regions' zeros, and its shrink against the model it extends.
+  double zero_heldout_nrmse_pct = 0.0;
+  double zero_shrink_pct = 0.0;
+  /// N_eff ln(force SSE) + N_zero ln(zero SSE), held out, of the model it extends less its own:
+  /// twice the held-out log-likelihood the candidate gains over both channels. The best
+  /// candidate has the largest.
+  double heldout_deviance_drop = 0.0;
   double bic = 0.0;
   double delta_bic = 0.0;  ///< against the model it extends
 };
@@ -220,6 +250,16 @@ struct DiscrepancyResult {
   double baseline_heldout_nrmse_pct = 0.0;  ///< the baseline has no shared parameters
   double extended_heldout_nrmse_pct = 0.0;
   double gap_shrink_pct = 0.0;  ///< 100 (1 - extended / baseline)
+  /// The zero channel: the change of each step-region's zero from the foot's step just before
+  /// (a zero is the region's mean reading in the two swing windows around its step). The
+  /// baseline reads nothing without a load, so the zero should not change; a sensor that creeps
+  /// reads its lagged load in the swing too, and the zero rises with it. NRMSE over the changes,
+  /// each scaled by its step-region's peak force. 0 changes (no channel) when the input has no
+  /// zero windows or every zero is the same.
+  long zero_changes = 0;
+  double zero_baseline_heldout_nrmse_pct = 0.0;
+  double zero_extended_heldout_nrmse_pct = 0.0;
+  double zero_gap_shrink_pct = 0.0;
   double baseline_bic = 0.0;
   std::vector<EffectEstimate> named_effects;
   std::vector<CandidateResult> candidates;         ///< each on top of the baseline
@@ -246,6 +286,9 @@ struct ExtendedModelFit {
   double extended_nrmse_pct = 0.0;  ///< pooled, in sample
   double baseline_heldout_nrmse_pct = 0.0;
   double extended_heldout_nrmse_pct = 0.0;
+  long zero_changes = 0;  ///< as DiscrepancyResult
+  double zero_baseline_heldout_nrmse_pct = 0.0;
+  double zero_extended_heldout_nrmse_pct = 0.0;
   std::vector<RegionComparison> regions;
 };
 

@@ -73,6 +73,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string_view>
@@ -99,6 +100,10 @@ struct Step {
   double t_toe_off_s = 0.0;              ///< t_s of the toe off frame
   double bias_bits = 0.0;                ///< summed-bits dc bias (mean of the two swing biases)
   std::vector<double> sensor_zero_bits;  ///< per sensor, mean over the swing-midpoint windows
+  /// Mean times of the frames of the windows before and after the step that the zero averages
+  /// (NaN where the step has no such window): when the insole read its zero.
+  double pre_zero_t_s = std::numeric_limits<double>::quiet_NaN();
+  double post_zero_t_s = std::numeric_limits<double>::quiet_NaN();
   double max_summed_bits = 0.0;          ///< max over the stance of the zeroed summed bits
   double adaptive_threshold_bits = 0.0;  ///< adaptive_threshold_bits(max_summed_bits, pct)
   double peak_force_n = 0.0;             ///< max over the stance of (S - bias) * newtons_per_bit
@@ -160,6 +165,7 @@ class StepSegmenter {
   /// lowest mean of as many consecutive frames between the window and the step.
   struct Window {
     std::int64_t midpoint = 0;
+    double t_s = 0.0;  ///< mean time of the frames averaged
     double bias_bits = 0.0;
     double floor_bits = 0.0;
     std::vector<double> zero_bits;

@@ -258,6 +258,10 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
           {"extended_nrmse_pct", fit->extended_nrmse_pct},
           {"baseline_heldout_nrmse_pct", fit->baseline_heldout_nrmse_pct},
           {"extended_heldout_nrmse_pct", fit->extended_heldout_nrmse_pct},
+          {"zero_channel",
+           {{"changes", fit->zero_changes},
+            {"baseline_heldout_nrmse_pct", fit->zero_baseline_heldout_nrmse_pct},
+            {"extended_heldout_nrmse_pct", fit->zero_extended_heldout_nrmse_pct}}},
           {"regions", regions}};
 }
 
@@ -467,6 +471,13 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
         "extended model: pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)\n",
         extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
         extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
+    if (extended->zero_changes > 0) {
+      fmt::print(
+          "zero channel ({} changes of the step-regions' zeros): held-out NRMSE {:.3f} % -> "
+          "{:.3f} %\n",
+          extended->zero_changes, extended->zero_baseline_heldout_nrmse_pct,
+          extended->zero_extended_heldout_nrmse_pct);
+    }
   }
 }
 

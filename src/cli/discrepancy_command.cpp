@@ -41,6 +41,9 @@ nlohmann::json candidates_json(const std::vector<CandidateResult>& list) {
                  {"in_sample_nrmse_pct", c.in_sample_nrmse_pct},
                  {"heldout_nrmse_pct", c.heldout_nrmse_pct},
                  {"heldout_shrink_pct", c.shrink_pct},
+                 {"zero_heldout_nrmse_pct", c.zero_heldout_nrmse_pct},
+                 {"zero_heldout_shrink_pct", c.zero_shrink_pct},
+                 {"heldout_deviance_drop", c.heldout_deviance_drop},
                  {"bic", c.bic},
                  {"delta_bic", c.delta_bic}});
   }
@@ -88,6 +91,14 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
   j["baseline_heldout_nrmse_pct"] = r.baseline_heldout_nrmse_pct;
   j["extended_heldout_nrmse_pct"] = r.extended_heldout_nrmse_pct;
   j["gap_shrink_pct"] = r.gap_shrink_pct;
+  j["zero_channel"] = {
+      {"changes", r.zero_changes},
+      {"baseline_heldout_nrmse_pct", r.zero_baseline_heldout_nrmse_pct},
+      {"extended_heldout_nrmse_pct", r.zero_extended_heldout_nrmse_pct},
+      {"gap_shrink_pct", r.zero_gap_shrink_pct},
+      {"what",
+       "change of each step-region's zero (its mean reading in the swing windows around "
+       "the step) from the foot's step before, scaled by the step-region's peak force"}};
   j["noise_floor_nrmse_pct"] = r.noise_floor_nrmse_pct;
   j["baseline_in_sample_nrmse_pct"] = r.baseline_in_sample_nrmse_pct;
   j["baseline_bic"] = r.baseline_bic;
@@ -182,10 +193,11 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
       "{:.1f} %\n",
       args.session.string(), result.steps, result.step_regions, result.step_regions_left_out,
       result.noise_floor_nrmse_pct);
-  fmt::print("{:<20}{:>14}{:>12}{:>12}\n", "candidate", "held-out %", "shrink %", "dBIC");
+  fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}\n", "candidate", "held-out %", "shrink %",
+             "zero shr. %", "dBIC");
   for (const CandidateResult& c : result.candidates) {
-    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.0f}\n", c.name, c.heldout_nrmse_pct, c.shrink_pct,
-               c.delta_bic);
+    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f}\n", c.name, c.heldout_nrmse_pct,
+               c.shrink_pct, c.zero_shrink_pct, c.delta_bic);
   }
   std::string named;
   for (const EffectEstimate& e : result.named_effects) {
@@ -206,6 +218,13 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   fmt::print("held-out NRMSE {:.2f} % -> {:.2f} % (gap shrink {:.1f} %)\n",
              result.baseline_heldout_nrmse_pct, result.extended_heldout_nrmse_pct,
              result.gap_shrink_pct);
+  if (result.zero_changes > 0) {
+    fmt::print(
+        "zero channel ({} step-to-step changes of the zero): held-out NRMSE {:.3f} % -> "
+        "{:.3f} % (gap shrink {:.1f} %)\n",
+        result.zero_changes, result.zero_baseline_heldout_nrmse_pct,
+        result.zero_extended_heldout_nrmse_pct, result.zero_gap_shrink_pct);
+  }
   for (const auto& path : written) fmt::print("wrote {}\n", path.string());
 }
 
