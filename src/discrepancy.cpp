@@ -1368,10 +1368,14 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   // A candidate is named when it shrinks the held-out error of the force or of the zero clearly
   // (a creeping sensor shows in the zero only: the zeroing takes it off the stance) and BIC
   // agrees. The best is the one whose held-out likelihood gains most over both channels.
+  // Its parameters must be determined, too: an optimum on a bound of the plausible range or
+  // along a flat direction (no finite standard error) is not an effect the data show.
   const auto passes = [&](const CandidateResult& r) {
     const bool shrinks = r.shrink_pct >= settings.min_shrink_pct ||
                          (pooled.zero_channel && r.zero_shrink_pct >= settings.min_shrink_pct);
-    return shrinks && r.delta_bic <= -settings.min_delta_bic;
+    const bool determined = std::all_of(r.params.begin(), r.params.end(),
+                                        [](const ParamEstimate& p) { return std::isfinite(p.se); });
+    return shrinks && determined && r.delta_bic <= -settings.min_delta_bic;
   };
   const auto most_likely = [](const std::vector<CandidateResult>& results) {
     std::size_t best = 0;

@@ -47,7 +47,9 @@
 // held-out error is that of each fold's steps under the parameters fitted on the other folds.
 // The best candidate is the one whose held-out deviance falls most below the baseline's; it is
 // named when its held-out NRMSE of the force or of the zero changes is at least min_shrink_pct
-// below the baseline's AND its BIC (both channels) is at least min_delta_bic below. A second
+// below the baseline's, its BIC (both channels) is at least min_delta_bic below, AND every
+// parameter has a finite standard error (an optimum on a bound or along a flat direction is not
+// an effect the data show). A second
 // effect is named on top of the first by the same rules against the first at its all-steps
 // parameters (which it runs on).
 //
