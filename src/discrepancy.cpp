@@ -911,14 +911,27 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
       u.foot = sa.foot;
       u.step = sa.step;
       u.region = region;
-      // Only the frames the tissue fit was given: without a measured area the model has nothing
-      // to say.
-      RegionSeries contact;
+      // The frames the tissue fit was given: without a measured area the model has nothing to
+      // say. And at the heel, the stance frames before the first of them in which it already
+      // reads a load: a heel strike with a few cells, whose area the cells do not give, where
+      // the model expects next to nothing. Only an impact acts there; without one the stance
+      // starts (40 N) when the heel's footprint is already determined.
+      std::vector<std::size_t> frames;
       for (std::size_t i = 0; i < ra.series.t_s.size(); ++i) {
-        if (!(ra.series.area_mm2[i] > 0.0)) continue;
+        if (ra.series.area_mm2[i] > 0.0) {
+          frames.push_back(i);
+        } else if (region == Region::Heel && frames.empty() && ra.series.force_n[i] > 0.0) {
+          frames.push_back(i);
+        }
+      }
+      RegionSeries contact;
+      for (std::size_t i : frames) {
         contact.t_s.push_back(ra.series.t_s[i]);
         contact.area_mm2.push_back(ra.series.area_mm2[i]);
         contact.force_n.push_back(ra.series.force_n[i]);
+      }
+      if (!contact.t_s.empty() && !(contact.area_mm2.front() > 0.0)) {
+        u.t_contact_s = std::min(u.t_contact_s, contact.t_s.front());
       }
       if (contact.t_s.size() < static_cast<std::size_t>(kMinContactFrames)) continue;
       u.t = contact.t_s;
@@ -938,10 +951,8 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
       }
       u.sat.assign(n, 0.0);
       const auto& sat = ds.saturated_cells[index_of(region)];
-      for (std::size_t i = 0, k = 0; i < ra.series.t_s.size() && k < n; ++i) {
-        if (!(ra.series.area_mm2[i] > 0.0)) continue;
-        if (i < sat.size()) u.sat[k] = sat[i];
-        ++k;
+      for (std::size_t k = 0; k < n; ++k) {
+        if (frames[k] < sat.size()) u.sat[k] = sat[frames[k]];
       }
       // Noise floor: the force's own noise about a smooth fit, and the force the model moves
       // when the measured area moves by one cell's quantisation (cell area / sqrt 12).

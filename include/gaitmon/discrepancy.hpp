@@ -5,7 +5,9 @@
 // Baseline. Each step's regions are fitted by analyse_step. The workflow keeps each fit's
 // damping exponent m and declared geometry and writes the model as F = K E(n) + D V (E, V the
 // elastic and damping shapes of the measured contact area, as in tissue_fit, over the frames
-// the fit was given); n is re-chosen from the fit's own value and a grid of nine, and K,
+// the fit was given, and at the heel the stance frames before them in which it reads a load:
+// a few cells give no area there and the model expects next to nothing, so their force is all
+// residual; n is re-chosen from the fit's own value and a grid of nine, and K,
 // D >= 0 are re-solved by least squares, per step and region, with every effect as without.
 // Baseline and extended models are then nested: an effect of zero strength is the baseline.
 //
