@@ -1383,7 +1383,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   // along a flat direction (no finite standard error) is not an effect the data show.
   const auto passes = [&](const CandidateResult& r) {
     const bool shrinks = r.shrink_pct >= settings.min_shrink_pct ||
-                         (pooled.zero_channel && r.zero_shrink_pct >= settings.min_shrink_pct);
+                         (pooled.zero_channel && r.zero_shrink_pct >= settings.min_zero_shrink_pct);
     const bool determined = std::all_of(r.params.begin(), r.params.end(),
                                         [](const ParamEstimate& p) { return std::isfinite(p.se); });
     return shrinks && determined && r.delta_bic <= -settings.min_delta_bic;

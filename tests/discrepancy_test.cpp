@@ -192,6 +192,10 @@ TEST(Discrepancy, NamesACreepThatTheZeroingMovedIntoTheZeros) {
   for (const auto& q : p) fmt::print("  {} = {:.3f} +- {:.3f}\n", q.name, q.value, q.se);
   EXPECT_NEAR(p[0].value, 0.3, 0.06);
   EXPECT_NEAR(p[1].value, 1.0, 0.25);
+  // The zero channel has its own threshold: above the 87 % measured, nothing is named.
+  DiscrepancySettings strict;
+  strict.min_zero_shrink_pct = 95.0;
+  EXPECT_EQ(named(find_discrepancy(clean_session(creep, 14, 7), strict)), "none");
 
   CleanCase none{"none", {}};
   none.zeroed = true;

@@ -106,6 +106,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
       {"folds", args.settings.folds},
       {"phase_bins", args.settings.phase_bins},
       {"min_shrink_pct", args.settings.min_shrink_pct},
+      {"min_zero_shrink_pct", args.settings.min_zero_shrink_pct},
       {"min_delta_bic", args.settings.min_delta_bic},
       {"second_effect", args.settings.second_effect},
       {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
@@ -248,6 +249,10 @@ void add_discrepancy_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   sub->add_option("--min-shrink", args->settings.min_shrink_pct,
                   "Held-out NRMSE fall needed to name an effect, %")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  sub->add_option("--min-zero-shrink", args->settings.min_zero_shrink_pct,
+                  "Held-out NRMSE fall of the zero changes needed to name an effect, %")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--min-delta-bic", args->settings.min_delta_bic,
