@@ -70,19 +70,20 @@ std::optional<double> cap_area_mm2(const Quadratic& q, std::size_t cells,
   return area;
 }
 
-}  // namespace
-
-std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size,
-                                         double aspect, std::span<const CellCentre> unloaded) {
+void require_finite_positive(CellSize size, double aspect) {
   if (!(size.width_mm > 0.0) || !(size.height_mm > 0.0) || !std::isfinite(size.width_mm) ||
       !std::isfinite(size.height_mm)) {
-    throw std::invalid_argument("footprint_area_mm2: the cell size must be finite and positive");
+    throw std::invalid_argument("footprint: the cell size must be finite and positive");
   }
   if (!(aspect > 0.0) || !std::isfinite(aspect)) {
-    throw std::invalid_argument("footprint_area_mm2: the aspect must be finite and positive");
+    throw std::invalid_argument("footprint: the aspect must be finite and positive");
   }
+}
+
+/// The cells' centroid, or nullopt if a cell is not finite or there is none. The fits work about
+/// it and in cell units, so their normal equations are well conditioned.
+std::optional<std::pair<double, double>> centroid(std::span<const LoadedCell> cells) {
   if (cells.empty()) return std::nullopt;
-  // Centred and in cell units, so the normal equations are well conditioned.
   double mean_x = 0.0;
   double mean_y = 0.0;
   for (const LoadedCell& c : cells) {
@@ -92,31 +93,75 @@ std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, Cell
     mean_x += c.x_mm;
     mean_y += c.y_mm;
   }
-  mean_x /= static_cast<double>(cells.size());
-  mean_y /= static_cast<double>(cells.size());
+  const auto count = static_cast<double>(cells.size());
+  return std::pair{mean_x / count, mean_y / count};
+}
 
+std::optional<Footprint> free_fit(std::span<const LoadedCell> cells, CellSize size,
+                                  std::span<const CellCentre> unloaded) {
+  const auto mean = centroid(cells);
+  if (!mean) return std::nullopt;
+  const auto [mean_x, mean_y] = *mean;
   using Row5 = Eigen::Matrix<double, 5, 1>;
-  if (const auto q = least_squares<5>(cells, mean_x, mean_y, size, [](double u, double v) {
-        return Row5(1.0, u, v, u * u, v * v);
-      })) {
-    if (const auto area = cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), (*q)(4)}, cells.size(),
-                                       unloaded, mean_x, mean_y, size)) {
-      return area;
-    }
-  }
+  const auto q = least_squares<5>(cells, mean_x, mean_y, size,
+                                  [](double u, double v) { return Row5(1.0, u, v, u * u, v * v); });
+  if (!q) return std::nullopt;
+  const Quadratic cap{(*q)(0), (*q)(1), (*q)(2), (*q)(3), (*q)(4)};
+  const auto area = cap_area_mm2(cap, cells.size(), unloaded, mean_x, mean_y, size);
+  if (!area) return std::nullopt;
+  // rA^2 = -peak / q3 widths^2 and rB^2 = -peak / q4 heights^2.
+  const double aspect = std::sqrt(cap.q4 / cap.q3) * size.width_mm / size.height_mm;
+  const double peak = cap.q0 - cap.q1 * cap.q1 / (4.0 * cap.q3) - cap.q2 * cap.q2 / (4.0 * cap.q4);
+  return Footprint{*area, aspect, peak};
+}
+
+std::optional<double> fit_at_aspect(std::span<const LoadedCell> cells, CellSize size, double aspect,
+                                    std::span<const CellCentre> unloaded) {
+  const auto mean = centroid(cells);
+  if (!mean) return std::nullopt;
+  const auto [mean_x, mean_y] = *mean;
   // rA = aspect rB, so in cell units q4 = kappa q3 with kappa = (aspect h / w)^2.
   const double ratio = aspect * size.height_mm / size.width_mm;
   const double kappa = ratio * ratio;
   using Row4 = Eigen::Matrix<double, 4, 1>;
-  if (const auto q = least_squares<4>(cells, mean_x, mean_y, size, [kappa](double u, double v) {
-        return Row4(1.0, u, v, u * u + kappa * v * v);
-      })) {
-    if (const auto area = cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), kappa * (*q)(3)},
-                                       cells.size(), unloaded, mean_x, mean_y, size)) {
-      return area;
+  const auto q = least_squares<4>(cells, mean_x, mean_y, size, [kappa](double u, double v) {
+    return Row4(1.0, u, v, u * u + kappa * v * v);
+  });
+  if (!q) return std::nullopt;
+  return cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), kappa * (*q)(3)}, cells.size(), unloaded,
+                      mean_x, mean_y, size);
+}
+
+}  // namespace
+
+std::optional<Footprint> free_footprint(std::span<const LoadedCell> cells, CellSize size,
+                                        std::span<const CellCentre> unloaded) {
+  require_finite_positive(size, 1.0);
+  return free_fit(cells, size, unloaded);
+}
+
+std::optional<double> footprint_area_at_aspect_mm2(std::span<const LoadedCell> cells, CellSize size,
+                                                   double aspect,
+                                                   std::span<const CellCentre> unloaded) {
+  require_finite_positive(size, aspect);
+  return fit_at_aspect(cells, size, aspect, unloaded);
+}
+
+std::optional<double> shared_aspect(std::span<const Footprint> footprints) {
+  // Each frame's aspect is as uncertain as its loads are small against the noise, so frames
+  // weigh by their peak squared; log keeps A/B and B/A symmetric.
+  double sum = 0.0;
+  double weight = 0.0;
+  for (const Footprint& f : footprints) {
+    if (!(f.aspect > 0.0) || !std::isfinite(f.aspect) || !(f.peak > 0.0) ||
+        !std::isfinite(f.peak)) {
+      continue;
     }
+    sum += f.peak * f.peak * std::log(f.aspect);
+    weight += f.peak * f.peak;
   }
-  return std::nullopt;
+  if (!(weight > 0.0)) return std::nullopt;
+  return std::exp(sum / weight);
 }
 
 }  // namespace gaitmon

@@ -58,11 +58,54 @@ std::array<RegionSample, kRegionCount> measure_frame(
     // The footprint grows into its region in the region's shape: where the loads cannot give
     // the ellipse's aspect, the region's box does.
     const double box_aspect = (x_hi - x_lo + cell.width_mm) / (y_hi - y_lo + cell.height_mm);
+    sample.free_footprint = free_footprint(scratch.loaded, cell, scratch.unloaded);
     sample.footprint_area_mm2 =
-        footprint_area_mm2(scratch.loaded, cell, box_aspect, scratch.unloaded);
+        sample.free_footprint
+            ? std::optional<double>(sample.free_footprint->area_mm2)
+            : footprint_area_at_aspect_mm2(scratch.loaded, cell, box_aspect, scratch.unloaded);
   }
   return samples;
 }
+
+namespace {
+
+/// Fits every frame's footprint of each region again at the aspect the stance's free fits share.
+void refit_at_shared_aspect(const Step& step, const InsoleLayout& layout, StanceSeries& series,
+                            FrameScratch& scratch) {
+  const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
+  std::array<std::optional<double>, kRegionCount> aspect;
+  std::vector<Footprint> fits;
+  for (Region region : kRegions) {
+    fits.clear();
+    for (const auto& frame : series.frames) {
+      if (const auto& f = frame[index_of(region)].free_footprint) fits.push_back(*f);
+    }
+    aspect[index_of(region)] = shared_aspect(fits);
+  }
+  for (std::size_t f = 0; f < series.size(); ++f) {
+    zero_and_threshold(step.stance[f].bits, step.sensor_zero_bits, step.adaptive_threshold_bits,
+                       scratch.zeroed);
+    for (Region region : kRegions) {
+      const auto& shared = aspect[index_of(region)];
+      RegionSample& sample = series.frames[f][index_of(region)];
+      if (!shared || sample.active_sensors == 0) continue;
+      scratch.loaded.clear();
+      scratch.unloaded.clear();
+      for (std::size_t i : layout.region_sensors(region)) {
+        const Sensor& s = layout.sensor(i);
+        if (scratch.zeroed[i] <= 0.0) {
+          scratch.unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
+        } else {
+          scratch.loaded.push_back({s.grid_x_mm, s.grid_y_mm, scratch.zeroed[i]});
+        }
+      }
+      sample.footprint_area_mm2 =
+          footprint_area_at_aspect_mm2(scratch.loaded, cell, *shared, scratch.unloaded);
+    }
+  }
+}
+
+}  // namespace
 
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             const Calibration& calibration, ContactEllipseCache* cache) {
@@ -93,6 +136,7 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
     series.frames.push_back(samples);
     series.total_force_n.push_back(total);
   }
+  refit_at_shared_aspect(step, layout, series, scratch);
   return series;
 }
 

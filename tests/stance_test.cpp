@@ -3,6 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -104,6 +108,56 @@ TEST_F(StanceTest, AnEllipseCacheChangesNothing) {
     EXPECT_DOUBLE_EQ(a.angle_rad, b.angle_rad);
   }
   EXPECT_GE(cache.hits(), 2u);
+}
+
+// Two full heel footprints of aspect 0.6 give the stance its aspect; a third frame loads two
+// rows only, so its own cells cannot give it, and the heel's box (52.5 x 60 mm, 0.875) would
+// give a wrong area. Measured at the shared aspect it has its true area.
+TEST_F(StanceTest, AFrameTooSmallForItsOwnAspectTakesTheStancesShared) {
+  const auto& heel = layout_->region_sensors(Region::Heel);
+  // The heel's first two rows (12 and 13 of size 37-38) share their columns; sensor 4 of row 12
+  // sits on the heel's axis.
+  const double cx = layout_->sensor(sensor_at(12, 4)).grid_x_mm;
+  const double cy_small = 0.5 * (layout_->sensor(sensor_at(12, 4)).grid_y_mm +
+                                 layout_->sensor(sensor_at(13, 4)).grid_y_mm);
+  double cy_full = 0.0;
+  for (std::size_t i : heel)
+    cy_full += layout_->sensor(i).grid_y_mm / static_cast<double>(heel.size());
+  const double aspect = 0.6;
+  const auto cap = [&](double cy, double rB, double peak_bits) {
+    std::vector<std::uint8_t> bits(layout_->sensor_count(), 2);
+    for (std::size_t i : heel) {
+      const Sensor& s = layout_->sensor(i);
+      const double rho2 =
+          std::pow((s.grid_x_mm - cx) / (aspect * rB), 2) + std::pow((s.grid_y_mm - cy) / rB, 2);
+      if (rho2 < 1.0) bits[i] = static_cast<std::uint8_t>(2.0 + std::round(peak_bits * (1 - rho2)));
+    }
+    return bits;
+  };
+  // Rows 7.5 mm either side of the centre load, the next ones (22.5 mm) do not; so do the
+  // columns 7.5 mm either side (rA = 12 mm) and not the next ones.
+  const double rB_small = 20.0;
+  const Step step = make_step(
+      {cap(cy_full, 28.0, 200.0), cap(cy_full, 28.0, 180.0), cap(cy_small, rB_small, 200.0)});
+  const StanceSeries series = measure_stance(step, *layout_, config_.calibration);
+  ASSERT_EQ(series.size(), 3u);
+  const RegionSample& small = series.at(2, Region::Heel);
+  EXPECT_EQ(small.active_sensors, 6);
+  EXPECT_FALSE(small.free_footprint.has_value());
+  ASSERT_TRUE(small.footprint_area_mm2.has_value());
+  const double truth = std::numbers::pi * aspect * rB_small * rB_small;
+  EXPECT_NEAR(*small.footprint_area_mm2 / truth, 1.0, 0.02);
+  // What the box's aspect would have given from the same cells.
+  std::vector<LoadedCell> cells;
+  for (std::size_t i : heel) {
+    const Sensor& s = layout_->sensor(i);
+    const double load = static_cast<double>(step.stance[2].bits[i]) - 2.0;
+    if (load >= step.adaptive_threshold_bits) cells.push_back({s.grid_x_mm, s.grid_y_mm, load});
+  }
+  const CellSize cell{layout_->geometry().width_mm, layout_->geometry().height_mm};
+  const auto boxed = footprint_area_at_aspect_mm2(cells, cell, 0.75);
+  ASSERT_TRUE(boxed.has_value());
+  EXPECT_GT(std::abs(*boxed / truth - 1.0), 0.1);
 }
 
 TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {

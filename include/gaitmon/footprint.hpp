@@ -18,10 +18,13 @@
 // The quadratic is fitted to the active cells' loads by linear least squares. The overall scale
 // of the loads cancels, so any unit (bits, N) serves.
 //
-// Cells in two rows (the midfoot) do not see the anterior-posterior curvature c4. There the
-// caller's aspect rA / rB (the region's box: the footprint grows into its region in the region's
-// shape) fixes it: c4 = c3 rA^2 / rB^2, leaving 1, x, y and x^2 + (rA / rB)^2 y^2. A wrong aspect
-// gives a wrong area, so the free quadratic is always tried first.
+// A given aspect rA / rB fixes c4 = c3 rA^2 / rB^2, leaving 1, x, y and x^2 + (rA / rB)^2 y^2.
+// The ellipsoid's contact keeps one aspect, A / B, at every depth (eqs 5, 6), so measure_stance
+// takes it from the stance's well-loaded frames (shared_aspect) and fits every frame with it: a
+// frame at a partial load has too few cells to give its own curvature ratio. Cells in two rows
+// (the midfoot) never see c4; where no frame of the stance gives it, the caller's aspect (the
+// region's box: the footprint grows into its region in the region's shape) stands in. A wrong
+// aspect gives a wrong area (tested).
 //
 // It is undetermined, and nullopt is returned, when even that fit is not determined (one row;
 // fewer than four cells, as a toe of one to three cells: their loads carry no curvature, and the
@@ -33,7 +36,7 @@
 // to the rim, which leaves the rim's cells, whose few bits noise and zeroing can take, their
 // margin. Without that last rule a frame whose loads are nearly flat now and then extrapolated
 // to twice its neighbours' area, a spike the fit and the discrepancy workflow took for physics.
-// The caller then uses the contact ellipse.
+// The caller then leaves the frame without a footprint.
 #pragma once
 
 #include <optional>
@@ -56,12 +59,33 @@ struct CellCentre {
   double y_mm = 0.0;
 };
 
-/// The area (mm^2) of the paraboloid footprint fitted to the cells, or nullopt when the cells do
-/// not determine it or `unloaded`, the region's cells that read nothing, contradict it (see
-/// above); `aspect` (rA / rB) is used only where the cells do not give it.
-/// Never throws for any cell values; non-finite cells give nullopt. Throws std::invalid_argument
-/// if the cell size or the aspect is not finite and positive.
-std::optional<double> footprint_area_mm2(std::span<const LoadedCell> cells, CellSize size,
-                                         double aspect, std::span<const CellCentre> unloaded = {});
+/// The free (five-term) fit of a frame's cells where it is a plausible cap: its area, its aspect
+/// rA / rB and its peak load (the unit of the loads).
+struct Footprint {
+  double area_mm2 = 0.0;
+  double aspect = 0.0;
+  double peak = 0.0;
+};
+
+/// The free fit of the cells, or nullopt when they do not determine it or `unloaded`, the
+/// region's cells that read nothing, contradict it (see above). Never throws for any cell
+/// values; non-finite cells give nullopt. Throws std::invalid_argument if the cell size is not
+/// finite and positive.
+std::optional<Footprint> free_footprint(std::span<const LoadedCell> cells, CellSize size,
+                                        std::span<const CellCentre> unloaded = {});
+
+/// The area of the four-term fit with the aspect rA / rB given, whatever the cells could say of
+/// it; nullopt as for free_footprint. Throws std::invalid_argument as free_footprint does, and if
+/// the aspect is not finite and positive.
+std::optional<double> footprint_area_at_aspect_mm2(std::span<const LoadedCell> cells, CellSize size,
+                                                   double aspect,
+                                                   std::span<const CellCentre> unloaded = {});
+
+/// The aspect shared by a stance's footprints of one region: the mean of their log aspects
+/// weighted by their peak squared, or nullopt if there is none. Why: the ellipsoid's contact
+/// keeps the aspect A / B at every depth (eqs 5, 6), and a frame's own curvature ratio, from a
+/// few cells at a partial load, scatters (10 % in area at half the peak); fixing it from the
+/// well-loaded frames leaves each frame two fewer terms.
+std::optional<double> shared_aspect(std::span<const Footprint> footprints);
 
 }  // namespace gaitmon

@@ -25,8 +25,11 @@ struct RegionSample {
   int active_sensors = 0;        ///< sensors at or above the adaptive threshold
   ContactEllipse ellipse;        ///< seed chapter 4; ellipse.kase None when no contact
   /// The paraboloid footprint fitted to the active cells' loads (footprint.hpp); nullopt when
-  /// they do not determine it.
+  /// they do not determine it. measure_frame fits it free where the cells allow, else at the
+  /// region box's aspect; measure_stance at the stance's shared aspect.
   std::optional<double> footprint_area_mm2;
+  /// The free fit of this frame alone (bits), where it is a plausible cap.
+  std::optional<Footprint> free_footprint;
 };
 
 /// Every frame of one stance, heel strike to toe off inclusive.
@@ -59,7 +62,9 @@ std::array<RegionSample, kRegionCount> measure_frame(
     ContactEllipseCache* cache, FrameScratch& scratch);
 
 /// Zeroes each stance frame with the step's per-sensor zero, applies its adaptive threshold, and
-/// measures every region. The first frame of the stance is the "first instant" of Case 1.
+/// measures every region. The first frame of the stance is the "first instant" of Case 1. Each
+/// region's footprints are then fitted again at the aspect its free fits share over the stance
+/// (shared_aspect), where any frame had one.
 /// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
 /// steps passes one cache for all of them (results are identical with or without it).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
