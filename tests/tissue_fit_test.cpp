@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -105,6 +106,7 @@ const std::vector<RegionStep>& recovery_data() {
 }
 
 double median(std::vector<double> v) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
   std::sort(v.begin(), v.end());
   const std::size_t n = v.size();
   return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
@@ -149,7 +151,12 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
   // Per session, foot and region: the steps' estimates for pooling and their truths.
   std::map<std::tuple<int, Foot, Region>, std::vector<std::pair<MaterialEstimate, MaterialVector>>>
       pools;
-  std::array<std::vector<double>, 4> pooled_errors;
+  // After pooling: every region-step, and those of the regions whose footprint is determined.
+  std::array<std::vector<double>, 4> pooled_errors, pooled_determined;
+  const auto add_pooled = [&](Region region, std::size_t k, double error) {
+    pooled_errors[k].push_back(error);
+    if (area_determined(region)) pooled_determined[k].push_back(error);
+  };
   for (const RegionStep& rs : recovery_data()) {
     const RegionSeries& series = rs.series(area);
     const RegionFit fit = fit_region(series, rs.truth, config().fit_bounds, settings);
@@ -163,9 +170,8 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
     } else {
       const double own[] = {std::log(fit.kbar_n_per_mm3.value), fit.n.value,
                             std::log(fit.cbar_ns_per_mm3.value), fit.m.value};
-      for (std::size_t k = 0; k < 4; ++k) {
-        pooled_errors[k].push_back(pooled_rel_error(k, own[k], truth[k]));
-      }
+      for (std::size_t k = 0; k < 4; ++k)
+        add_pooled(rs.region, k, pooled_rel_error(k, own[k], truth[k]));
     }
     ek.push_back(rel_error(fit.kbar_n_per_mm3.value, rs.truth.kbar_n_per_mm3));
     en.push_back(rel_error(fit.n.value, rs.truth.n));
@@ -183,7 +189,8 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
     const PooledEstimates p = pool_steps(estimates, material_bounds(config().fit_bounds));
     for (std::size_t i = 0; i < pool.size(); ++i) {
       for (std::size_t k = 0; k < 4; ++k) {
-        pooled_errors[k].push_back(pooled_rel_error(k, p.steps[i].value[k], pool[i].second[k]));
+        add_pooled(std::get<2>(key), k,
+                   pooled_rel_error(k, p.steps[i].value[k], pool[i].second[k]));
       }
     }
   }
@@ -210,11 +217,13 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
       "[ smoothing %s, area %s ] %zu fits, ok %.1f %%, median rel. error kbar %.3f n %.3f cbar "
       "%.3f m %.3f, median NRMSE %.2f %%\n"
       "    without the toes    %3zu fits: kbar %.3f n %.3f cbar %.3f m %.3f\n"
-      "    pooled across steps           kbar %.3f n %.3f cbar %.3f m %.3f\n",
+      "    pooled across steps           kbar %.3f n %.3f cbar %.3f m %.3f\n"
+      "    pooled, without the toes      kbar %.3f n %.3f cbar %.3f m %.3f\n",
       std::string(smoothing_name(smoothing)).c_str(), std::string(area_source_name(area)).c_str(),
       r.fits, 100.0 * r.ok_fraction, r.all.kbar, r.all.n, r.all.cbar, r.all.m, r.nrmse,
       determined[0].size(), r.determined.kbar, r.determined.n, r.determined.cbar, r.determined.m,
-      r.pooled.kbar, r.pooled.n, r.pooled.cbar, r.pooled.m);
+      r.pooled.kbar, r.pooled.n, r.pooled.cbar, r.pooled.m, median(pooled_determined[0]),
+      median(pooled_determined[1]), median(pooled_determined[2]), median(pooled_determined[3]));
   for (Region region : kRegions) {
     const auto& e = per_region[index_of(region)];
     if (e[0].empty()) continue;
