@@ -70,13 +70,10 @@ std::optional<double> cap_area_mm2(const Quadratic& q, std::size_t cells,
   return area;
 }
 
-void require_finite_positive(CellSize size, double aspect) {
+void require_cell_size(CellSize size) {
   if (!(size.width_mm > 0.0) || !(size.height_mm > 0.0) || !std::isfinite(size.width_mm) ||
       !std::isfinite(size.height_mm)) {
     throw std::invalid_argument("footprint: the cell size must be finite and positive");
-  }
-  if (!(aspect > 0.0) || !std::isfinite(aspect)) {
-    throw std::invalid_argument("footprint: the aspect must be finite and positive");
   }
 }
 
@@ -136,14 +133,17 @@ std::optional<double> fit_at_aspect(std::span<const LoadedCell> cells, CellSize 
 
 std::optional<Footprint> free_footprint(std::span<const LoadedCell> cells, CellSize size,
                                         std::span<const CellCentre> unloaded) {
-  require_finite_positive(size, 1.0);
+  require_cell_size(size);
   return free_fit(cells, size, unloaded);
 }
 
 std::optional<double> footprint_area_at_aspect_mm2(std::span<const LoadedCell> cells, CellSize size,
                                                    double aspect,
                                                    std::span<const CellCentre> unloaded) {
-  require_finite_positive(size, aspect);
+  require_cell_size(size);
+  if (!(aspect > 0.0) || !std::isfinite(aspect)) {
+    throw std::invalid_argument("footprint: the aspect must be finite and positive");
+  }
   return fit_at_aspect(cells, size, aspect, unloaded);
 }
 
