@@ -275,14 +275,14 @@ struct RegionContact {
   double ddot_mm_per_s = 0.0;
 };
 
-std::optional<RegionContact> contact_at(const SimulatedRegion& region, const RegionWindow& window,
+std::optional<RegionContact> contact_at(const SimulatedRegion& simulated, Region region,
                                         const Stance& stance, double t_s) {
-  const auto [shape, shape_rate] = bump(window, (t_s - stance.start_s) / stance.duration_s);
-  if (shape <= 0.0) return std::nullopt;
-  const double area = region.peak_area_mm2 * shape;
-  const double area_rate = region.peak_area_mm2 * shape_rate / stance.duration_s;
-  return RegionContact{area, deformation_mm(region.params, area),
-                       deformation_rate_mm_per_s(region.params, area, area_rate)};
+  const auto [area, rate_per_fraction] =
+      planned_contact_area_mm2(simulated, region, (t_s - stance.start_s) / stance.duration_s);
+  if (area <= 0.0) return std::nullopt;
+  const double area_rate = rate_per_fraction / stance.duration_s;
+  return RegionContact{area, deformation_mm(simulated.params, area),
+                       deformation_rate_mm_per_s(simulated.params, area, area_rate)};
 }
 
 /// The last step of the sensor stage: round to bits and clip to the insole's 0..255.
@@ -406,6 +406,12 @@ std::optional<Rasterisation> parse_rasterisation(std::string_view text) {
   if (text == "centre") return Rasterisation::CellCentre;
   if (text == "coverage") return Rasterisation::Coverage;
   return std::nullopt;
+}
+
+std::pair<double, double> planned_contact_area_mm2(const SimulatedRegion& simulated, Region region,
+                                                   double fraction) {
+  const auto [shape, shape_rate] = bump(kWindows[index_of(region)], fraction);
+  return {simulated.peak_area_mm2 * shape, simulated.peak_area_mm2 * shape_rate};
 }
 
 double contact_area_for_elastic_force(const EllipsoidParams& params, double target_force_n,
@@ -533,7 +539,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
         for (Region r : kRegions) {
           const std::size_t ri = index_of(r);
           const SimulatedRegion& sr = truth.regions[ri];
-          const auto contact = contact_at(sr, kWindows[ri], stance, t);
+          const auto contact = contact_at(sr, r, stance, t);
           if (!contact) continue;
           EllipsoidParams params = sr.params;
           params.kbar_n_per_mm3 *= tally.kbar_factor[ri];

@@ -286,6 +286,28 @@ TEST(Simulator, PeakAreaBisectionHitsTheTargetElasticForce) {
   EXPECT_EQ(contact_area_for_elastic_force(p, 0.0, 3000.0), 0.0);
 }
 
+// The planned area course other code rebuilds the truth from: nothing outside the region's
+// window (the heel's 0-0.52 of the contact, written in the truth JSON), its peak area at the
+// window's peak, and a rate that is the course's derivative (central differences).
+TEST(Simulator, PlannedContactAreaIsTheBumpAndItsRate) {
+  SimulatedRegion heel;
+  heel.peak_area_mm2 = 3000.0;
+  EXPECT_EQ(planned_contact_area_mm2(heel, Region::Heel, 0.0).first, 0.0);
+  EXPECT_EQ(planned_contact_area_mm2(heel, Region::Heel, 0.6).first, 0.0);
+  EXPECT_EQ(planned_contact_area_mm2(heel, Region::Heel, 0.6).second, 0.0);
+  EXPECT_NEAR(planned_contact_area_mm2(heel, Region::Heel, 0.12).first, 3000.0, 1e-9);
+  EXPECT_NEAR(planned_contact_area_mm2(heel, Region::Heel, 0.06).first, 1500.0, 1e-9);
+  constexpr double h = 1e-6;
+  for (double u : {0.03, 0.1, 0.2, 0.4, 0.5}) {
+    const double numeric = (planned_contact_area_mm2(heel, Region::Heel, u + h).first -
+                            planned_contact_area_mm2(heel, Region::Heel, u - h).first) /
+                           (2 * h);
+    EXPECT_NEAR(planned_contact_area_mm2(heel, Region::Heel, u).second, numeric,
+                1e-5 * std::abs(numeric) + 1e-3)
+        << u;
+  }
+}
+
 TEST(Simulator, EffectRegistryListsNoneAndTheFivePhysicalEffects) {
   EXPECT_EQ(
       simulation_effect_names(),

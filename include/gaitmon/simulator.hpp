@@ -42,6 +42,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "gaitmon/config.hpp"
@@ -170,6 +171,13 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
 /// `target_force_n`, by bisection, or `max_area_mm2` if even that falls short.
 double contact_area_for_elastic_force(const EllipsoidParams& params, double target_force_n,
                                       double max_area_mm2);
+
+/// The simulator's planned contact area of `region` (mm^2) at `fraction` of a contact's duration
+/// (0 at its start, 1 at its end), and its rate in mm^2 per unit fraction (divide by the contact's
+/// duration for mm^2/s): the smooth bump the area stage follows. Lets a caller rebuild the exact
+/// area course without the sensors, as the estimation bounds in the tests do.
+std::pair<double, double> planned_contact_area_mm2(const SimulatedRegion& simulated, Region region,
+                                                   double fraction);
 
 /// Per-cell loads (N), in the order of layout.region_sensors(region), for one region whose
 /// ellipsoid is deformed by d at rate ddot: the contact ellipse (radii from eqs 5, 6, axes along
