@@ -391,13 +391,7 @@ TEST(Simulator, TissueStepVariationScattersKbarAndCbarByTheSdAskedFor) {
     EXPECT_GE(ratio, 0.98 * lo) << i;
     EXPECT_LE(ratio, 1.02 * hi) << i;
   }
-  const auto sd = [](const std::vector<double>& v) {
-    double mean = 0.0;
-    for (double x : v) mean += x / static_cast<double>(v.size());
-    double ss = 0.0;
-    for (double x : v) ss += (x - mean) * (x - mean);
-    return std::sqrt(ss / static_cast<double>(v.size() - 1));
-  };
+  const auto& sd = test::sample_sd;
   ASSERT_GE(log_k.size(), 500u);
   EXPECT_NEAR(sd(log_k), 0.20, 0.02);
   EXPECT_NEAR(sd(log_c), 0.20, 0.02);

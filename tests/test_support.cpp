@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -73,6 +74,14 @@ int run_command(const std::string& command, std::string* output) {
   int status = ::pclose(pipe);
   if (output != nullptr) *output = std::move(text);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+double sample_sd(const std::vector<double>& values) {
+  double mean = 0.0;
+  for (double x : values) mean += x / static_cast<double>(values.size());
+  double ss = 0.0;
+  for (double x : values) ss += (x - mean) * (x - mean);
+  return std::sqrt(ss / static_cast<double>(values.size() - 1));
 }
 
 }  // namespace gaitmon::test

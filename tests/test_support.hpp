@@ -1,8 +1,10 @@
-// Paths and scratch folders for tests and benchmarks; free of any test framework.
+// Paths, scratch folders and small statistics for tests and benchmarks; free of any test
+// framework.
 #pragma once
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace gaitmon::test {
 
@@ -19,5 +21,7 @@ std::filesystem::path scratch_dir(const std::string& name);
 std::filesystem::path write_text(const std::filesystem::path& path, const std::string& text);
 /// Runs a shell command, returns its exit status, and captures stdout+stderr into `output`.
 int run_command(const std::string& command, std::string* output = nullptr);
+/// The sample standard deviation (n - 1); needs at least two values.
+double sample_sd(const std::vector<double>& values);
 
 }  // namespace gaitmon::test

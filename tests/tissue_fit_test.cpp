@@ -450,13 +450,7 @@ TEST(OneStepBound, TheFitScattersAsTheBoundSaysOnExactAreas) {
     ln_kbar.push_back(std::log(fit.kbar_n_per_mm3.value / truth.kbar_n_per_mm3));
     n.push_back(fit.n.value / truth.n - 1.0);
   }
-  const auto sd = [](const std::vector<double>& v) {
-    double mean = 0.0;
-    for (double x : v) mean += x / static_cast<double>(v.size());
-    double ss = 0.0;
-    for (double x : v) ss += (x - mean) * (x - mean);
-    return std::sqrt(ss / static_cast<double>(v.size() - 1));
-  };
+  const auto& sd = test::sample_sd;
   std::printf("heel 41-42: scatter / bound  kbar %.3f / %.3f  n %.3f / %.3f\n", sd(ln_kbar),
               b.relative_sd[0], sd(n), b.relative_sd[1]);
   EXPECT_NEAR(sd(ln_kbar) / b.relative_sd[0], 1.0, 0.2);
