@@ -140,6 +140,9 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
     const RegionAnalysis& ra = steps[si].at(region);
     if (ra.frames == 0) continue;
     ++r.steps_with_contact;
+    if (settings.area == AreaSource::Footprint && ra.area == AreaSource::Ellipse) {
+      ++r.steps_on_ellipse;
+    }
     stances.push_back(ra.series);
     aspects.push_back(ra.aspect);
     if (ra.fit.status != FitStatus::Ok) continue;

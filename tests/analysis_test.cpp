@@ -239,5 +239,32 @@ TEST(AnalyseSession, FitsEachRegionOverAllStepsAndSummarisesTheSteps) {
   EXPECT_EQ(s.nrmse_total_pct.count, static_cast<int>(steps.size()));
 }
 
+// The session counts the steps whose fit fell back to the contact ellipse: every step of the
+// toes (one to four active cells, no footprint), none of the heel or the metatarsals, and none at
+// all when the settings ask for the ellipse.
+TEST(AnalyseSession, CountsTheStepsFittedOnTheContactEllipseForWantOfAFootprint) {
+  const Simulated& sim = simulated();
+  const InsoleLayout layout(sim.config.insole(InsoleSize::S37_38), sim.config.sensor);
+  for (AreaSource area : {AreaSource::Footprint, AreaSource::Ellipse}) {
+    SCOPED_TRACE(std::string(area_source_name(area)));
+    AnalysisSettings settings;
+    settings.area = area;
+    std::vector<StepAnalysis> steps;
+    for (const Step& step : sim.steps) {
+      steps.push_back(analyse_step(step, layout, sim.config, settings));
+    }
+    const SessionAnalysis s = analyse_session(steps, sim.config, InsoleSize::S37_38, settings);
+    for (Region region : kRegions) {
+      SCOPED_TRACE(std::string(region_name(region)));
+      const RegionSessionAnalysis& r = s.regions[index_of(region)];
+      const bool toe =
+          region == Region::Toe1 || region == Region::Toe2 || region == Region::Toes3_5;
+      const int expected = area == AreaSource::Footprint && toe ? r.steps_with_contact : 0;
+      EXPECT_GT(r.steps_with_contact, 0);
+      EXPECT_EQ(r.steps_on_ellipse, expected);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon

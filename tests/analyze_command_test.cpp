@@ -215,6 +215,33 @@ TEST(AnalyzeCommand, PrintsASummaryPerRegion) {
   EXPECT_EQ(a.output.find("warning"), std::string::npos) << a.output;
 }
 
+// The toes' cells determine no footprint, so their fits fall back to the contact ellipse; the
+// summary, session.json and the report say so for them and for no other region.
+TEST(AnalyzeCommand, SaysWhichRegionsWereFittedOnTheContactEllipse) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto note = a.output.find("note: fitted on the contact ellipse: ");
+  ASSERT_NE(note, std::string::npos) << a.output;
+  const std::string line = a.output.substr(note, a.output.find('\n', note) - note);
+  const auto j = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
+  const std::string html = read_all(a.dir / "out" / "report.html");
+  std::size_t notes_in_report = 0;
+  for (auto at = html.find("Fitted on the <b>contact ellipse</b>"); at != std::string::npos;
+       at = html.find("Fitted on the <b>contact ellipse</b>", at + 1)) {
+    ++notes_in_report;
+  }
+  for (const auto& [region, r] : j.at("regions").items()) {
+    SCOPED_TRACE(region);
+    const bool toe = region.rfind("toe", 0) == 0;
+    const int contact = r.at("steps_with_contact").get<int>();
+    EXPECT_EQ(r.at("steps_on_contact_ellipse").get<int>(), toe ? contact : 0);
+    const std::string listed =
+        region + " (" + std::to_string(contact) + " of " + std::to_string(contact) + " steps)";
+    EXPECT_EQ(line.find(listed) != std::string::npos, toe) << line;
+  }
+  EXPECT_EQ(notes_in_report, 3u);
+}
+
 // --area ellipse gives the fit the seed's contact ellipse: the heel's peak contact areas differ
 // from the default footprint's, and the setting is recorded.
 TEST(AnalyzeCommand, AreaEllipseUsesTheContactEllipse) {

@@ -105,7 +105,11 @@ struct RegionSessionAnalysis {
   Region region = Region::Heel;
   int steps_with_contact = 0;
   int steps_fitted = 0;  ///< per-step fits with status Ok
-  double aspect = 0.0;   ///< median of the steps' aspects (Appendix I's if none)
+  /// Steps with contact given the contact ellipse although the settings ask for the footprint:
+  /// the region's cells determined a footprint in fewer than kMinFootprintFrames frames (the toes'
+  /// one to four active cells). Their fits rest on an area that moves in whole cells.
+  int steps_on_ellipse = 0;
+  double aspect = 0.0;  ///< median of the steps' aspects (Appendix I's if none)
   EllipsoidParams declared;
   RegionFit session_fit;  ///< one parameter set for every stance with contact
   /// The per-step fits pooled across the steps (pooling.hpp), over the steps fitted Ok whose four

@@ -290,6 +290,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
     regions[std::string(region_name(r.region))] = {
         {"steps_with_contact", r.steps_with_contact},
         {"steps_fitted", r.steps_fitted},
+        {"steps_on_contact_ellipse", r.steps_on_ellipse},
         {"aspect_a_over_b", r.aspect},
         {"declared", nlohmann::json(r.declared)},
         {"session_fit", fit_json(r.session_fit)},
@@ -336,6 +337,19 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
   }
   fmt::print("medians across steps; total-force NRMSE median {:.1f} % (IQR {:.1f} %)\n",
              session.nrmse_total_pct.median, session.nrmse_total_pct.iqr());
+  std::vector<std::string> on_ellipse;
+  for (const RegionSessionAnalysis& r : session.regions) {
+    if (r.steps_on_ellipse > 0) {
+      on_ellipse.push_back(fmt::format("{} ({} of {} steps)", region_name(r.region),
+                                       r.steps_on_ellipse, r.steps_with_contact));
+    }
+  }
+  if (!on_ellipse.empty()) {
+    fmt::print(
+        "note: fitted on the contact ellipse: {}; their active cells determine no footprint, so "
+        "the area moves in whole cells and does not determine n, cbar and m there\n",
+        fmt::join(on_ellipse, ", "));
+  }
   if (settings.fit.mode == FitMode::Identifiable) {
     fmt::print("note: C and d0 are declared (Appendix I means), kbar and cbar derived from them\n");
   } else {

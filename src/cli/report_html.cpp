@@ -385,6 +385,14 @@ std::string region_section(const ReportInput& in, const RegionSessionAnalysis& r
       region_name(r.region), r.steps_with_contact, r.steps_fitted,
       fit_status_name(r.session_fit.status),
       r.session_fit.reason.empty() ? "" : " (" + escape(r.session_fit.reason) + ")", r.aspect);
+  if (r.steps_on_ellipse > 0) {
+    fmt::format_to(std::back_inserter(out),
+                   "<p class=\"note\">Fitted on the <b>contact ellipse</b> in {} of {} steps: this "
+                   "region's active cells determined no footprint, so its area moves in whole "
+                   "cells, and n, cbar and m are not determined by it: their values are where the "
+                   "fit came to rest, not the tissue's.</p>",
+                   r.steps_on_ellipse, r.steps_with_contact);
+  }
   const StepAnalysis* typical = typical_step(in.analyses, r.region);
   if (typical != nullptr) {
     const auto shown = overlaid(in.analyses, r.region);
