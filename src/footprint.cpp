@@ -6,6 +6,7 @@
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
+#include <vector>
 
 namespace gaitmon {
 namespace {
@@ -112,8 +113,14 @@ std::optional<Footprint> free_fit(std::span<const LoadedCell> cells, CellSize si
   return Footprint{*area, aspect, peak};
 }
 
-std::optional<double> fit_at_aspect(std::span<const LoadedCell> cells, CellSize size, double aspect,
-                                    std::span<const CellCentre> unloaded) {
+// The four-term fit's cap at `aspect`, and the centroid it is written about.
+struct CapFit {
+  Quadratic cap;
+  double mean_x, mean_y;
+};
+
+std::optional<CapFit> cap_at_aspect(std::span<const LoadedCell> cells, CellSize size,
+                                    double aspect) {
   const auto mean = centroid(cells);
   if (!mean) return std::nullopt;
   const auto [mean_x, mean_y] = *mean;
@@ -125,8 +132,13 @@ std::optional<double> fit_at_aspect(std::span<const LoadedCell> cells, CellSize 
     return Row4(1.0, u, v, u * u + kappa * v * v);
   });
   if (!q) return std::nullopt;
-  return cap_area_mm2({(*q)(0), (*q)(1), (*q)(2), (*q)(3), kappa * (*q)(3)}, cells.size(), unloaded,
-                      mean_x, mean_y, size);
+  return CapFit{{(*q)(0), (*q)(1), (*q)(2), (*q)(3), kappa * (*q)(3)}, mean_x, mean_y};
+}
+
+void require_aspect(double aspect) {
+  if (!(aspect > 0.0) || !std::isfinite(aspect)) {
+    throw std::invalid_argument("footprint: the aspect must be finite and positive");
+  }
 }
 
 }  // namespace
@@ -141,10 +153,48 @@ std::optional<double> footprint_area_at_aspect_mm2(std::span<const LoadedCell> c
                                                    double aspect,
                                                    std::span<const CellCentre> unloaded) {
   require_cell_size(size);
-  if (!(aspect > 0.0) || !std::isfinite(aspect)) {
-    throw std::invalid_argument("footprint: the aspect must be finite and positive");
+  require_aspect(aspect);
+  const auto fit = cap_at_aspect(cells, size, aspect);
+  if (!fit) return std::nullopt;
+  return cap_area_mm2(fit->cap, cells.size(), unloaded, fit->mean_x, fit->mean_y, size);
+}
+
+std::optional<double> footprint_area_unthresholded_mm2(std::span<const LoadedCell> region_cells,
+                                                       CellSize size, double aspect,
+                                                       double threshold_bits) {
+  require_cell_size(size);
+  require_aspect(aspect);
+  // The set grows or shrinks by a rim of cells a round and settles in two or three. Where it
+  // does not, a cell at the rim is going in and out as the cap's edge crosses its centre: it
+  // reads next to nothing either way, and the last round's fit stands.
+  constexpr int kMaxRounds = 8;
+  std::vector<bool> covered(region_cells.size());
+  for (std::size_t i = 0; i < region_cells.size(); ++i) {
+    covered[i] = region_cells[i].load >= threshold_bits;
   }
-  return fit_at_aspect(cells, size, aspect, unloaded);
+  std::vector<LoadedCell> cells;
+  std::optional<double> area;
+  for (int round = 0; round < kMaxRounds; ++round) {
+    cells.clear();
+    for (std::size_t i = 0; i < region_cells.size(); ++i) {
+      if (covered[i]) cells.push_back(region_cells[i]);
+    }
+    const auto fit = cap_at_aspect(cells, size, aspect);
+    if (!fit) return std::nullopt;
+    area = cap_area_mm2(fit->cap, cells.size(), {}, fit->mean_x, fit->mean_y, size);
+    if (!area) return std::nullopt;
+    const Quadratic& q = fit->cap;
+    bool settled = true;
+    for (std::size_t i = 0; i < region_cells.size(); ++i) {
+      const double u = (region_cells[i].x_mm - fit->mean_x) / size.width_mm;
+      const double v = (region_cells[i].y_mm - fit->mean_y) / size.height_mm;
+      const bool inside = q.q0 + q.q1 * u + q.q2 * v + q.q3 * u * u + q.q4 * v * v > 0.0;
+      settled = settled && inside == covered[i];
+      covered[i] = inside;
+    }
+    if (settled) break;
+  }
+  return area;
 }
 
 std::optional<double> shared_aspect(std::span<const Footprint> footprints) {

@@ -107,4 +107,16 @@ InsoleLayout::InsoleLayout(const InsoleSpec& spec, const SensorGeometry& geometr
   }
 }
 
+double InsoleLayout::region_box_aspect(Region region) const {
+  const auto& cells = region_sensors_[index_of(region)];
+  const auto [x_lo, x_hi] = std::minmax_element(cells.begin(), cells.end(), [&](auto a, auto b) {
+    return sensors_[a].grid_x_mm < sensors_[b].grid_x_mm;
+  });
+  const auto [y_lo, y_hi] = std::minmax_element(cells.begin(), cells.end(), [&](auto a, auto b) {
+    return sensors_[a].grid_y_mm < sensors_[b].grid_y_mm;
+  });
+  return (sensors_[*x_hi].grid_x_mm - sensors_[*x_lo].grid_x_mm + geometry_.width_mm) /
+         (sensors_[*y_hi].grid_y_mm - sensors_[*y_lo].grid_y_mm + geometry_.height_mm);
+}
+
 }  // namespace gaitmon

@@ -2,10 +2,19 @@
 #include "gaitmon/stance.hpp"
 
 #include <algorithm>
-#include <limits>
+#include <cmath>
 #include <stdexcept>
 
 namespace gaitmon {
+namespace {
+
+// A footprint refitted over the unthresholded cells may differ from the thresholded fit by this
+// fraction at most; beyond it the low readings are not the cap's rim but a sensor still reading
+// after its load has gone, as under creep (4 bits on every cell around a cap of 8 widened it by
+// three quarters).
+constexpr double kMaxUnthresholdedChange = 0.15;
+
+}  // namespace
 
 std::array<RegionSample, kRegionCount> measure_frame(
     std::span<const std::uint8_t> raw, std::span<const double> zero, double threshold_bits,
@@ -31,16 +40,8 @@ std::array<RegionSample, kRegionCount> measure_frame(
     scratch.cells.clear();
     scratch.loaded.clear();
     scratch.unloaded.clear();
-    double x_lo = std::numeric_limits<double>::infinity();
-    double x_hi = -x_lo;
-    double y_lo = x_lo;
-    double y_hi = -x_lo;
     for (std::size_t i : layout.region_sensors(region)) {
       const Sensor& s = layout.sensor(i);
-      x_lo = std::min(x_lo, s.grid_x_mm);
-      x_hi = std::max(x_hi, s.grid_x_mm);
-      y_lo = std::min(y_lo, s.grid_y_mm);
-      y_hi = std::max(y_hi, s.grid_y_mm);
       if (scratch.zeroed[i] <= 0.0) {
         scratch.unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
         continue;
@@ -55,42 +56,41 @@ std::array<RegionSample, kRegionCount> measure_frame(
     sample.ellipse = cache != nullptr
                          ? cache->fit(scratch.cells, cell, region, first_instant)
                          : fit_contact_ellipse(scratch.cells, cell, region, first_instant);
-    // The footprint grows into its region in the region's shape: where the loads cannot give
-    // the ellipse's aspect, the region's box does.
-    const double box_aspect = (x_hi - x_lo + cell.width_mm) / (y_hi - y_lo + cell.height_mm);
     sample.free_footprint = free_footprint(scratch.loaded, cell, scratch.unloaded);
     sample.footprint_area_mm2 =
         sample.free_footprint
             ? std::optional<double>(sample.free_footprint->area_mm2)
-            : footprint_area_at_aspect_mm2(scratch.loaded, cell, box_aspect, scratch.unloaded);
+            : footprint_area_at_aspect_mm2(scratch.loaded, cell, layout.region_box_aspect(region),
+                                           scratch.unloaded);
   }
   return samples;
 }
 
 namespace {
 
-/// Fits every frame's footprint of each region again at the aspect the stance's free fits share.
-void refit_at_shared_aspect(const Step& step, const InsoleLayout& layout, StanceSeries& series,
-                            FrameScratch& scratch) {
+/// Fits every frame's footprint of each region again: at the aspect the stance's free fits share
+/// (the region's box where none has one), and then over the cells under the threshold too.
+void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries& series,
+                      FrameScratch& scratch) {
   const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
-  std::array<std::optional<double>, kRegionCount> aspect;
+  std::array<double, kRegionCount> aspect{};
   std::vector<Footprint> fits;
   for (Region region : kRegions) {
     fits.clear();
     for (const auto& frame : series.frames) {
       if (const auto& f = frame[index_of(region)].free_footprint) fits.push_back(*f);
     }
-    aspect[index_of(region)] = shared_aspect(fits);
+    aspect[index_of(region)] = shared_aspect(fits).value_or(layout.region_box_aspect(region));
   }
   for (std::size_t f = 0; f < series.size(); ++f) {
-    zero_and_threshold(step.stance[f].bits, step.sensor_zero_bits, step.adaptive_threshold_bits,
-                       scratch.zeroed);
+    const auto& raw = step.stance[f].bits;
+    zero_and_threshold(raw, step.sensor_zero_bits, step.adaptive_threshold_bits, scratch.zeroed);
     for (Region region : kRegions) {
-      const auto& shared = aspect[index_of(region)];
       RegionSample& sample = series.frames[f][index_of(region)];
-      if (!shared || sample.active_sensors == 0) continue;
+      if (sample.active_sensors == 0) continue;
       scratch.loaded.clear();
       scratch.unloaded.clear();
+      scratch.region.clear();
       for (std::size_t i : layout.region_sensors(region)) {
         const Sensor& s = layout.sensor(i);
         if (scratch.zeroed[i] <= 0.0) {
@@ -98,9 +98,20 @@ void refit_at_shared_aspect(const Step& step, const InsoleLayout& layout, Stance
         } else {
           scratch.loaded.push_back({s.grid_x_mm, s.grid_y_mm, scratch.zeroed[i]});
         }
+        scratch.region.push_back(
+            {s.grid_x_mm, s.grid_y_mm, static_cast<double>(raw[i]) - step.sensor_zero_bits[i]});
       }
+      const double a = aspect[index_of(region)];
+      const auto thresholded =
+          footprint_area_at_aspect_mm2(scratch.loaded, cell, a, scratch.unloaded);
+      const auto unthresholded = thresholded
+                                     ? footprint_area_unthresholded_mm2(
+                                           scratch.region, cell, a, step.adaptive_threshold_bits)
+                                     : std::nullopt;
       sample.footprint_area_mm2 =
-          footprint_area_at_aspect_mm2(scratch.loaded, cell, *shared, scratch.unloaded);
+          unthresholded && std::abs(*unthresholded / *thresholded - 1.0) <= kMaxUnthresholdedChange
+              ? unthresholded
+              : thresholded;
     }
   }
 }
@@ -136,7 +147,7 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
     series.frames.push_back(samples);
     series.total_force_n.push_back(total);
   }
-  refit_at_shared_aspect(step, layout, series, scratch);
+  refit_footprints(step, layout, series, scratch);
   return series;
 }
 

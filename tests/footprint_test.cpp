@@ -14,6 +14,7 @@
 #include <random>
 #include <span>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "gaitmon/config.hpp"
@@ -138,66 +139,99 @@ TEST(Footprint, TheSharedAspectIsTheLogMeanWeightedByThePeakSquared) {
   EXPECT_NEAR(*shared_aspect(with_bad), 2.5, 1e-12);
 }
 
+/// One region of a size as the simulator rasterises it (cell centres, the model's pressure at
+/// rest), read through 0.5-bit noise and rounding.
+class RasterisedRegion {
+ public:
+  RasterisedRegion(InsoleSize size, Region region, std::uint64_t seed)
+      : config_(load_config(test::source_dir() / "config" / "gaitmon.toml")),
+        layout_(config_.insole(size), config_.sensor),
+        region_(region),
+        params_(config_.tissue(size, region).mean),
+        bits_per_n_(1.0 / config_.calibration.newtons_per_bit(config_.sensor.area_mm2())),
+        rng_(seed) {}
+
+  CellSize cell() const { return {config_.sensor.width_mm, config_.sensor.height_mm}; }
+  /// The contact's aspect as the simulator lays it: stretched to the region's box.
+  double box_aspect() const { return layout_.region_box_aspect(region_); }
+  double sensor_area_mm2() const {
+    return static_cast<double>(layout_.region_sensors(region_).size()) * config_.sensor.area_mm2();
+  }
+
+  /// Every cell of the region at contact area `area_mm2`, in bits, carrying `load_share` of the
+  /// elastic force there (under 1 as the tissue recovers at toe off and damping pulls it down).
+  std::vector<LoadedCell> read(double area_mm2, double load_share = 1.0) {
+    const double d = deformation_mm(params_, area_mm2);
+    const std::vector<double> loads = rasterise_region(
+        layout_, region_, params_, d, 0.0, ModelVariant::Correct, Rasterisation::CellCentre,
+        load_share * force_n(params_, d, 0.0, ModelVariant::Correct));
+    const auto& sensors = layout_.region_sensors(region_);
+    std::vector<LoadedCell> cells;
+    for (std::size_t i = 0; i < sensors.size(); ++i) {
+      const Sensor& s = layout_.sensor(sensors[i]);
+      const double bits = std::clamp(std::round(loads[i] * bits_per_n_ + noise_(rng_)), 0.0, 255.0);
+      cells.push_back({s.grid_x_mm, s.grid_y_mm, bits});
+    }
+    return cells;
+  }
+
+ private:
+  Config config_;
+  InsoleLayout layout_;
+  Region region_;
+  EllipsoidParams params_;
+  double bits_per_n_;
+  std::mt19937_64 rng_;
+  std::normal_distribution<double> noise_{0.0, 0.5};
+};
+
+/// The cells at or above `threshold` and the centres of those under it, as the thresholded fits
+/// see them.
+void split(std::span<const LoadedCell> cells, double threshold, std::vector<LoadedCell>& loaded,
+           std::vector<CellCentre>& unloaded) {
+  loaded.clear();
+  unloaded.clear();
+  for (const LoadedCell& c : cells) {
+    if (c.load < threshold) {
+      unloaded.push_back({c.x_mm, c.y_mm});
+    } else {
+      loaded.push_back(c);
+    }
+  }
+}
+
+std::pair<double, double> mean_sd(const std::vector<double>& v) {
+  double m = 0.0;
+  for (double x : v) m += x / static_cast<double>(v.size());
+  return {m, test::sample_sd(v)};
+}
+
 // Why measure_stance shares the aspect: met1_2 of size 45-46 (22 cells) as the simulator
 // rasterises it, with 0.5-bit noise, rounding and a 6-bit threshold, at half its peak area. The
 // free fit takes its curvature ratio from the few loaded cells and scatters by about 10 %; at
 // the aspect that 20 full-load frames share it scatters by under 3 %, without a bias.
 TEST(Footprint, AtTheSharedAspectAPartialLoadScattersLessThanAlone) {
-  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  const InsoleSize size = InsoleSize::S45_46;
-  const InsoleLayout layout(config.insole(size), config.sensor);
-  const Region region = Region::Met1_2;
-  const EllipsoidParams params = config.tissue(size, region).mean;
-  const auto& sensors = layout.region_sensors(region);
-  const CellSize cell{config.sensor.width_mm, config.sensor.height_mm};
-  const double bits_per_n = 1.0 / config.calibration.newtons_per_bit(config.sensor.area_mm2());
-  const double peak_area = 0.69 * static_cast<double>(sensors.size()) * config.sensor.area_mm2();
-  std::mt19937_64 rng(7);
-  std::normal_distribution<double> noise(0.0, 0.5);
-  const auto frame = [&](double area_mm2, std::vector<LoadedCell>& loaded,
-                         std::vector<CellCentre>& unloaded) {
-    const double d = deformation_mm(params, area_mm2);
-    const std::vector<double> loads =
-        rasterise_region(layout, region, params, d, 0.0, ModelVariant::Correct,
-                         Rasterisation::CellCentre, force_n(params, d, 0.0, ModelVariant::Correct));
-    loaded.clear();
-    unloaded.clear();
-    for (std::size_t i = 0; i < sensors.size(); ++i) {
-      const Sensor& s = layout.sensor(sensors[i]);
-      const double bits = std::clamp(std::round(loads[i] * bits_per_n + noise(rng)), 0.0, 255.0);
-      if (bits < 6.0) {
-        unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
-      } else {
-        loaded.push_back({s.grid_x_mm, s.grid_y_mm, bits});
-      }
-    }
-  };
+  RasterisedRegion met(InsoleSize::S45_46, Region::Met1_2, 7);
+  const double peak_area = 0.69 * met.sensor_area_mm2();
   std::vector<LoadedCell> loaded;
   std::vector<CellCentre> unloaded;
   std::vector<Footprint> full_load;
   for (int k = 0; k < 20; ++k) {
-    frame(peak_area, loaded, unloaded);
-    if (const auto f = free_footprint(loaded, cell, unloaded)) full_load.push_back(*f);
+    split(met.read(peak_area), 6.0, loaded, unloaded);
+    if (const auto f = free_footprint(loaded, met.cell(), unloaded)) full_load.push_back(*f);
   }
   const auto aspect = shared_aspect(full_load);
   ASSERT_TRUE(aspect.has_value());
   std::vector<double> alone, shared;
   for (int k = 0; k < 300; ++k) {
-    frame(0.5 * peak_area, loaded, unloaded);
-    if (const auto f = free_footprint(loaded, cell, unloaded)) {
+    split(met.read(0.5 * peak_area), 6.0, loaded, unloaded);
+    if (const auto f = free_footprint(loaded, met.cell(), unloaded)) {
       alone.push_back(f->area_mm2 / (0.5 * peak_area));
     }
-    if (const auto a = footprint_area_at_aspect_mm2(loaded, cell, *aspect, unloaded)) {
+    if (const auto a = footprint_area_at_aspect_mm2(loaded, met.cell(), *aspect, unloaded)) {
       shared.push_back(*a / (0.5 * peak_area));
     }
   }
-  const auto mean_sd = [](const std::vector<double>& v) {
-    double m = 0.0;
-    for (double x : v) m += x / static_cast<double>(v.size());
-    double ss = 0.0;
-    for (double x : v) ss += (x - m) * (x - m);
-    return std::pair{m, std::sqrt(ss / static_cast<double>(v.size()))};
-  };
   ASSERT_GE(alone.size(), 200u);
   ASSERT_EQ(shared.size(), 300u);
   const auto [alone_mean, alone_sd] = mean_sd(alone);
@@ -208,6 +242,65 @@ TEST(Footprint, AtTheSharedAspectAPartialLoadScattersLessThanAlone) {
   EXPECT_GT(alone_sd, 0.06);
   EXPECT_LT(shared_sd, 0.03);
   EXPECT_NEAR(shared_mean, 1.0, 0.01);
+}
+
+// The cap over every cell it covers, read without a threshold, is exact where the cells read the
+// paraboloid and nothing outside it: from the cells above 40 % of the peak it grows to the whole
+// cap in a few rounds, where the fit to those cells alone is exact too but rests on fewer.
+TEST(Footprint, WithoutTheThresholdTheCapTakesInItsRim) {
+  const double cx = 31.1, cy = 52.4, rA = 24.3, rB = 41.7, peak = 87.0;
+  std::vector<LoadedCell> region;
+  for (int j = 0; j < 8; ++j) {
+    for (int i = 0; i < 9; ++i) {
+      const double x = i * kW;
+      const double y = j * kH;
+      const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
+      region.push_back({x, y, std::max(0.0, peak * (1.0 - rho2))});
+    }
+  }
+  const auto area = footprint_area_unthresholded_mm2(region, CellSize{kW, kH}, rA / rB, 0.4 * peak);
+  ASSERT_TRUE(area.has_value());
+  EXPECT_NEAR(*area, kPi * rA * rB, 1e-9 * kPi * rA * rB);
+}
+
+// What the rim buys where the pressure is low for the contact's size, as at toe off: met1_2,
+// met3_5 and the heel of size 41-42 at three quarters of their sensor area and a fifth
+// of the elastic force there, through noise, rounding and a 5-bit threshold (what the adaptive
+// one comes to for a 60 kg walker), at the simulator's aspect. Compared on the frames where the
+// fit to the cells above the threshold is found (about half of them; measure_stance takes the
+// rim's fit only there, as its check against creep): the rim's is there too, without a bias and
+// with a half to two thirds of the scatter (measured: met1_2 155 frames, 0.989 +- 0.035 -> 0.999
+// +- 0.015; met3_5 136, 0.988 +- 0.027 -> 0.998 +- 0.012; the heel 142, 1.016 +- 0.021 -> 1.006
+// +- 0.014).
+TEST(Footprint, WithTheRimALowPressureFootprintScattersLess) {
+  for (Region r : {Region::Met1_2, Region::Met3_5, Region::Heel}) {
+    RasterisedRegion region(InsoleSize::S41_42, r, 11);
+    const double area = 0.75 * region.sensor_area_mm2();
+    std::vector<LoadedCell> loaded;
+    std::vector<CellCentre> unloaded;
+    std::vector<double> thresholded, with_rim;
+    const double aspect = region.box_aspect();
+    for (int k = 0; k < 300; ++k) {
+      const auto cells = region.read(area, 0.2);
+      split(cells, 5.0, loaded, unloaded);
+      const auto a = footprint_area_at_aspect_mm2(loaded, region.cell(), aspect, unloaded);
+      if (!a) continue;
+      thresholded.push_back(*a / area);
+      const auto b = footprint_area_unthresholded_mm2(cells, region.cell(), aspect, 5.0);
+      ASSERT_TRUE(b.has_value());
+      with_rim.push_back(*b / area);
+    }
+    const auto [t_mean, t_sd] = mean_sd(thresholded);
+    const auto [r_mean, r_sd] = mean_sd(with_rim);
+    const std::string name(region_name(r));
+    std::printf(
+        "%s at a fifth of its load, %zu frames: above the threshold %.3f +- %.3f, with "
+        "the rim %.3f +- %.3f\n",
+        name.c_str(), thresholded.size(), t_mean, t_sd, r_mean, r_sd);
+    ASSERT_GE(thresholded.size(), 100u) << name;
+    EXPECT_NEAR(r_mean, 1.0, 0.01) << name;
+    EXPECT_LT(r_sd, 0.75 * t_sd) << name;
+  }
 }
 
 TEST(Footprint, OneRowOrTooFewCellsDoNotDetermineIt) {
@@ -273,6 +366,10 @@ TEST(Footprint, ABadCellSizeOrAspectThrows) {
   EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{kW, kH}, 0.0),
                std::invalid_argument);
   EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{kW, kH}, std::nan("")),
+               std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_unthresholded_mm2(cells, CellSize{kW, 0.0}, 1.0, 5.0),
+               std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_unthresholded_mm2(cells, CellSize{kW, kH}, -1.0, 5.0),
                std::invalid_argument);
 }
 

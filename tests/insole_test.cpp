@@ -177,6 +177,13 @@ TEST(InsoleLayout, RegionSensorsAndOutermostHeelRow) {
   EXPECT_EQ(wide.outermost_heel_row(), 3);
 }
 
+// One cell is 7.5 x 15 mm; two side by side in a row are 15 x 15 mm, whatever the pitch.
+TEST(InsoleLayout, RegionBoxAspectSpansTheCellsEdgeToEdge) {
+  const InsoleLayout wide(spec_2_4_3(), geometry(RowAlignment::Centred, 9.0, 20.0));
+  EXPECT_DOUBLE_EQ(wide.region_box_aspect(Region::Heel), 1.0);
+  EXPECT_DOUBLE_EQ(wide.region_box_aspect(Region::Met1_2), 0.5);
+}
+
 TEST(InsoleLayout, RegionSensorsComeInSensorOrderWhateverTheSpanOrder) {
   InsoleSpec spec = spec_2_4_3();
   spec.regions[index_of(Region::Heel)] = {{3, 3, 3}, {3, 2, 2}};

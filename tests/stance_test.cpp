@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "test_support.hpp"
 
@@ -158,6 +159,103 @@ TEST_F(StanceTest, AFrameTooSmallForItsOwnAspectTakesTheStancesShared) {
   const auto boxed = footprint_area_at_aspect_mm2(cells, cell, 0.75);
   ASSERT_TRUE(boxed.has_value());
   EXPECT_GT(std::abs(*boxed / truth - 1.0), 0.1);
+}
+
+/// A heel cap of `aspect` (rA / rB) about the heel's cells' centroid, `peak_bits` above the
+/// zero of 2 bits, and `floor_bits` more on every heel cell, rounded.
+std::vector<std::uint8_t> heel_cap(const InsoleLayout& layout, double aspect, double rB,
+                                   double peak_bits, double floor_bits = 0.0) {
+  const auto& heel = layout.region_sensors(Region::Heel);
+  double cx = 0.0, cy = 0.0;
+  for (std::size_t i : heel) {
+    cx += layout.sensor(i).grid_x_mm / static_cast<double>(heel.size());
+    cy += layout.sensor(i).grid_y_mm / static_cast<double>(heel.size());
+  }
+  std::vector<std::uint8_t> bits(layout.sensor_count(), 2);
+  for (std::size_t i : heel) {
+    const Sensor& s = layout.sensor(i);
+    const double rho2 =
+        std::pow((s.grid_x_mm - cx) / (aspect * rB), 2) + std::pow((s.grid_y_mm - cy) / rB, 2);
+    const double load = std::max(0.0, peak_bits * (1.0 - rho2)) + floor_bits;
+    bits[i] = static_cast<std::uint8_t>(2.0 + std::round(load));
+  }
+  return bits;
+}
+
+/// The heel's zeroed loads in one frame of `step`, all of them or those at or above the
+/// threshold.
+std::vector<LoadedCell> heel_loads(const Step& step, const InsoleLayout& layout, std::size_t frame,
+                                   bool thresholded) {
+  std::vector<LoadedCell> cells;
+  for (std::size_t i : layout.region_sensors(Region::Heel)) {
+    const Sensor& s = layout.sensor(i);
+    const double load = static_cast<double>(step.stance[frame].bits[i]) - 2.0;
+    if (!thresholded || load >= step.adaptive_threshold_bits) {
+      cells.push_back({s.grid_x_mm, s.grid_y_mm, load});
+    }
+  }
+  return cells;
+}
+
+/// The aspect the stance's free heel footprints share, as measure_stance takes it.
+double heel_shared_aspect(const StanceSeries& series) {
+  std::vector<Footprint> fits;
+  for (std::size_t f = 0; f < series.size(); ++f) {
+    if (const auto& fp = series.at(f, Region::Heel).free_footprint) fits.push_back(*fp);
+  }
+  return shared_aspect(fits).value();
+}
+
+// At toe off the tissue recovers and its pressure falls while the contact is still wide: a heel
+// cap of 12 bits at the peak reads under the 5-bit threshold on its outer 60 % of area. The
+// stance's footprint is the fit that takes those rim cells in (footprint_area_unthresholded_mm2
+// measures what that buys under noise), not the one to the cells above the threshold.
+TEST_F(StanceTest, TheRimUnderTheThresholdCountsInTheFootprint) {
+  const double aspect = 0.8, rB = 30.0;
+  const Step step =
+      make_step({heel_cap(*layout_, aspect, rB, 200.0), heel_cap(*layout_, aspect, rB, 12.0)});
+  const StanceSeries series = measure_stance(step, *layout_, config_.calibration);
+  ASSERT_EQ(series.size(), 2u);
+  const CellSize cell{layout_->geometry().width_mm, layout_->geometry().height_mm};
+  const double shared = heel_shared_aspect(series);
+  const auto above =
+      footprint_area_at_aspect_mm2(heel_loads(step, *layout_, 1, true), cell, shared);
+  const auto all = footprint_area_unthresholded_mm2(heel_loads(step, *layout_, 1, false), cell,
+                                                    shared, step.adaptive_threshold_bits);
+  ASSERT_TRUE(above.has_value());
+  ASSERT_TRUE(all.has_value());
+  EXPECT_GT(std::abs(*all / *above - 1.0), 1e-3);
+  ASSERT_TRUE(series.at(1, Region::Heel).footprint_area_mm2.has_value());
+  EXPECT_DOUBLE_EQ(*series.at(1, Region::Heel).footprint_area_mm2, *all);
+}
+
+// A sensor that still reads after its load has gone (creep) reads a few bits more on every cell
+// of the earlier, wider footprint: here 4 bits on the whole heel around a small cap of 8. Taken
+// in, those readings flatten the cap and widen it by about three quarters, so the stance keeps
+// the fit to the cells above the threshold.
+TEST_F(StanceTest, LowReadingsBeyondTheCapKeepTheThresholdedFootprint) {
+  const double aspect = 0.8;
+  const Step step = make_step(
+      {heel_cap(*layout_, aspect, 30.0, 200.0), heel_cap(*layout_, aspect, 15.0, 8.0, 4.0)});
+  const StanceSeries series = measure_stance(step, *layout_, config_.calibration);
+  ASSERT_EQ(series.size(), 2u);
+  const double shared = heel_shared_aspect(series);
+  const CellSize cell{layout_->geometry().width_mm, layout_->geometry().height_mm};
+  std::vector<CellCentre> unloaded;
+  for (std::size_t i : layout_->region_sensors(Region::Heel)) {
+    if (static_cast<double>(step.stance[1].bits[i]) - 2.0 < step.adaptive_threshold_bits) {
+      unloaded.push_back({layout_->sensor(i).grid_x_mm, layout_->sensor(i).grid_y_mm});
+    }
+  }
+  const auto above =
+      footprint_area_at_aspect_mm2(heel_loads(step, *layout_, 1, true), cell, shared, unloaded);
+  const auto all = footprint_area_unthresholded_mm2(heel_loads(step, *layout_, 1, false), cell,
+                                                    shared, step.adaptive_threshold_bits);
+  ASSERT_TRUE(above.has_value());
+  ASSERT_TRUE(all.has_value());
+  EXPECT_GT(*all / *above, 1.5);
+  ASSERT_TRUE(series.at(1, Region::Heel).footprint_area_mm2.has_value());
+  EXPECT_DOUBLE_EQ(*series.at(1, Region::Heel).footprint_area_mm2, *above);
 }
 
 TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {

@@ -81,6 +81,22 @@ std::optional<double> footprint_area_at_aspect_mm2(std::span<const LoadedCell> c
                                                    double aspect,
                                                    std::span<const CellCentre> unloaded = {});
 
+/// The area of the four-term fit at `aspect` over all of a region's cells, read without the
+/// adaptive threshold: starting from the cells at or above `threshold_bits`, the fit takes in
+/// every cell its cap covers, whatever it reads (zeroed bits, so also under the threshold or
+/// below zero), and leaves out every cell it does not, until the set of cells stops changing.
+/// Why: at a partial load the threshold cuts off a wide rim (at a tenth of the peak pressure
+/// the outer 30 % of the footprint's area reads under 5 bits), and the cap's size rests on the
+/// few cells left; the rim's low readings are unbiased looks at the pressure there (noise of
+/// half a bit dithers the rounding). It holds only where an unloaded cell reads its zero: a
+/// sensor that still reads after the load has gone (creep) breaks it, which is why the caller
+/// checks it against the thresholded fit (measure_stance). nullopt as for free_footprint (with no
+/// cell counted as reading nothing: every cell the cap covers is in the fit). Throws
+/// std::invalid_argument as footprint_area_at_aspect_mm2 does.
+std::optional<double> footprint_area_unthresholded_mm2(std::span<const LoadedCell> region_cells,
+                                                       CellSize size, double aspect,
+                                                       double threshold_bits);
+
 /// The aspect shared by a stance's footprints of one region: the mean of their log aspects
 /// weighted by their peak squared, or nullopt if there is none. Why: the ellipsoid's contact
 /// keeps the aspect A / B at every depth (eqs 5, 6), and a frame's own curvature ratio, from a

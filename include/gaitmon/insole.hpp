@@ -52,6 +52,10 @@ class InsoleLayout {
     return region_sensors_[index_of(region)];
   }
 
+  /// Width over height of the bounding box of a region's cells in the grid frame, cell edges
+  /// included: the shape a footprint grows into where its loads cannot give its aspect.
+  double region_box_aspect(Region region) const;
+
  private:
   InsoleSize size_;
   SensorGeometry geometry_;

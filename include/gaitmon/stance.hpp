@@ -26,7 +26,8 @@ struct RegionSample {
   ContactEllipse ellipse;        ///< seed chapter 4; ellipse.kase None when no contact
   /// The paraboloid footprint fitted to the active cells' loads (footprint.hpp); nullopt when
   /// they do not determine it. measure_frame fits it free where the cells allow, else at the
-  /// region box's aspect; measure_stance at the stance's shared aspect.
+  /// region box's aspect; measure_stance at the stance's shared aspect and over the cells under
+  /// the threshold too.
   std::optional<double> footprint_area_mm2;
   /// The free fit of this frame alone (bits), where it is a plausible cap.
   std::optional<Footprint> free_footprint;
@@ -50,6 +51,7 @@ struct FrameScratch {
   std::vector<ActiveCell> cells;
   std::vector<LoadedCell> loaded;
   std::vector<CellCentre> unloaded;
+  std::vector<LoadedCell> region;  ///< every cell of a region, zeroed but not thresholded
 };
 
 /// One frame: zeroes the raw bits with `zero`, applies the adaptive threshold and measures every
@@ -64,7 +66,9 @@ std::array<RegionSample, kRegionCount> measure_frame(
 /// Zeroes each stance frame with the step's per-sensor zero, applies its adaptive threshold, and
 /// measures every region. The first frame of the stance is the "first instant" of Case 1. Each
 /// region's footprints are then fitted again at the aspect its free fits share over the stance
-/// (shared_aspect), where any frame had one.
+/// (shared_aspect; the region's box where no frame had one), and once more over all its cells
+/// without the threshold (footprint_area_unthresholded_mm2), which is kept where it is within
+/// 15 % of the thresholded fit.
 /// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
 /// steps passes one cache for all of them (results are identical with or without it).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
