@@ -207,7 +207,7 @@ double heel_shared_aspect(const StanceSeries& series) {
 }
 
 // At toe off the tissue recovers and its pressure falls while the contact is still wide: a heel
-// cap of 12 bits at the peak reads under the 5-bit threshold on its outer 60 % of area. The
+// cap of 12 bits at the peak reads under the 5-bit threshold on its outer 40 % of area. The
 // stance's footprint is the fit that takes those rim cells in (footprint_area_unthresholded_mm2
 // measures what that buys under noise), not the one to the cells above the threshold.
 TEST_F(StanceTest, TheRimUnderTheThresholdCountsInTheFootprint) {
