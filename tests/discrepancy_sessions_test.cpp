@@ -195,10 +195,12 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   EXPECT_EQ(drift_in_creep[1], 3);
   EXPECT_EQ(drift_elsewhere[1], 0);
   // The gap shrink's ceiling: the same session without the effect still has its noise (areas,
-  // cells, rounding), so no extension can shrink the gap by more than 1 - floor / baseline. When
-  // measured, that ceiling was under the 40 % in one session (hysteresis, size 45-46:
-  // 28.6 %, where the named effect reached the floor), and the named effects removed 40-111 % of
-  // the squared excess over the floor (the least, 40-50 %, for stress relaxation).
+  // cells, rounding), so an extension that models only the effect cannot shrink the gap by more
+  // than 1 - floor / baseline (hysteresis also takes a little of the floor: two of its sessions
+  // ended below it). When measured, that ceiling was under the 40 % in one session
+  // (hysteresis, size 45-46: 28.6 %, where the named effect reached the floor), and the named
+  // effects removed 40-111 % of the squared excess over the floor (the least, 40-50 %, for
+  // stress relaxation).
   fmt::print("Against the same seed and size without the effect (held-out NRMSE):\n{}", paired);
   fmt::print(
       "force effect sessions whose gap no extension could shrink by 40 %: {} of 12; least "
