@@ -1510,4 +1510,61 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   return out;
 }
 
+FixedEffectEvaluation evaluate_effect_at(const DiscrepancyInput& input, std::string_view effect,
+                                         const std::map<std::string, double>& params,
+                                         const DiscrepancySettings& settings) {
+  check_settings(settings, input);
+  check_discrepancy_effect(effect);
+  const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
+  const CandidateSpec& spec = spec_named(specs, effect);
+  for (const auto& [name, value] : params) {
+    const auto p = std::find_if(spec.params.begin(), spec.params.end(),
+                                [&](const ParamSpec& q) { return q.name == name; });
+    if (p == spec.params.end()) {
+      throw std::invalid_argument(spec.name + " has no parameter '" + name + "'");
+    }
+    if (!(value >= p->lo && value <= p->hi)) {
+      throw std::invalid_argument(spec.name + "." + name + " = " + std::to_string(value) +
+                                  " is outside [" + std::to_string(p->lo) + ", " +
+                                  std::to_string(p->hi) + "]");
+    }
+  }
+  // The given values, and every grid value of a parameter not given.
+  std::vector<std::vector<double>> thetas{{}};
+  for (const ParamSpec& p : spec.params) {
+    const auto given = params.find(p.name);
+    std::vector<std::vector<double>> next;
+    for (const auto& partial : thetas) {
+      for (double v : given != params.end() ? std::vector<double>{given->second} : p.grid) {
+        next.push_back(partial);
+        next.back().push_back(v);
+      }
+    }
+    thetas = std::move(next);
+  }
+  const Prepared prep = prepare(input, settings.folds);
+  const Costs base = unit_costs(prep.units, {});
+  std::vector<Costs> costs(thetas.size());
+  parallel_for(thetas.size(), [&](std::size_t i) {
+    const std::vector<FixedEffect> fx{{&spec, thetas[i]}};
+    costs[i] = unit_costs(prep.units, fx);
+  });
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < costs.size(); ++i) {
+    if (deviance(costs[i].force_sse(), costs[i].zero_sse(), prep.pooled) <
+        deviance(costs[best].force_sse(), costs[best].zero_sse(), prep.pooled)) {
+      best = i;
+    }
+  }
+  FixedEffectEvaluation out;
+  for (std::size_t p = 0; p < spec.params.size(); ++p) {
+    out.params.push_back({spec.params[p].name, thetas[best][p], 0.0});
+  }
+  out.baseline_nrmse_pct = nrmse(base.force_sse(), prep.pooled.norm);
+  out.extended_nrmse_pct = nrmse(costs[best].force_sse(), prep.pooled.norm);
+  out.zero_baseline_nrmse_pct = nrmse(base.zero_sse(), prep.pooled.zero_norm);
+  out.zero_extended_nrmse_pct = nrmse(costs[best].zero_sse(), prep.pooled.zero_norm);
+  return out;
+}
+
 }  // namespace gaitmon

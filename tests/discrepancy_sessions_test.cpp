@@ -43,7 +43,7 @@ struct SessionCase {
   std::uint64_t seed;
 };
 
-DiscrepancyResult run(const SessionCase& c, const std::filesystem::path& dir) {
+DiscrepancyInput session_input(const SessionCase& c, const std::filesystem::path& dir) {
   const Config& config = shipped_config();
   SimulationOptions o;
   // 12 s: about 20 complete steps, enough for 5 folds, and the whole matrix (30 sessions with
@@ -60,8 +60,11 @@ DiscrepancyResult run(const SessionCase& c, const std::filesystem::path& dir) {
   std::vector<Step> steps;
   segment_session(csv, config, [&](Step&& s) { steps.push_back(std::move(s)); });
   const InsoleLayout layout(config.insole(c.size), config.sensor);
-  return find_discrepancy(
-      prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings()));
+  return prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
+}
+
+DiscrepancyResult run(const SessionCase& c, const std::filesystem::path& dir) {
+  return find_discrepancy(session_input(c, dir));
 }
 
 TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
@@ -106,13 +109,17 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   // The force effects against the same seed and size without the effect: what no extension can
   // take from the baseline (the paired session's own held-out NRMSE, its noise floor).
   std::string paired;
+  // Each effect session with the effect at the simulator's own parameters: what the effect can
+  // explain at all, against which the fitted candidate is judged.
+  std::string at_truth;
   int beyond_any_extension = 0;
   double min_excess_removed = 100.0;
   std::uint64_t seed = 100;
   for (const std::string& effect : classes) {
     for (std::size_t i = 0; i < 3; ++i) {
       const SessionCase c{effect, strengths.at(effect)[i], sizes[i], ++seed};
-      const DiscrepancyResult r = run(c, dir);
+      const DiscrepancyInput input = session_input(c, dir);
+      const DiscrepancyResult r = find_discrepancy(input);
       const std::string first = r.named_effects.empty() ? "none" : r.named_effects.front().name;
       ++named_matrix[effect][first];
       std::size_t best = 0;
@@ -141,7 +148,27 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
           r.zero_extended_heldout_nrmse_pct, r.zero_gap_shrink_pct, r.candidates[best].name,
           r.candidates[best].shrink_pct, r.candidates[best].zero_shrink_pct,
           drifting.empty() ? "-" : drifting);
-      if (effect == "none" || effect == "sensor_creep") continue;
+      if (effect == "none") continue;
+      const FixedEffectEvaluation truth = evaluate_effect_at(input, effect, c.params);
+      const double truth_shrink =
+          100.0 * (1.0 - truth.extended_nrmse_pct / truth.baseline_nrmse_pct);
+      const double truth_zero_shrink =
+          100.0 * (1.0 - truth.zero_extended_nrmse_pct / truth.zero_baseline_nrmse_pct);
+      at_truth += fmt::format(
+          "  {:<18} {:<6} seed {:>3}: at the true parameters {:5.1f} % (zero channel {:5.1f} %); "
+          "fitted and held out {:5.1f} % ({:5.1f} %)\n",
+          effect, insole_size_name(c.size), c.seed, truth_shrink, truth_zero_shrink,
+          r.gap_shrink_pct, r.zero_gap_shrink_pct);
+      // The fitted candidate, held out, comes within a fifth of what its effect explains at
+      // the true parameters in sample (measured: 0.89 x at the least; stress relaxation,
+      // hysteresis and creep within 0.95-1.01 x; the impact of the smallest size and every
+      // saturation session gained more as fitted than at the truth, whose region-level form
+      // is only an approximation of the cells' ceiling).
+      if (effect == "sensor_creep") {
+        EXPECT_GE(r.zero_gap_shrink_pct, 0.8 * truth_zero_shrink) << c.seed;
+        continue;
+      }
+      EXPECT_GE(r.gap_shrink_pct, 0.8 * truth_shrink) << effect << " seed " << c.seed;
       const DiscrepancyResult without = run({"none", {}, c.size, c.seed}, dir);
       const double base = r.baseline_heldout_nrmse_pct;
       const double ext = r.extended_heldout_nrmse_pct;
@@ -207,6 +234,9 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       "excess over the floor removed: {:.0f} %\n",
       beyond_any_extension, min_excess_removed);
   EXPECT_GE(min_excess_removed, 33.0);
+  fmt::print(
+      "The effect at its true parameters (in sample) and as fitted (held out), gap shrink:\n{}",
+      at_truth);
 }
 
 TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {

@@ -236,6 +236,43 @@ TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
   EXPECT_THROW(fit_extended_model(input, effects, {}, stop.get_token()), FitStopped);
 }
 
+// With the parameters the session was made with, an effect explains what it added, down to the
+// noise, and the fitted candidate comes as close; at zero strength it is the baseline exactly.
+TEST(Discrepancy, AnEffectAtItsTrueParametersExplainsWhatItAdded) {
+  const CleanCase c{"stress_relaxation", {{"strength", 0.4}, {"tau_s", 0.3}}};
+  const DiscrepancyInput input = clean_session(c, 14, 7);
+  const FixedEffectEvaluation truth = evaluate_effect_at(input, c.effect, c.params);
+  const DiscrepancyResult fitted = find_discrepancy(input);
+  fmt::print("relaxation at its truth: {:.2f} % -> {:.2f} %; fitted, held out: {:.2f} %\n",
+             truth.baseline_nrmse_pct, truth.extended_nrmse_pct, fitted.extended_heldout_nrmse_pct);
+  ASSERT_EQ(truth.params.size(), 2u);
+  EXPECT_EQ(truth.params[0].name, "strength");
+  EXPECT_EQ(truth.params[0].value, 0.4);
+  EXPECT_EQ(truth.params[1].value, 0.3);
+  EXPECT_DOUBLE_EQ(truth.baseline_nrmse_pct, fitted.baseline_heldout_nrmse_pct);
+  EXPECT_LT(truth.extended_nrmse_pct, 0.5 * truth.baseline_nrmse_pct);
+  EXPECT_NEAR(fitted.extended_heldout_nrmse_pct, truth.extended_nrmse_pct,
+              0.15 * truth.extended_nrmse_pct);
+
+  const FixedEffectEvaluation off =
+      evaluate_effect_at(input, c.effect, {{"strength", 0.0}, {"tau_s", 0.3}});
+  EXPECT_EQ(off.extended_nrmse_pct, off.baseline_nrmse_pct);
+
+  // The simulator's impact has no onset: the workflow's takes the best of its grid.
+  const CleanCase impact{"impact_transient", {{"amplitude_n", 80.0}, {"duration_s", 0.04}}};
+  const FixedEffectEvaluation at_impact =
+      evaluate_effect_at(clean_session(impact, 10, 3), impact.effect, impact.params);
+  ASSERT_EQ(at_impact.params.size(), 3u);
+  EXPECT_EQ(at_impact.params[2].name, "onset_frames");
+  EXPECT_TRUE(at_impact.params[2].value == 0.0 || at_impact.params[2].value == 0.5 ||
+              at_impact.params[2].value == 1.0);
+  EXPECT_LT(at_impact.extended_nrmse_pct, 0.5 * at_impact.baseline_nrmse_pct);
+
+  EXPECT_THROW(evaluate_effect_at(input, "crosstalk", {}), std::invalid_argument);
+  EXPECT_THROW(evaluate_effect_at(input, c.effect, {{"gain", 0.2}}), std::invalid_argument);
+  EXPECT_THROW(evaluate_effect_at(input, c.effect, {{"strength", 2.0}}), std::invalid_argument);
+}
+
 TEST(Discrepancy, LeavesOutRegionStepsFittedOnTheEllipseWhenOthersHaveFootprints) {
   DiscrepancyInput input = clean_session({"none", {}}, 10, 5);
   const DiscrepancyResult all_ellipse = find_discrepancy(input);

@@ -67,6 +67,7 @@
 
 #include <array>
 #include <limits>
+#include <map>
 #include <span>
 #include <stdexcept>
 #include <stop_token>
@@ -310,5 +311,26 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
                                     const DiscrepancySettings& settings = {},
                                     const std::stop_token& stop = {});
+
+/// One effect at given parameters on top of the baseline, nothing fitted but each step's n, K
+/// and D (and, for sensor_creep, each chain's unknown start lag): what the effect itself can
+/// explain of a session whose truth is known, a simulated one. Against the fitted candidate it
+/// tells the fit of the shared parameters from what the baseline chain leaves. A parameter
+/// missing from `params` takes the value of its grid that fits best (impact_transient's
+/// onset_frames, which the simulator does not have). Nothing is held out: the parameters come
+/// from outside the data.
+struct FixedEffectEvaluation {
+  std::vector<ParamEstimate> params;  ///< as evaluated (se 0)
+  double baseline_nrmse_pct = 0.0;
+  double extended_nrmse_pct = 0.0;
+  double zero_baseline_nrmse_pct = 0.0;
+  double zero_extended_nrmse_pct = 0.0;
+};
+
+/// Throws std::invalid_argument for an unknown effect, a parameter it does not have, or a value
+/// outside the parameter's bounds.
+FixedEffectEvaluation evaluate_effect_at(const DiscrepancyInput& input, std::string_view effect,
+                                         const std::map<std::string, double>& params,
+                                         const DiscrepancySettings& settings = {});
 
 }  // namespace gaitmon
