@@ -1517,7 +1517,9 @@ FixedEffectEvaluation evaluate_effect_at(const DiscrepancyInput& input, std::str
   check_discrepancy_effect(effect);
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   const CandidateSpec& spec = spec_named(specs, effect);
-  for (const auto& [name, value] : params) {
+  for (const auto& given : params) {
+    const std::string& name = given.first;
+    const double value = given.second;
     const auto p = std::find_if(spec.params.begin(), spec.params.end(),
                                 [&](const ParamSpec& q) { return q.name == name; });
     if (p == spec.params.end()) {
