@@ -9,6 +9,7 @@
 #include <exception>
 #include <functional>
 #include <limits>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <numbers>
@@ -693,12 +694,15 @@ struct CandidateOutcome {
   Costs in_sample;            // per unit at theta
 };
 
-std::vector<std::vector<double>> grid_of(const CandidateSpec& spec) {
+// Every combination of the parameters' grid values; a parameter in `fixed` takes that value only.
+std::vector<std::vector<double>> grid_of(const CandidateSpec& spec,
+                                         const std::map<std::string, double>& fixed = {}) {
   std::vector<std::vector<double>> grid{{}};
   for (const ParamSpec& p : spec.params) {
+    const auto given = fixed.find(p.name);
     std::vector<std::vector<double>> next;
     for (const auto& partial : grid) {
-      for (double v : p.grid) {
+      for (double v : given != fixed.end() ? std::vector<double>{given->second} : p.grid) {
         auto t = partial;
         t.push_back(v);
         next.push_back(std::move(t));
@@ -1531,19 +1535,7 @@ FixedEffectEvaluation evaluate_effect_at(const DiscrepancyInput& input, std::str
                                   std::to_string(p->hi) + "]");
     }
   }
-  // The given values, and every grid value of a parameter not given.
-  std::vector<std::vector<double>> thetas{{}};
-  for (const ParamSpec& p : spec.params) {
-    const auto given = params.find(p.name);
-    std::vector<std::vector<double>> next;
-    for (const auto& partial : thetas) {
-      for (double v : given != params.end() ? std::vector<double>{given->second} : p.grid) {
-        next.push_back(partial);
-        next.back().push_back(v);
-      }
-    }
-    thetas = std::move(next);
-  }
+  const std::vector<std::vector<double>> thetas = grid_of(spec, params);
   const Prepared prep = prepare(input, settings.folds);
   const Costs base = unit_costs(prep.units, {});
   std::vector<Costs> costs(thetas.size());
