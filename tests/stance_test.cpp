@@ -231,9 +231,10 @@ TEST_F(StanceTest, TheRimUnderTheThresholdCountsInTheFootprint) {
 
 // A sensor that still reads after its load has gone (creep) reads a few bits more on every cell
 // of the earlier, wider footprint: here 4 bits on the whole heel around a small cap of 8. Taken
-// in, those readings flatten the cap and widen it by about three quarters, so the stance keeps
-// the fit to the cells above the threshold.
-TEST_F(StanceTest, LowReadingsBeyondTheCapKeepTheThresholdedFootprint) {
+// in, those readings flatten the cap and widen it by about three quarters. Two fits of the same
+// contact that far apart say one of them is wrong, and which one the frame cannot tell (a
+// thresholded fit on a few nearly flat loads extrapolates as far): the frame gets none.
+TEST_F(StanceTest, FootprintsThatDisagreeLeaveTheFrameWithoutOne) {
   const double aspect = 0.8;
   const Step step = make_step(
       {heel_cap(*layout_, aspect, 30.0, 200.0), heel_cap(*layout_, aspect, 15.0, 8.0, 4.0)});
@@ -254,8 +255,8 @@ TEST_F(StanceTest, LowReadingsBeyondTheCapKeepTheThresholdedFootprint) {
   ASSERT_TRUE(above.has_value());
   ASSERT_TRUE(all.has_value());
   EXPECT_GT(*all / *above, 1.5);
-  ASSERT_TRUE(series.at(1, Region::Heel).footprint_area_mm2.has_value());
-  EXPECT_DOUBLE_EQ(*series.at(1, Region::Heel).footprint_area_mm2, *above);
+  EXPECT_FALSE(series.at(1, Region::Heel).footprint_area_mm2.has_value());
+  EXPECT_TRUE(series.at(0, Region::Heel).footprint_area_mm2.has_value());
 }
 
 TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {

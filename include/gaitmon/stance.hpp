@@ -68,7 +68,7 @@ std::array<RegionSample, kRegionCount> measure_frame(
 /// region's footprints are then fitted again at the aspect its free fits share over the stance
 /// (shared_aspect; the region's box where no frame had one), and once more over all its cells
 /// without the threshold (footprint_area_unthresholded_mm2), which is kept where it is within
-/// 15 % of the thresholded fit.
+/// 15 % of the thresholded fit; where the two differ by more, the frame has no footprint.
 /// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
 /// steps passes one cache for all of them (results are identical with or without it).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
