@@ -113,6 +113,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   // explain at all, against which the fitted candidate is judged.
   std::string at_truth;
   int beyond_any_extension = 0;
+  int at_issue_target = 0;
   double min_excess_removed = 100.0;
   std::uint64_t seed = 100;
   for (const std::string& effect : classes) {
@@ -160,10 +161,9 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
           effect, insole_size_name(c.size), c.seed, truth_shrink, truth_zero_shrink,
           r.gap_shrink_pct, r.zero_gap_shrink_pct);
       // The fitted candidate, held out, comes within a fifth of what its effect explains at
-      // the true parameters in sample (measured: 0.89 x at the least; stress relaxation,
-      // hysteresis and creep within 0.95-1.01 x; the impact of the smallest size and every
-      // saturation session gained more as fitted than at the truth, whose region-level form
-      // is only an approximation of the cells' ceiling).
+      // the true parameters in sample (measured: 0.97 x at the least, creep's zero channel
+      // 45-46; the impact and saturation of size 37-38 and saturation 41-42 and 45-46 gained
+      // more as named, with a second effect on top, than the one effect at its truth).
       if (effect == "sensor_creep") {
         EXPECT_GE(r.zero_gap_shrink_pct, 0.8 * truth_zero_shrink) << c.seed;
         continue;
@@ -179,6 +179,15 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
           100.0 * (base * base - ext * ext) / (base * base - floor * floor);
       if (max_shrink < 40.0) ++beyond_any_extension;
       min_excess_removed = std::min(min_excess_removed, excess_removed);
+      if (r.gap_shrink_pct >= 40.0) ++at_issue_target;
+      // Every force effect but stress relaxation reaches the issue's 40 %, or all but a little
+      // of what any extension could take (measured: hysteresis 45-46, whose ceiling is 28 %,
+      // removed 110 % of the excess; saturation 41-42 reached 40.4 % and 89 %).
+      if (effect != "stress_relaxation") {
+        EXPECT_TRUE(r.gap_shrink_pct >= 40.0 || excess_removed >= 85.0)
+            << effect << " seed " << c.seed << ": " << r.gap_shrink_pct << " %, " << excess_removed
+            << " % of the excess";
+      }
       paired += fmt::format(
           "  {:<18} {:<6} seed {:>3}: without the effect {:5.2f} %; the most any extension could "
           "shrink the gap {:5.1f} %, shrunk {:5.1f} %; excess over the floor removed {:4.0f} %\n",
@@ -200,18 +209,19 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   print("Confusion matrix (named effect; 3 sessions per row)", named_matrix);
   print("Best candidate by held-out likelihood (force and zero), named or not", ranked_matrix);
   fmt::print("Sessions:\n{}", shrinks);
-  // The naming threshold (5 %) is about three times the largest false improvement seen on 15
-  // sessions without an effect (these three and twelve others, README), so none of these is
-  // named and no effect session is named wrongly. All 15 effect sessions were named right when
-  // measured (sensor creep through the zero channel, the weakest impact through the heel's
-  // frames before its footprint); the issue's 40 % shrink is not met by every effect (README,
-  // "Model-data discrepancy").
+  // The naming threshold (5 %) is 2.6 times the largest false improvement seen on 15 sessions
+  // without an effect (these three and twelve others, README: impact_transient 1.95 %;
+  // sensor_saturation gained up to 7.6 % in size 45-46, where no cells share the top reading,
+  // and the ceiling rule keeps it unnamed), so none of these is named and no effect session is
+  // named wrongly. All 15 effect sessions were named right when measured (sensor creep through
+  // the zero channel, the weakest impact through the heel's frames before its footprint); the
+  // issue's 40 % shrink is not met by stress relaxation (README, "Model-data discrepancy").
   fmt::print("effect sessions named right: {} of 15; with a wrong effect named: {}\n", right_names,
              wrong_names);
   EXPECT_EQ(none_named, 0);
   EXPECT_EQ(wrong_names, 0);
   EXPECT_EQ(right_names, 15);
-  // Creep is named on the zeros, and its zero channel gap shrinks by 73-79 % when measured.
+  // Creep is named on the zeros, and its zero channel gap shrinks by 72-78 % when measured.
   fmt::print("smallest zero channel shrink of the creep sessions: {:.1f} %\n",
              min_creep_zero_shrink);
   EXPECT_GE(min_creep_zero_shrink, 40.0);
@@ -225,14 +235,14 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   // cells, rounding), so an extension that models only the effect cannot shrink the gap by more
   // than 1 - floor / baseline (hysteresis also takes a little of the floor: two of its sessions
   // ended below it). When measured, that ceiling was under the issue's 40 % in one session
-  // (hysteresis, size 45-46: 28.6 %, where the named effect reached the floor), and the named
-  // effects removed 40-111 % of the squared excess over the floor (the least, 40-50 %, for
-  // stress relaxation).
+  // (hysteresis, size 45-46: 28.3 %, where the named effect reached the floor), and the named
+  // effects removed 42-112 % of the squared excess over the floor (the least, 42-60 %, for
+  // stress relaxation; 89 % or more for every other effect).
   fmt::print("Against the same seed and size without the effect (held-out NRMSE):\n{}", paired);
   fmt::print(
       "force effect sessions whose gap no extension could shrink by 40 %: {} of 12; least "
-      "excess over the floor removed: {:.0f} %\n",
-      beyond_any_extension, min_excess_removed);
+      "excess over the floor removed: {:.0f} %; gap shrunk by 40 % or more: {} of 12\n",
+      beyond_any_extension, min_excess_removed, at_issue_target);
   EXPECT_GE(min_excess_removed, 33.0);
   fmt::print(
       "The effect at its true parameters (in sample) and as fitted (held out), gap shrink:\n{}",

@@ -17,12 +17,13 @@
 //   sensor_creep       F_meas = F + beta LP_tau(F); zeroed steps: the zeros (below)
 //                                                              (gain beta, tau_s)
 //   hysteresis         F_meas = F (1 + h z(d)), Dahl state z   (strength h, transition_mm)
-//   impact_transient   heel F_meas = F + a sin(pi (t - t0) / T) (amplitude_n, duration_s,
-//                      onset_frames: t0 is that many frames before the heel's first frame
-//                      with a contact ellipse)
-//   sensor_saturation  F_meas = F (1 - (1 - c / p)^2) for p > c, p = 2 F / cells / N-per-bit
-//                      the peak reading of a paraboloid pressure over the measured contact
-//                      (ceiling_bits c)
+//   impact_transient   heel F_meas = F + a sin(pi (t - t0) / T) (amplitude_n, duration_s;
+//                      t0, 0 to 2 frames before the heel's first frame with a load, is
+//                      each step's own, chosen by its fit as n is)
+//   sensor_saturation  F_meas = F phi^-(2 + n) (1 - L^2), L = 1 - c phi^(1 + n) / p, where
+//                      p = 2 F / cells / N-per-bit is the peak reading of a paraboloid pressure
+//                      over the measured contact and phi(L) = (1 + L + L^2) / (1 + L) how much
+//                      wider the footprint fitted to capped cells is (ceiling_bits c; n = 0.3)
 // LP_tau is a first-order lag running through the foot's steps in time order (the lag carried
 // into a step is that of the measured force of the foot's earlier steps, decayed over the
 // swing).
@@ -139,8 +140,15 @@ struct DiscrepancySettings {
   /// (3.1 %) on 17 simulated sessions without an effect, as 5 % is for the force (1.7 %).
   double min_zero_shrink_pct = 10.0;
   double min_delta_bic = 10.0;  ///< and BIC at least this much
-  bool second_effect = true;    ///< look for a second effect on top of the first
-  int top_cells = 10;           ///< region x phase cells listed under `where`
+  /// sensor_saturation is named only where its ceiling shows in the readings: in at least this
+  /// many steps, and this share of them, two or more cells of one region read within
+  /// kSaturationBandBits of the session's highest reading in one frame (a ceiling's flat top
+  /// spans several cells). Without it the candidate's region-level form took up misfit at high
+  /// loads in sessions that had no ceiling (5.3 and 7.6 % held-out, size 45-46, no such frame).
+  int min_ceiling_steps = 3;
+  double min_ceiling_steps_pct = 10.0;
+  bool second_effect = true;  ///< look for a second effect on top of the first
+  int top_cells = 10;         ///< region x phase cells listed under `where`
 };
 
 struct ParamEstimate {
@@ -268,6 +276,9 @@ struct DiscrepancyResult {
   double zero_extended_heldout_nrmse_pct = 0.0;
   double zero_gap_shrink_pct = 0.0;
   double baseline_bic = 0.0;
+  /// Steps with a frame in which two or more cells of one region read at the session's top
+  /// (DiscrepancySettings::min_ceiling_steps); -1 where the input has no cell counts.
+  int ceiling_plateau_steps = -1;
   std::vector<EffectEstimate> named_effects;
   std::vector<CandidateResult> candidates;         ///< each on top of the baseline
   std::vector<CandidateResult> second_candidates;  ///< each on top of the first named effect
@@ -313,12 +324,11 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     const std::stop_token& stop = {});
 
 /// One effect at given parameters on top of the baseline, nothing fitted but each step's n, K
-/// and D (and, for sensor_creep, each chain's unknown start lag): what the effect itself can
-/// explain of a session whose truth is known, a simulated one. Against the fitted candidate it
-/// tells the fit of the shared parameters from what the baseline chain leaves. A parameter
-/// missing from `params` takes the value of its grid that fits best (impact_transient's
-/// onset_frames, which the simulator does not have). Nothing is held out: the parameters come
-/// from outside the data.
+/// and D (and each step's own choices: sensor_creep's unknown start lags, impact_transient's
+/// onset): what the effect itself can explain of a session whose truth is known, a simulated
+/// one. Against the fitted candidate it tells the fit of the shared parameters from what the
+/// baseline chain leaves. A parameter missing from `params` takes the value of its grid that
+/// fits best. Nothing is held out: the parameters come from outside the data.
 struct FixedEffectEvaluation {
   std::vector<ParamEstimate> params;  ///< as evaluated (se 0)
   double baseline_nrmse_pct = 0.0;

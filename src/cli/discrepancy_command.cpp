@@ -108,6 +108,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
       {"min_shrink_pct", args.settings.min_shrink_pct},
       {"min_zero_shrink_pct", args.settings.min_zero_shrink_pct},
       {"min_delta_bic", args.settings.min_delta_bic},
+      {"min_ceiling_steps", args.settings.min_ceiling_steps},
+      {"min_ceiling_steps_pct", args.settings.min_ceiling_steps_pct},
       {"second_effect", args.settings.second_effect},
       {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
   j["data"] = {{"steps", r.steps},
@@ -144,7 +146,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
                       {"lag1_autocorrelation", d.lag1_autocorrelation},
                       {"runs_test_z", d.runs_z},
                       {"effective_sample_fraction", d.effective_sample_fraction},
-                      {"correlation_with_state", corr}};
+                      {"correlation_with_state", corr},
+                      {"ceiling_plateau_steps", r.ceiling_plateau_steps}};
   nlohmann::json zeros = nlohmann::json::array();
   for (const ZeroLevelDrift& z : r.zero_levels) {
     zeros.push_back({{"foot", foot_name(z.foot)},
@@ -199,6 +202,13 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   for (const CandidateResult& c : result.candidates) {
     fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f}\n", c.name, c.heldout_nrmse_pct,
                c.shrink_pct, c.zero_shrink_pct, c.delta_bic);
+  }
+  if (result.ceiling_plateau_steps >= 0) {
+    fmt::print(
+        "ceiling in the readings: {} of {} steps have a frame with two or more cells of one "
+        "region at the session's top reading (sensor_saturation needs {} and {:.0f} %)\n",
+        result.ceiling_plateau_steps, result.steps, args.settings.min_ceiling_steps,
+        args.settings.min_ceiling_steps_pct);
   }
   std::string named;
   for (const EffectEstimate& e : result.named_effects) {
