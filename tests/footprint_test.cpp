@@ -30,19 +30,28 @@ constexpr double kW = 7.5;
 constexpr double kH = 15.0;
 constexpr double kPi = std::numbers::pi;
 
-/// p = peak (1 - rho^2) of an axis-aligned ellipse sampled at the centres of a cols x rows grid,
-/// keeping the cells where it is positive, as the adaptive threshold keeps the loaded ones.
-std::vector<LoadedCell> sampled_cap(double cx, double cy, double rA, double rB, double peak,
-                                    int cols, int rows) {
+/// Every cell of a cols x rows grid reading p = peak (1 - rho^2) of an axis-aligned ellipse at
+/// its centre, 0 outside the contact and capped at `ceiling`, as a region's cells read without
+/// the threshold.
+std::vector<LoadedCell> raster(double cx, double cy, double rA, double rB, double peak, int cols,
+                               int rows, double ceiling = std::numeric_limits<double>::infinity()) {
   std::vector<LoadedCell> cells;
   for (int j = 0; j < rows; ++j) {
     for (int i = 0; i < cols; ++i) {
       const double x = i * kW;
       const double y = j * kH;
       const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
-      if (rho2 < 1.0) cells.push_back({x, y, peak * (1.0 - rho2)});
+      cells.push_back({x, y, std::min(ceiling, std::max(0.0, peak * (1.0 - rho2)))});
     }
   }
+  return cells;
+}
+
+/// The raster's cells inside the contact, as the adaptive threshold keeps the loaded ones.
+std::vector<LoadedCell> sampled_cap(double cx, double cy, double rA, double rB, double peak,
+                                    int cols, int rows) {
+  std::vector<LoadedCell> cells = raster(cx, cy, rA, rB, peak, cols, rows);
+  std::erase_if(cells, [](const LoadedCell& c) { return !(c.load > 0.0); });
   return cells;
 }
 
@@ -249,15 +258,7 @@ TEST(Footprint, AtTheSharedAspectAPartialLoadScattersLessThanAlone) {
 // cap in a few rounds, where the fit to those cells alone is exact too but rests on fewer.
 TEST(Footprint, WithoutTheThresholdTheCapTakesInItsRim) {
   const double cx = 31.1, cy = 52.4, rA = 24.3, rB = 41.7, peak = 87.0;
-  std::vector<LoadedCell> region;
-  for (int j = 0; j < 8; ++j) {
-    for (int i = 0; i < 9; ++i) {
-      const double x = i * kW;
-      const double y = j * kH;
-      const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
-      region.push_back({x, y, std::max(0.0, peak * (1.0 - rho2))});
-    }
-  }
+  const std::vector<LoadedCell> region = raster(cx, cy, rA, rB, peak, 9, 8);
   const auto area = footprint_area_unthresholded_mm2(region, CellSize{kW, kH}, rA / rB, 0.4 * peak);
   ASSERT_TRUE(area.has_value());
   EXPECT_NEAR(*area, kPi * rA * rB, 1e-9 * kPi * rA * rB);
@@ -272,16 +273,7 @@ TEST(Footprint, WithoutTheThresholdTheCapTakesInItsRim) {
 TEST(Footprint, ACeilingWidensTheFootprintAsDerived) {
   const double cx = 31.1, cy = 52.4, rA = 24.3, rB = 41.7, peak = 120.0;
   for (const double L : {0.1, 0.2, 0.3, 0.45, 0.6}) {
-    const double ceiling = peak * (1.0 - L);
-    std::vector<LoadedCell> region;
-    for (int j = 0; j < 10; ++j) {
-      for (int i = 0; i < 11; ++i) {
-        const double x = i * kW;
-        const double y = j * kH;
-        const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
-        region.push_back({x, y, std::min(ceiling, std::max(0.0, peak * (1.0 - rho2)))});
-      }
-    }
+    const std::vector<LoadedCell> region = raster(cx, cy, rA, rB, peak, 11, 10, peak * (1.0 - L));
     const auto area =
         footprint_area_unthresholded_mm2(region, CellSize{kW, kH}, rA / rB, 0.05 * peak);
     ASSERT_TRUE(area.has_value()) << L;
