@@ -779,6 +779,53 @@ std::vector<std::vector<double>> grid_of(const CandidateSpec& spec,
   return grid;
 }
 
+// Standard errors from the curvature of the profiled deviance at its minimum `value`: cov = 2
+// H^-1 (diagonal of the inverse). With the force alone that is 2 s^2 H_SSE^-1, s^2 = SSE /
+// N_eff, N_eff inflating for autocorrelated residuals. NaN where H is not positive definite.
+std::vector<double> standard_errors(
+    const std::vector<double>& theta, double value,
+    const std::function<double(const std::vector<double>&)>& objective) {
+  const std::size_t q = theta.size();
+  std::vector<double> se(q, 0.0);
+  std::vector<double> h(q);
+  // The profile has kinks where a unit's n moves to the next of its grid values; a step of 1 %
+  // could straddle one and give a curvature of either sign (stress relaxation's strength 0.56
+  // and tau 0.83 s, both well inside their ranges, came out without an SE), so the step spans
+  // 3 % and averages over them.
+  for (std::size_t i = 0; i < q; ++i) h[i] = std::max(1e-4, 3e-2 * std::abs(theta[i]));
+  const auto at = [&](std::size_t i, double di, std::size_t j, double dj) {
+    auto th = theta;
+    th[i] += di;
+    th[j] += dj;
+    return objective(th);
+  };
+  std::vector<double> H(q * q, 0.0);
+  for (std::size_t i = 0; i < q; ++i) {
+    H[i * q + i] = (at(i, h[i], i, 0) - 2 * value + at(i, -h[i], i, 0)) / (h[i] * h[i]);
+    for (std::size_t j = i + 1; j < q; ++j) {
+      const double v = (at(i, h[i], j, h[j]) - at(i, h[i], j, -h[j]) - at(i, -h[i], j, h[j]) +
+                        at(i, -h[i], j, -h[j])) /
+                       (4 * h[i] * h[j]);
+      H[i * q + j] = H[j * q + i] = v;
+    }
+  }
+  // Invert H (q <= 2: no candidate has more).
+  std::vector<double> inv(q * q, 0.0);
+  if (q == 1 && H[0] > 0) {
+    inv[0] = 1.0 / H[0];
+  } else if (q == 2) {
+    const double det = H[0] * H[3] - H[1] * H[2];
+    if (det > 0 && H[0] > 0) {
+      inv = {H[3] / det, -H[1] / det, -H[2] / det, H[0] / det};
+    }
+  }
+  for (std::size_t i = 0; i < q; ++i) {
+    const double var = 2.0 * inv[i * q + i];
+    se[i] = var > 0 ? std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
+  }
+  return se;
+}
+
 // Fits one candidate on top of `base` (fixed effects): grid, k-fold, local refinement, SEs.
 // Every evaluation of the model first checks `stop`.
 CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& pooled,
@@ -861,57 +908,13 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     out.heldout.force[ui] = c.force[ui];
     out.heldout.zero[ui] = c.zero[ui];
   }
-  const std::vector<double>& theta = fits[folds].first;
-  const Costs& in_sample = fits[folds].second;
-  const double value = deviance_without(in_sample, -1);
-  const auto objective = [&](const std::vector<double>& th) {
-    const Costs c = costs_at(th);
-    return deviance(c.force_sse(), c.zero_sse(), pooled);
-  };
-  out.theta = theta;
-  out.in_sample = in_sample;
-
-  // Standard errors from the curvature of the profiled deviance: cov = 2 H^-1 (diagonal of the
-  // inverse). With the force alone that is 2 s^2 H_SSE^-1, s^2 = SSE / N_eff, N_eff inflating
-  // for autocorrelated residuals.
-  const std::size_t q = theta.size();
-  out.se.assign(q, 0.0);
-  std::vector<double> h(q);
-  // The profile has kinks where a unit's n moves to the next of its grid values; a step of 1 %
-  // could straddle one and give a curvature of either sign (stress relaxation's strength 0.56
-  // and tau 0.83 s, both well inside their ranges, came out without an SE), so the step spans
-  // 3 % and averages over them.
-  for (std::size_t i = 0; i < q; ++i) h[i] = std::max(1e-4, 3e-2 * std::abs(theta[i]));
-  const auto at = [&](std::size_t i, double di, std::size_t j, double dj) {
-    auto th = theta;
-    th[i] += di;
-    th[j] += dj;
-    return objective(th);
-  };
-  std::vector<double> H(q * q, 0.0);
-  for (std::size_t i = 0; i < q; ++i) {
-    H[i * q + i] = (at(i, h[i], i, 0) - 2 * value + at(i, -h[i], i, 0)) / (h[i] * h[i]);
-    for (std::size_t j = i + 1; j < q; ++j) {
-      const double v = (at(i, h[i], j, h[j]) - at(i, h[i], j, -h[j]) - at(i, -h[i], j, h[j]) +
-                        at(i, -h[i], j, -h[j])) /
-                       (4 * h[i] * h[j]);
-      H[i * q + j] = H[j * q + i] = v;
-    }
-  }
-  // Invert H (q <= 2: no candidate has more).
-  std::vector<double> inv(q * q, 0.0);
-  if (q == 1 && H[0] > 0) {
-    inv[0] = 1.0 / H[0];
-  } else if (q == 2) {
-    const double det = H[0] * H[3] - H[1] * H[2];
-    if (det > 0 && H[0] > 0) {
-      inv = {H[3] / det, -H[1] / det, -H[2] / det, H[0] / det};
-    }
-  }
-  for (std::size_t i = 0; i < q; ++i) {
-    const double var = 2.0 * inv[i * q + i];
-    out.se[i] = var > 0 ? std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
-  }
+  out.theta = fits[folds].first;
+  out.in_sample = fits[folds].second;
+  out.se = standard_errors(out.theta, deviance_without(out.in_sample, -1),
+                           [&](const std::vector<double>& th) {
+                             const Costs c = costs_at(th);
+                             return deviance(c.force_sse(), c.zero_sse(), pooled);
+                           });
   return out;
 }
 
