@@ -207,6 +207,13 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
       "footprint, and their contact ellipse moves in whole cells). Pooled NRMSE (eq 58, regions "
       "weighted by their force). Noise floor {:.2f} %.</p>",
       r.steps, r.step_regions, r.frames, r.step_regions_left_out, r.noise_floor_nrmse_pct);
+  if (r.ceiling_plateau_steps >= 0) {
+    html += fmt::format(
+        "<p>A ceiling in the readings: {} of {} steps have a frame in which two or more cells of "
+        "one region read at the session's top (sensor_saturation is named only where enough "
+        "do).</p>",
+        r.ceiling_plateau_steps, r.steps);
+  }
   html += "<h2>Named effects</h2><ul>" + named + "</ul>";
   html += fmt::format(
       "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.</p>",
