@@ -137,7 +137,7 @@ struct DiscrepancySettings {
   int phase_bins = 10;          ///< bins of normalised stance time, >= 10
   double min_shrink_pct = 5.0;  ///< held-out NRMSE must fall at least this much, %
   /// or the zero channel's at least this much, %: three times its largest false improvement
-  /// (3.1 %) on 17 simulated sessions without an effect, as 5 % is for the force (1.7 %).
+  /// (3.1 %) on 17 simulated sessions without an effect; 5 % is 2.6 times the force's (1.95 %).
   double min_zero_shrink_pct = 10.0;
   double min_delta_bic = 10.0;  ///< and BIC at least this much
   /// sensor_saturation is named only where its ceiling shows in the readings: in at least this
