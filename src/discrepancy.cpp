@@ -164,6 +164,7 @@ struct CandidateSpec {
   std::vector<ParamSpec> params;
   std::function<std::unique_ptr<Applied>(const std::vector<Unit>&, std::span<const double>)> make;
   bool reads_in_swing = false;  // solves each chain's unknown start lag (Pooled::unknown_starts)
+  bool needs_ceiling = false;   // named only where the readings show a ceiling (ceiling_seen)
 };
 
 // The foot's measured force of one region, low-passed through its steps: the lag carried into
@@ -424,7 +425,9 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
        {{"ceiling_bits", 5.0, 1000.0, linspace(40.0, 260.0, 12)}},
        [cell_area_mm2, newtons_per_bit](const std::vector<Unit>&, std::span<const double> th) {
          return std::make_unique<SaturationEffect>(th[0], cell_area_mm2, newtons_per_bit);
-       }});
+       },
+       false,
+       true});
   specs.push_back({"sensor_creep",
                    1,
                    {{"gain", 0.0, 2.0, linspace(0.05, 0.5, 10)}, {"tau_s", 0.02, 60.0, slow_tau}},
@@ -1485,7 +1488,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                          (pooled.zero_channel && r.zero_shrink_pct >= settings.min_zero_shrink_pct);
     const bool determined = std::all_of(r.params.begin(), r.params.end(),
                                         [](const ParamEstimate& p) { return std::isfinite(p.se); });
-    const bool seen = r.name != "sensor_saturation" || ceiling_seen;
+    const bool seen = !spec_named(specs, r.name).needs_ceiling || ceiling_seen;
     return shrinks && determined && seen && r.delta_bic <= -settings.min_delta_bic;
   };
   const auto most_likely = [](const std::vector<CandidateResult>& results) {
