@@ -13,6 +13,7 @@
 #include <memory>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <stop_token>
 #include <thread>
@@ -829,7 +830,25 @@ std::vector<double> standard_errors(
   return se;
 }
 
-// Fits one candidate on top of `base` (fixed effects): grid, k-fold, local refinement, SEs.
+// The refinement's pattern search: how often its steps halve, and how many moves it makes at
+// most (a bound on the work; a search that starts on the grid's best point settles in far fewer).
+constexpr int kPatternHalvings = 4;
+constexpr int kPatternMoves = 40;
+
+// Half the grid's spacing around its point nearest `value`.
+double half_local_spacing(const ParamSpec& p, double value) {
+  const auto& g = p.grid;
+  if (g.size() < 2) return 0.1 * std::abs(value);
+  std::size_t i = 0;
+  for (std::size_t k = 1; k < g.size(); ++k) {
+    if (std::abs(g[k] - value) < std::abs(g[i] - value)) i = k;
+  }
+  const std::size_t lo = i > 0 ? i - 1 : i;
+  const std::size_t hi = i + 1 < g.size() ? i + 1 : i;
+  return 0.5 * (g[hi] - g[lo]) / static_cast<double>(hi - lo);
+}
+
+// Fits one candidate on top of `base` (fixed effects): grid, k-fold, refinement, SEs.
 // Every evaluation of the model first checks `stop`.
 CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& pooled,
                                std::span<const FixedEffect> base, const CandidateSpec& spec,
@@ -861,8 +880,12 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     fx.push_back({&spec, th});
     return unit_costs(units, fx);
   };
-  // From the grid point that fits the units outside `held_out` best, a coordinate search in
-  // shrinking steps; returns the parameters and their costs on every unit.
+  // From the grid point that fits the units outside `held_out` best, a pattern search: poll a
+  // step along each parameter and, with two, along both diagonals (relaxation's strength and
+  // tau trade off along one); move to the first poll that improves, or halve the steps where
+  // none does. Steps start at half the grid's spacing around the start, so a geometric grid (the
+  // time constants) is searched at its own scale. Returns the parameters and their costs on every
+  // unit.
   const auto refine = [&](int held_out) {
     std::size_t best = 0;
     for (std::size_t gi = 1; gi < grid.size(); ++gi) {
@@ -873,26 +896,49 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     std::vector<double> theta = grid[best];
     Costs at_theta = costs[best];
     double value = deviance_without(at_theta, held_out);
-    std::vector<double> step(theta.size());
-    for (std::size_t p = 0; p < theta.size(); ++p) {
-      const auto& g = spec.params[p].grid;
-      step[p] = g.size() > 1 ? 0.5 * (g[1] - g[0]) : 0.1 * theta[p];
+    const std::size_t q = theta.size();
+    std::vector<double> step(q);
+    for (std::size_t p = 0; p < q; ++p) step[p] = half_local_spacing(spec.params[p], theta[p]);
+    std::vector<std::vector<double>> directions;
+    for (std::size_t p = 0; p < q; ++p) {
+      for (double sign : {-1.0, 1.0}) {
+        directions.emplace_back(q, 0.0);
+        directions.back()[p] = sign;
+      }
     }
-    for (int round = 0; round < 4; ++round) {
-      for (std::size_t p = 0; p < theta.size(); ++p) {
-        for (double dir : {-1.0, 1.0}) {
-          auto trial = theta;
-          trial[p] = std::clamp(theta[p] + dir * step[p], spec.params[p].lo, spec.params[p].hi);
-          Costs c = costs_at(trial);
-          const double v = deviance_without(c, held_out);
-          if (v < value) {
-            value = v;
-            theta = trial;
-            at_theta = std::move(c);
-            break;
-          }
+    if (q == 2) {
+      for (double a : {-1.0, 1.0}) {
+        for (double b : {-1.0, 1.0}) directions.push_back({a, b});
+      }
+    }
+    // Polls start with the direction that last improved, so a walk along a valley costs one
+    // evaluation a move.
+    std::size_t first = 0;
+    for (int halvings = 0, moves = 0; halvings < kPatternHalvings && moves < kPatternMoves;) {
+      bool moved = false;
+      for (std::size_t k = 0; k < directions.size() && !moved; ++k) {
+        const std::size_t d = (first + k) % directions.size();
+        auto trial = theta;
+        for (std::size_t p = 0; p < q; ++p) {
+          trial[p] = std::clamp(theta[p] + directions[d][p] * step[p], spec.params[p].lo,
+                                spec.params[p].hi);
         }
-        step[p] *= 0.5;
+        if (trial == theta) continue;
+        Costs c = costs_at(trial);
+        const double v = deviance_without(c, held_out);
+        if (v < value) {
+          value = v;
+          theta = std::move(trial);
+          at_theta = std::move(c);
+          first = d;
+          moved = true;
+        }
+      }
+      if (moved) {
+        ++moves;
+      } else {
+        for (double& st : step) st *= 0.5;
+        ++halvings;
       }
     }
     return std::pair{theta, at_theta};
@@ -918,6 +964,13 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
                              const Costs c = costs_at(th);
                              return deviance(c.force_sse(), c.zero_sse(), pooled);
                            });
+  // At a bound the minimum is the constraint's, not the data's: the curvature says nothing of
+  // how well the parameter is determined.
+  for (std::size_t p = 0; p < out.theta.size(); ++p) {
+    if (out.theta[p] <= spec.params[p].lo || out.theta[p] >= spec.params[p].hi) {
+      out.se[p] = std::numeric_limits<double>::quiet_NaN();
+    }
+  }
   return out;
 }
 

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -355,13 +356,33 @@ TEST(DiscrepancySessions, NothingIsNamedInTheSmallestSizeWithoutAnEffect) {
   }
 }
 
+TEST(DiscrepancySessions, RelaxationWhoseStrengthAndTauTradeOffIsRefinedToItsMinimum) {
+  // Strength and tau trade off along a valley of the deviance. The coordinate search used
+  // before stepped along the axes only, by half the grid's first spacing (15 ms for tau), and
+  // stopped off the valley's floor: the curvature there was not positive definite, no standard
+  // error came out, and this session (16 % held-out gain, BIC 680 better) went unnamed.
+  const auto dir = test::scratch_dir("discrepancy-relaxation-valley");
+  const DiscrepancyResult r =
+      run({"stress_relaxation", {{"strength", 0.6}, {"tau_s", 1.0}}, InsoleSize::S41_42, 105}, dir);
+  ASSERT_FALSE(r.named_effects.empty());
+  const EffectEstimate& named = r.named_effects.front();
+  EXPECT_EQ(named.name, "stress_relaxation");
+  for (const ParamEstimate& p : named.params) {
+    EXPECT_TRUE(std::isfinite(p.se)) << p.name;
+    const double truth = p.name == "strength" ? 0.6 : 1.0;
+    EXPECT_NEAR(p.value, truth, p.name == "strength" ? 0.05 : 0.4) << p.name;
+  }
+  EXPECT_GE(r.gap_shrink_pct, 10.0);
+}
+
 TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNamed) {
-  // On this real recording the zero changes of the steps follow the load near the swing
-  // windows a little (the foot is not always quite unloaded there), and the creep candidate
-  // takes that up: its zero channel gains 9 % and BIC 155 when measured, but its optimum has no
-  // finite standard error (a flat direction or a bound), so it is not named.
+  // On this real recording (8 force sensors a foot spread over patches of cells, no contact
+  // area to speak of) the impact candidate lowers the held-out force error by more than the 5 %
+  // threshold and BIC by hundreds, but its duration goes to the top of its range and its
+  // amplitude with it: an optimum on a bound, without a finite standard error, is not an effect
+  // the data show, so nothing is named.
   const auto dir = test::scratch_dir("discrepancy-undetermined");
-  const auto csv = test::shared_dir() / "real-data" / "gaitpdb" / "gaitpdb_JuPt01_01.csv";
+  const auto csv = test::shared_dir() / "real-data" / "gaitpdb" / "gaitpdb_GaCo01_01.csv";
   if (!std::filesystem::exists(csv)) GTEST_SKIP() << "real recording not found: " << csv;
   std::string output;
   ASSERT_EQ(
@@ -373,15 +394,19 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   std::ifstream in(dir / "out" / "discrepancy.json");
   const auto j = nlohmann::json::parse(in);
   EXPECT_TRUE(j["named_effects"].empty()) << j["named_effects"].dump();
+  EXPECT_NE(output.find("named: none (the most likely candidate, impact_transient, gains"),
+            std::string::npos)
+      << output;
+  EXPECT_NE(output.find("amplitude_n and duration_s have no standard error"), std::string::npos)
+      << output;
   bool seen = false;
   for (const auto& c : j["candidates"]) {
-    if (c["name"] != "sensor_creep") continue;
+    if (c["name"] != "impact_transient") continue;
     seen = true;
-    EXPECT_GE(c["zero_heldout_shrink_pct"].get<double>(), 5.0) << c.dump();
+    EXPECT_GE(c["heldout_shrink_pct"].get<double>(), 5.0) << c.dump();
     EXPECT_LE(c["delta_bic"].get<double>(), -10.0) << c.dump();
-    bool undetermined = false;
-    for (const auto& [name, p] : c["params"].items()) undetermined |= p["se"].is_null();
-    EXPECT_TRUE(undetermined) << c.dump();
+    EXPECT_NEAR(c["params"]["duration_s"]["value"].get<double>(), 0.2, 1e-9) << c.dump();
+    EXPECT_TRUE(c["params"]["duration_s"]["se"].is_null()) << c.dump();
   }
   EXPECT_TRUE(seen);
 }

@@ -40,11 +40,12 @@
 // zeroing leaves is about proportional to the load, and the step's own K takes it up.
 //
 // Fitting. Each candidate is fitted on a grid of its parameters (profiled over every step's K,
-// D) and refined locally, minimising the deviance N_eff ln SSE_force + N_zero ln SSE_zero: each
-// channel with its own residual variance (the zeros' residuals are some hundred times smaller
-// than the force's, and a plain sum of squares would let the force decide alone). N_eff =
-// N (1 - r1) / (1 + r1), r1 the lag-1 autocorrelation of the baseline's force residuals; N_zero
-// the observed changes. Standard errors come from the curvature of the profiled deviance.
+// D) and refined by a pattern search, minimising the deviance N_eff ln SSE_force + N_zero ln
+// SSE_zero: each channel with its own residual variance (the zeros' residuals are some hundred
+// times smaller than the force's, and a plain sum of squares would let the force decide alone).
+// N_eff = N (1 - r1) / (1 + r1), r1 the lag-1 autocorrelation of the baseline's force residuals;
+// N_zero the observed changes. Standard errors come from the curvature of the profiled deviance
+// (none for a parameter at a bound of its range).
 //
 // Choice. Steps are split into k folds (by time order, step i in fold i mod k); a candidate's
 // held-out error is that of each fold's steps under the parameters fitted on the other folds.

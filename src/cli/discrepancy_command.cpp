@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -164,6 +166,33 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
   return j.dump(2) + "\n";
 }
 
+// Why nothing was named, where the most likely candidate gains clearly but leaves a parameter
+// undetermined: "no missing effect found" would hide a large gain.
+std::string unnamed_reason(const DiscrepancyResult& result, const DiscrepancySettings& settings) {
+  const auto best = std::max_element(result.candidates.begin(), result.candidates.end(),
+                                     [](const auto& a, const auto& b) {
+                                       return a.heldout_deviance_drop < b.heldout_deviance_drop;
+                                     });
+  if (best != result.candidates.end() && (best->shrink_pct >= settings.min_shrink_pct ||
+                                          best->zero_shrink_pct >= settings.min_zero_shrink_pct)) {
+    std::string undetermined;
+    int count = 0;
+    for (const ParamEstimate& p : best->params) {
+      if (std::isfinite(p.se)) continue;
+      undetermined += (count++ == 0 ? "" : " and ") + p.name;
+    }
+    if (count > 0) {
+      return fmt::format(
+          "none (the most likely candidate, {}, gains {:.1f} % held out ({:.1f} % on the zero "
+          "channel), but {} {} no standard error: at a bound of its range or along a flat "
+          "direction, not determined by the data)",
+          best->name, best->shrink_pct, best->zero_shrink_pct, undetermined,
+          count == 1 ? "has" : "have");
+    }
+  }
+  return "none (no missing effect found)";
+}
+
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const Config config = load_global_config(global);
   const SessionHeader header = SessionReader(args.session).header();
@@ -197,11 +226,18 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
       "{:.1f} %\n",
       args.session.string(), result.steps, result.step_regions, result.step_regions_left_out,
       result.noise_floor_nrmse_pct);
-  fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}\n", "candidate", "held-out %", "shrink %",
-             "zero shr. %", "dBIC");
+  // The parameters show why a candidate with a clear gain may still not be named: one without
+  // a standard error (at a bound of its range, or along a flat direction) is not determined.
+  fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}  {}\n", "candidate", "held-out %", "shrink %",
+             "zero shr. %", "dBIC", "parameters");
   for (const CandidateResult& c : result.candidates) {
-    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f}\n", c.name, c.heldout_nrmse_pct,
-               c.shrink_pct, c.zero_shrink_pct, c.delta_bic);
+    std::string params;
+    for (const ParamEstimate& p : c.params) {
+      params += std::isfinite(p.se) ? fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se)
+                                    : fmt::format(" {}={:.4g} (no SE)", p.name, p.value);
+    }
+    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f} {}\n", c.name, c.heldout_nrmse_pct,
+               c.shrink_pct, c.zero_shrink_pct, c.delta_bic, params);
   }
   if (result.ceiling_plateau_steps >= 0) {
     fmt::print(
@@ -217,7 +253,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
       named += fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se);
     }
   }
-  fmt::print("named: {}\n", named.empty() ? "none (no missing effect found)" : named);
+  fmt::print("named: {}\n", named.empty() ? unnamed_reason(result, args.settings) : named);
   for (const ZeroLevelDrift& z : result.zero_levels) {
     if (!z.drifting) continue;
     fmt::print(
