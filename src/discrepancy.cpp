@@ -2,6 +2,9 @@
 // parameter grid with k-fold held-out error and BIC, residual maps and diagnostics.
 #include "gaitmon/discrepancy.hpp"
 
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -1536,14 +1539,36 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   // Its parameters must be determined, too: an optimum on a bound of the plausible range or
   // along a flat direction (no finite standard error) is not an effect the data show. And a
   // ceiling must show in the readings themselves (ceiling_seen).
-  const auto passes = [&](const CandidateResult& r) {
-    const bool shrinks = r.shrink_pct >= settings.min_shrink_pct ||
-                         (pooled.zero_channel && r.zero_shrink_pct >= settings.min_zero_shrink_pct);
-    const bool determined = std::all_of(r.params.begin(), r.params.end(),
-                                        [](const ParamEstimate& p) { return std::isfinite(p.se); });
-    const bool seen = !spec_named(specs, r.name).needs_ceiling || ceiling_seen;
-    return shrinks && determined && seen && r.delta_bic <= -settings.min_delta_bic;
+  // Why a candidate is not named, in words; empty where it is.
+  const auto verdict = [&](const CandidateResult& r) {
+    std::vector<std::string> reasons;
+    if (r.shrink_pct < settings.min_shrink_pct &&
+        !(pooled.zero_channel && r.zero_shrink_pct >= settings.min_zero_shrink_pct)) {
+      reasons.push_back(fmt::format(
+          "its held-out gain ({:.1f} %, {:.1f} % on the zero channel) is under the {:g} % ({:g} %) "
+          "needed",
+          r.shrink_pct, r.zero_shrink_pct, settings.min_shrink_pct, settings.min_zero_shrink_pct));
+    }
+    if (r.delta_bic > -settings.min_delta_bic) {
+      reasons.push_back(fmt::format("BIC falls by {:.0f}, under the {:g} needed", -r.delta_bic,
+                                    settings.min_delta_bic));
+    }
+    std::vector<std::string> undetermined;
+    for (const ParamEstimate& p : r.params) {
+      if (!std::isfinite(p.se)) undetermined.push_back(p.name);
+    }
+    if (!undetermined.empty()) {
+      reasons.push_back(fmt::format(
+          "{} {} no standard error (at a bound of its range or along a flat direction: not "
+          "determined by the data)",
+          fmt::join(undetermined, " and "), undetermined.size() == 1 ? "has" : "have"));
+    }
+    if (spec_named(specs, r.name).needs_ceiling && !ceiling_seen) {
+      reasons.push_back("the readings show no ceiling");
+    }
+    return fmt::format("{}", fmt::join(reasons, "; "));
   };
+  const auto passes = [&](const CandidateResult& r) { return verdict(r).empty(); };
   const auto most_likely = [](const std::vector<CandidateResult>& results) {
     std::size_t best = 0;
     for (std::size_t i = 1; i < results.size(); ++i) {
@@ -1555,7 +1580,9 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   const CandidateOutcome* last = &baseline;
   std::vector<FixedEffect> chosen;
   std::vector<CandidateOutcome> seconds;
-  if (passes(out.candidates[best])) {
+  out.most_likely_candidate = out.candidates[best].name;
+  out.not_named_reason = verdict(out.candidates[best]);
+  if (out.not_named_reason.empty()) {
     const CandidateOutcome& first = outcomes[best];
     out.named_effects.push_back(estimate_of(first));
     chosen.push_back({first.spec, first.theta});

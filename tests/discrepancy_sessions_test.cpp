@@ -124,6 +124,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       const DiscrepancyResult r = find_discrepancy(input);
       const std::string first = r.named_effects.empty() ? "none" : r.named_effects.front().name;
       ++named_matrix[effect][first];
+      EXPECT_EQ(r.named_effects.empty(), !r.not_named_reason.empty()) << r.not_named_reason;
       std::size_t best = 0;
       for (std::size_t k = 1; k < r.candidates.size(); ++k) {
         if (r.candidates[k].heldout_deviance_drop > r.candidates[best].heldout_deviance_drop) {
@@ -394,9 +395,10 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   std::ifstream in(dir / "out" / "discrepancy.json");
   const auto j = nlohmann::json::parse(in);
   EXPECT_TRUE(j["named_effects"].empty()) << j["named_effects"].dump();
-  EXPECT_NE(output.find("named: none (the most likely candidate, impact_transient, gains"),
+  EXPECT_NE(output.find("named: none (the most likely candidate, impact_transient, is not named"),
             std::string::npos)
       << output;
+  EXPECT_EQ(j["most_likely_candidate"], "impact_transient");
   EXPECT_NE(output.find("amplitude_n and duration_s have no standard error"), std::string::npos)
       << output;
   bool seen = false;

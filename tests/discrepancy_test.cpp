@@ -173,9 +173,11 @@ TEST(Discrepancy, OnCleanSeriesNamesEachEffectAndClosesTheHeldOutGap) {
     ASSERT_FALSE(r.candidates.empty());
     if (expected == "none") {
       EXPECT_TRUE(r.named_effects.empty()) << named(r);
+      EXPECT_FALSE(r.not_named_reason.empty());
       continue;
     }
     ASSERT_FALSE(r.named_effects.empty()) << expected;
+    EXPECT_TRUE(r.not_named_reason.empty()) << r.not_named_reason;
     EXPECT_EQ(r.named_effects.front().name, expected);
     EXPECT_GE(r.gap_shrink_pct, 40.0) << expected;
   }
@@ -206,7 +208,11 @@ TEST(Discrepancy, NamesACreepThatTheZeroingMovedIntoTheZeros) {
   // The zero channel has its own threshold: above the 87 % measured, nothing is named.
   DiscrepancySettings strict;
   strict.min_zero_shrink_pct = 95.0;
-  EXPECT_EQ(named(find_discrepancy(clean_session(creep, 14, 7), strict)), "none");
+  const DiscrepancyResult s = find_discrepancy(clean_session(creep, 14, 7), strict);
+  EXPECT_EQ(named(s), "none");
+  EXPECT_EQ(s.most_likely_candidate, "sensor_creep");
+  EXPECT_NE(s.not_named_reason.find("is under the 5 % (95 %) needed"), std::string::npos)
+      << s.not_named_reason;
 
   CleanCase none{"none", {}};
   none.zeroed = true;

@@ -281,6 +281,11 @@ struct DiscrepancyResult {
   /// (DiscrepancySettings::min_ceiling_steps); -1 where the input has no cell counts.
   int ceiling_plateau_steps = -1;
   std::vector<EffectEstimate> named_effects;
+  /// The candidate whose held-out deviance falls most below the baseline's, and why it was not
+  /// named, in words (empty where it was): a clear gain can still leave a parameter
+  /// undetermined, and "no missing effect" would hide it.
+  std::string most_likely_candidate;
+  std::string not_named_reason;
   std::vector<CandidateResult> candidates;         ///< each on top of the baseline
   std::vector<CandidateResult> second_candidates;  ///< each on top of the first named effect
   std::vector<ResidualCell> where;                 ///< top cells by excess over the noise floor

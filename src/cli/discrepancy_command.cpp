@@ -90,6 +90,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
   }
   j["named_effects"] = named;
   j["named_effect_params"] = named_params;
+  j["most_likely_candidate"] = r.most_likely_candidate;
+  j["not_named_reason"] = r.not_named_reason;
   j["baseline_heldout_nrmse_pct"] = r.baseline_heldout_nrmse_pct;
   j["extended_heldout_nrmse_pct"] = r.extended_heldout_nrmse_pct;
   j["gap_shrink_pct"] = r.gap_shrink_pct;
@@ -166,33 +168,6 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
   return j.dump(2) + "\n";
 }
 
-// Why nothing was named, where the most likely candidate gains clearly but leaves a parameter
-// undetermined: "no missing effect found" would hide a large gain.
-std::string unnamed_reason(const DiscrepancyResult& result, const DiscrepancySettings& settings) {
-  const auto best = std::max_element(result.candidates.begin(), result.candidates.end(),
-                                     [](const auto& a, const auto& b) {
-                                       return a.heldout_deviance_drop < b.heldout_deviance_drop;
-                                     });
-  if (best != result.candidates.end() && (best->shrink_pct >= settings.min_shrink_pct ||
-                                          best->zero_shrink_pct >= settings.min_zero_shrink_pct)) {
-    std::string undetermined;
-    int count = 0;
-    for (const ParamEstimate& p : best->params) {
-      if (std::isfinite(p.se)) continue;
-      undetermined += (count++ == 0 ? "" : " and ") + p.name;
-    }
-    if (count > 0) {
-      return fmt::format(
-          "none (the most likely candidate, {}, gains {:.1f} % held out ({:.1f} % on the zero "
-          "channel), but {} {} no standard error: at a bound of its range or along a flat "
-          "direction, not determined by the data)",
-          best->name, best->shrink_pct, best->zero_shrink_pct, undetermined,
-          count == 1 ? "has" : "have");
-    }
-  }
-  return "none (no missing effect found)";
-}
-
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const Config config = load_global_config(global);
   const SessionHeader header = SessionReader(args.session).header();
@@ -253,7 +228,11 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
       named += fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se);
     }
   }
-  fmt::print("named: {}\n", named.empty() ? unnamed_reason(result, args.settings) : named);
+  if (named.empty()) {
+    named = fmt::format("none (the most likely candidate, {}, is not named: {})",
+                        result.most_likely_candidate, result.not_named_reason);
+  }
+  fmt::print("named: {}\n", named);
   for (const ZeroLevelDrift& z : result.zero_levels) {
     if (!z.drifting) continue;
     fmt::print(

@@ -127,7 +127,10 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
     }
     named += "</li>";
   }
-  if (named.empty()) named = "<li>none: no candidate improved the held-out error beyond noise</li>";
+  if (named.empty()) {
+    named = fmt::format("<li>none: the most likely candidate, {}, is not named: {}</li>",
+                        escape(r.most_likely_candidate), escape(r.not_named_reason));
+  }
 
   std::string candidates =
       "<table><tr><th>candidate</th><th>held-out NRMSE %</th><th>shrink %</th><th>in-sample "
