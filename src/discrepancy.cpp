@@ -1550,8 +1550,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
           r.shrink_pct, r.zero_shrink_pct, settings.min_shrink_pct, settings.min_zero_shrink_pct));
     }
     if (r.delta_bic > -settings.min_delta_bic) {
-      reasons.push_back(fmt::format("BIC falls by {:.0f}, under the {:g} needed", -r.delta_bic,
-                                    settings.min_delta_bic));
+      reasons.push_back(fmt::format("BIC changes by {:+.0f}, where a fall of {:g} is needed",
+                                    r.delta_bic, settings.min_delta_bic));
     }
     std::vector<std::string> undetermined;
     for (const ParamEstimate& p : r.params) {
