@@ -142,15 +142,19 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       ++(effect == "sensor_creep" ? drift_in_creep : drift_elsewhere)[!drifting.empty()];
       if (effect == "sensor_creep")
         min_creep_zero_shrink = std::min(min_creep_zero_shrink, r.zero_gap_shrink_pct);
+      std::string all_named;
+      for (const EffectEstimate& e : r.named_effects) {
+        all_named += (all_named.empty() ? "" : "+") + e.name;
+      }
       shrinks += fmt::format(
-          "  {:<18} {:<6} seed {:>3}: named {:<18} held-out {:6.2f} % -> {:6.2f} % (gap shrink "
+          "  {:<18} {:<6} seed {:>3}: named {:<34} held-out {:6.2f} % -> {:6.2f} % (gap shrink "
           "{:5.1f} %); zero channel {:5.3f} % -> {:5.3f} % ({:5.1f} %); best candidate {} "
           "{:+.1f} % / zero {:+.1f} %; zero drifting: {}\n",
-          effect, insole_size_name(c.size), c.seed, first, r.baseline_heldout_nrmse_pct,
-          r.extended_heldout_nrmse_pct, r.gap_shrink_pct, r.zero_baseline_heldout_nrmse_pct,
-          r.zero_extended_heldout_nrmse_pct, r.zero_gap_shrink_pct, r.candidates[best].name,
-          r.candidates[best].shrink_pct, r.candidates[best].zero_shrink_pct,
-          drifting.empty() ? "-" : drifting);
+          effect, insole_size_name(c.size), c.seed, all_named.empty() ? "none" : all_named,
+          r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct,
+          r.zero_baseline_heldout_nrmse_pct, r.zero_extended_heldout_nrmse_pct,
+          r.zero_gap_shrink_pct, r.candidates[best].name, r.candidates[best].shrink_pct,
+          r.candidates[best].zero_shrink_pct, drifting.empty() ? "-" : drifting);
       if (effect == "none") continue;
       const FixedEffectEvaluation truth = evaluate_effect_at(input, effect, c.params);
       const double truth_shrink =

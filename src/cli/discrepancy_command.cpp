@@ -28,6 +28,16 @@ struct DiscrepancyArgs {
   DiscrepancySettings settings;
 };
 
+// " name=value+-se" per parameter, "(no SE)" where the data do not determine it.
+std::string params_text(const std::vector<ParamEstimate>& params) {
+  std::string text;
+  for (const ParamEstimate& p : params) {
+    text += std::isfinite(p.se) ? fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se)
+                                : fmt::format(" {}={:.4g} (no SE)", p.name, p.value);
+  }
+  return text;
+}
+
 nlohmann::json params_json(const std::vector<ParamEstimate>& params) {
   nlohmann::json j = nlohmann::json::object();
   for (const ParamEstimate& p : params) j[p.name] = {{"value", p.value}, {"se", p.se}};
@@ -205,13 +215,8 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}  {}\n", "candidate", "held-out %", "shrink %",
              "zero shr. %", "dBIC", "parameters");
   for (const CandidateResult& c : result.candidates) {
-    std::string params;
-    for (const ParamEstimate& p : c.params) {
-      params += std::isfinite(p.se) ? fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se)
-                                    : fmt::format(" {}={:.4g} (no SE)", p.name, p.value);
-    }
     fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f} {}\n", c.name, c.heldout_nrmse_pct,
-               c.shrink_pct, c.zero_shrink_pct, c.delta_bic, params);
+               c.shrink_pct, c.zero_shrink_pct, c.delta_bic, params_text(c.params));
   }
   if (result.ceiling_plateau_steps >= 0) {
     fmt::print(
@@ -222,10 +227,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   }
   std::string named;
   for (const EffectEstimate& e : result.named_effects) {
-    named += (named.empty() ? "" : ", ") + e.name;
-    for (const ParamEstimate& p : e.params) {
-      named += fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se);
-    }
+    named += (named.empty() ? "" : ", ") + e.name + params_text(e.params);
   }
   if (named.empty()) {
     named = fmt::format("none (the most likely candidate, {}, is not named: {})",
