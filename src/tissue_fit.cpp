@@ -33,6 +33,16 @@ std::optional<Smoothing> parse_smoothing(std::string_view text) {
   return std::nullopt;
 }
 
+std::string_view end_rate_name(EndRate rate) {
+  return rate == EndRate::SecondOrder ? "second-order" : "two-frame";
+}
+
+std::optional<EndRate> parse_end_rate(std::string_view text) {
+  if (text == "two-frame") return EndRate::TwoFrame;
+  if (text == "second-order") return EndRate::SecondOrder;
+  return std::nullopt;
+}
+
 std::string_view fit_mode_name(FitMode mode) {
   return mode == FitMode::Seed8 ? "seed8" : "identifiable";
 }
@@ -234,7 +244,7 @@ void polynomial_fit(const std::vector<double>& t, const std::vector<double>& y,
 
 // Appends the contact frames of one stance. Runs of contact are treated separately so that
 // gdot never bridges a gap without contact.
-void append_frames(const RegionSeries& s, Smoothing smoothing, std::size_t offset,
+void append_frames(const RegionSeries& s, Smoothing smoothing, EndRate end_rate, std::size_t offset,
                    std::vector<FitFrame>& frames) {
   const std::size_t n = s.t_s.size();
   std::size_t begin = 0;
@@ -256,6 +266,15 @@ void append_frames(const RegionSeries& s, Smoothing smoothing, std::size_t offse
         f.area_lo_mm2 = s.area_mm2[lo];
         f.area_hi_mm2 = s.area_mm2[hi];
         f.dt_s = hi > lo ? s.t_s[hi] - s.t_s[lo] : 0.0;
+        if (end_rate == EndRate::SecondOrder && len >= 3 && (i == begin || i + 1 == end)) {
+          // One-sided over three frames, pointing into the run: h < 0 at its last frame.
+          const std::size_t i1 = i == begin ? i + 1 : i - 1;
+          const std::size_t i2 = i == begin ? i + 2 : i - 2;
+          const double h = s.t_s[i1] - s.t_s[i];
+          f.area_rate_mm2_per_s =
+              (-3.0 * s.area_mm2[i] + 4.0 * s.area_mm2[i1] - s.area_mm2[i2]) / (2.0 * h);
+          f.dt_s = 0.0;
+        }
         f.input_index = offset + i;
         frames.push_back(f);
       }
@@ -1024,7 +1043,7 @@ RegionFit fit_region_session(std::span<const RegionSeries> stances, const Ellips
   std::vector<double> measured;
   for (const RegionSeries& s : stances) {
     check_series(s);
-    append_frames(s, settings.smoothing, measured.size(), frames);
+    append_frames(s, settings.smoothing, settings.end_rate, measured.size(), frames);
     measured.insert(measured.end(), s.force_n.begin(), s.force_n.end());
   }
   return fit_frames(frames, measured.size(), measured, declared, bounds, settings);

@@ -318,6 +318,44 @@ TEST(AnalyzeCommand, Seed8TakesTheSeedsInputsUnlessToldOtherwise) {
   EXPECT_EQ(settings(a.dir / "seed8-raw").at("area"), "footprint");
 }
 
+// --end-rate second-order changes the damping fits (the rate at each contact's ends), is recorded
+// and said, and is refused with the seed's smoothing, which takes the rate from its polynomial.
+TEST(AnalyzeCommand, EndRateSecondOrderIsRecordedAndNeedsTheRawSeries) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  int status = -1;
+  const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                  (a.dir / "second-order").string() + " --end-rate second-order",
+                              &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("end rate second-order"), std::string::npos) << out;
+  const auto settings = [](const fs::path& dir) {
+    return nlohmann::json::parse(read_all(dir / "session.json")).at("settings");
+  };
+  EXPECT_EQ(settings(a.dir / "out").at("end_rate"), "two-frame");
+  EXPECT_EQ(settings(a.dir / "second-order").at("end_rate"), "second-order");
+  const auto heel_cbar = [](const fs::path& csv) {
+    std::vector<std::string> cbar;
+    for (const std::string& line : lines_of(csv)) {
+      const auto f = fields(line);
+      if (f.size() > 13 && f[2] == "heel") cbar.push_back(f[13]);
+    }
+    return cbar;
+  };
+  const auto two = heel_cbar(a.dir / "out" / "regions.csv");
+  const auto three = heel_cbar(a.dir / "second-order" / "regions.csv");
+  ASSERT_FALSE(two.empty());
+  ASSERT_EQ(two.size(), three.size());
+  EXPECT_NE(two, three);
+  const std::string refused =
+      run("analyze " + (a.dir / "s.csv").string() + " --out " + (a.dir / "refused").string() +
+              " --end-rate second-order --smoothing seed",
+          &status);
+  EXPECT_NE(status, 0) << refused;
+  EXPECT_NE(refused.find("--end-rate"), std::string::npos) << refused;
+  EXPECT_FALSE(fs::exists(a.dir / "refused" / "regions.csv"));
+}
+
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-bad");
   std::string text =

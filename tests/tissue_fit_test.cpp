@@ -515,6 +515,51 @@ TEST(TissueFit, RecoversANoiseFreeModelSeries) {
   EXPECT_TRUE(std::isfinite(fit.kbar_n_per_mm3.se));
 }
 
+// At a contact's first and last frame the two-frame difference is the area's rate half a frame
+// inward; the second-order one-sided difference is exact for a quadratic course, as the central
+// difference inside the run is. So on the model's own series over a parabolic area course
+// (heel, 25 frames, cut where it falls under a quarter of its peak: through the cells a run of
+// measured footprints starts and ends at a sizeable area, footprint.hpp) only the ends' rate
+// keeps the damping from its truth, and the second-order ends take most of that away.
+TEST(TissueFit, SecondOrderRatesAtTheContactEndsRecoverTheDampingCloser) {
+  RegionSeries s;
+  const double peak_area = 0.25 * std::acos(-1.0) * kHeel.A_mm * kHeel.B_mm;
+  for (int i = 0; i < 25; ++i) {
+    const double u = (i + 0.5) / 12.5 - 1.0;  // -1..1 over the stance
+    const double area = peak_area * (1.0 - u * u);
+    const double rate = peak_area * -2.0 * u / (0.6 / 2.0);
+    const bool loaded = area >= 0.25 * peak_area;
+    s.t_s.push_back(0.6 * (i + 0.5) / 25.0);
+    s.area_mm2.push_back(loaded ? area : 0.0);
+    s.force_n.push_back(loaded ? force_n(kHeel, deformation_mm(kHeel, area),
+                                         deformation_rate_mm_per_s(kHeel, area, rate),
+                                         ModelVariant::Correct)
+                               : 0.0);
+  }
+  FitSettings second_order = raw();
+  second_order.end_rate = EndRate::SecondOrder;
+  const RegionFit two = fit_region(s, kHeel, config().fit_bounds, raw());
+  const RegionFit three = fit_region(s, kHeel, config().fit_bounds, second_order);
+  ASSERT_EQ(two.status, FitStatus::Ok) << two.reason;
+  ASSERT_EQ(three.status, FitStatus::Ok) << three.reason;
+  const double two_cbar = rel_error(two.cbar_ns_per_mm3.value, kHeel.cbar_ns_per_mm3);
+  const double three_cbar = rel_error(three.cbar_ns_per_mm3.value, kHeel.cbar_ns_per_mm3);
+  const double two_m = rel_error(two.m.value, kHeel.m);
+  const double three_m = rel_error(three.m.value, kHeel.m);
+  std::printf("cbar error %.4f (two-frame) / %.4f (second-order), m %.4f / %.4f\n", two_cbar,
+              three_cbar, two_m, three_m);
+  EXPECT_LT(three_cbar, 0.5 * two_cbar);
+  EXPECT_LT(three_m, 0.5 * two_m);
+  EXPECT_LT(three.nrmse_pct, two.nrmse_pct);
+}
+
+TEST(TissueFit, EndRateNamesRoundTrip) {
+  for (EndRate rate : {EndRate::TwoFrame, EndRate::SecondOrder}) {
+    EXPECT_EQ(parse_end_rate(end_rate_name(rate)), rate);
+  }
+  EXPECT_EQ(parse_end_rate("three-frame"), std::nullopt);
+}
+
 // The identifiability demonstration through the fit: two declared (C, d0) pairs give the same
 // K = kbar C^(1+n) d0^(-n) and D, and kbar, cbar rescale by the (C, d0) factors.
 TEST(TissueFit, DeclaredCAndD0OnlyRescaleKbarAndCbar) {

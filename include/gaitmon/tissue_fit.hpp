@@ -27,6 +27,15 @@ enum class Smoothing { None, Seed };
 std::string_view smoothing_name(Smoothing smoothing);  ///< "none", "seed"
 std::optional<Smoothing> parse_smoothing(std::string_view text);
 
+/// gdot at the first and last frame of each run of contact (raw series only; inside a run it is
+/// the central difference). `TwoFrame` (default): the difference to the one neighbour, which is
+/// the rate half a frame inward, where the area curves most. `SecondOrder`: (-3 A0 + 4 A1 - A2) /
+/// 2h, exact for a quadratic course. The second has no such bias but more noise, so it helps only
+/// where many steps are pooled (README, "Per-step estimates pooled across steps").
+enum class EndRate { TwoFrame, SecondOrder };
+std::string_view end_rate_name(EndRate rate);  ///< "two-frame", "second-order"
+std::optional<EndRate> parse_end_rate(std::string_view text);
+
 /// Which parameters are free.
 /// `Identifiable` (default): kbar, n, cbar, m; A/B from the measured ellipses, P = pi A B, C and
 /// d0 declared (config). `Seed8`: the seed's 8-parameter fit, all of A, B, C, d0, kbar, n, cbar,
@@ -50,6 +59,7 @@ struct FitSettings {
   ModelVariant model = ModelVariant::Correct;
   FitMode mode = FitMode::Identifiable;
   Smoothing smoothing = Smoothing::None;
+  EndRate end_rate = EndRate::TwoFrame;
   bool free_scale = false;  ///< also free P = pi A B (keeping A/B), Identifiable mode only
   /// Starts of the general solver (free P, seed8) around the principled initial guess. The
   /// default fit needs none: it searches the whole (n, m) box with K and D solved exactly.

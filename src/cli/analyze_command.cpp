@@ -41,6 +41,7 @@ struct AnalyzeArgs {
   // Empty: the default, which for --fit seed8 is the seed's own input (see settings_from).
   std::string smoothing;
   std::string area;
+  std::string end_rate = "two-frame";
   bool free_scale = false;
   std::vector<std::string> effects;
   bool effects_given = false;
@@ -79,6 +80,12 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
     s.area = *parse_area_source(args.area);
   } else if (seed8) {
     s.area = AreaSource::Ellipse;
+  }
+  s.fit.end_rate = *parse_end_rate(args.end_rate);
+  if (s.fit.end_rate != EndRate::TwoFrame && s.fit.smoothing != Smoothing::None) {
+    throw CLI::ValidationError("--end-rate",
+                               "applies to --smoothing none only (the seed's "
+                               "smoothing takes the rate from its polynomial)");
   }
   s.fit.free_scale = args.free_scale;
   if (s.fit.free_scale && s.fit.mode != FitMode::Identifiable) {
@@ -278,6 +285,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                    {"fit", fit_mode_name(settings.fit.mode)},
                    {"smoothing", smoothing_name(settings.fit.smoothing)},
                    {"area", area_source_name(settings.area)},
+                   {"end_rate", end_rate_name(settings.fit.end_rate)},
                    {"free_scale", settings.fit.free_scale},
                    {"starts", settings.fit.starts},
                    {"max_iterations", settings.fit.max_iterations},
@@ -320,11 +328,13 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
                    const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                    const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
                    const std::vector<std::filesystem::path>& written) {
-  fmt::print("{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{})\n",
+  fmt::print("{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{}{})\n",
              args.session.string(), insole_size_name(header.insole_size), steps.size(),
              analyses.size(), model_variant_name(settings.fit.model),
              fit_mode_name(settings.fit.mode), smoothing_name(settings.fit.smoothing),
-             area_source_name(settings.area), settings.fit.free_scale ? ", free scale" : "");
+             area_source_name(settings.area),
+             settings.fit.end_rate == EndRate::TwoFrame ? "" : ", end rate second-order",
+             settings.fit.free_scale ? ", free scale" : "");
   fmt::print("{:<19}{:>8}{:>10}{:>12}{:>10}{:>13}{:>10}{:>12}{:>12}\n", "region", "fitted",
              "contact", "kbar N/mm3", "n", "cbar Ns/mm3", "m", "NRMSE %", "session %");
   for (const RegionSessionAnalysis& r : session.regions) {
@@ -529,6 +539,11 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "ellipse (the seed's contact ellipse of the active cells; the default with "
                   "--fit seed8)")
       ->check(CLI::IsMember({"footprint", "ellipse"}));
+  sub->add_option("--end-rate", args->end_rate,
+                  "Area rate at each contact's first and last frame: two-frame (default: the "
+                  "difference to its neighbour, best for single steps) or second-order (three "
+                  "frames, less biased; better pooled values on sessions of a minute or more)")
+      ->check(CLI::IsMember({"two-frame", "second-order"}));
   sub->add_flag("--free-scale", args->free_scale,
                 "Also fit P = pi A B (keeping A/B); identifiable mode only");
   sub->add_option("--effects", args->effects,
