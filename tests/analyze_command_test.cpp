@@ -43,6 +43,20 @@ std::string read_all(const fs::path& path) {
   return text.str();
 }
 
+/// One column of regions.csv over the heel's rows, as written.
+std::vector<std::string> heel_column(const fs::path& regions_csv, std::size_t column) {
+  std::vector<std::string> values;
+  for (const std::string& line : lines_of(regions_csv)) {
+    const auto f = fields(line);
+    if (f.size() > column && f[2] == "heel") values.push_back(f[column]);
+  }
+  return values;
+}
+
+nlohmann::json settings_of(const fs::path& out_dir) {
+  return nlohmann::json::parse(read_all(out_dir / "session.json")).at("settings");
+}
+
 /// A 6 s simulated walk, analysed once with --report.
 struct Analysed {
   fs::path dir;
@@ -255,16 +269,8 @@ TEST(AnalyzeCommand, AreaEllipseUsesTheContactEllipse) {
   EXPECT_NE(out.find("area ellipse"), std::string::npos) << out;
   const auto j = nlohmann::json::parse(read_all(a.dir / "ellipse" / "session.json"));
   EXPECT_EQ(j.at("settings").at("area"), "ellipse");
-  const auto heel_peak_areas = [](const fs::path& csv) {
-    std::vector<std::string> areas;
-    for (const std::string& line : lines_of(csv)) {
-      const auto f = fields(line);
-      if (f.size() > 6 && f[2] == "heel") areas.push_back(f[6]);
-    }
-    return areas;
-  };
-  const auto footprint = heel_peak_areas(a.dir / "out" / "regions.csv");
-  const auto ellipse = heel_peak_areas(a.dir / "ellipse" / "regions.csv");
+  const auto footprint = heel_column(a.dir / "out" / "regions.csv", 6);  // peak_area_mm2
+  const auto ellipse = heel_column(a.dir / "ellipse" / "regions.csv", 6);
   ASSERT_EQ(footprint.size(), ellipse.size());
   ASSERT_FALSE(footprint.empty());
   EXPECT_NE(footprint, ellipse);
@@ -298,24 +304,21 @@ TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
 TEST(AnalyzeCommand, Seed8TakesTheSeedsInputsUnlessToldOtherwise) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
-  const auto settings = [](const fs::path& dir) {
-    return nlohmann::json::parse(read_all(dir / "session.json")).at("settings");
-  };
-  EXPECT_EQ(settings(a.dir / "out").at("smoothing"), "none");
-  EXPECT_EQ(settings(a.dir / "out").at("area"), "footprint");
+  EXPECT_EQ(settings_of(a.dir / "out").at("smoothing"), "none");
+  EXPECT_EQ(settings_of(a.dir / "out").at("area"), "footprint");
   int status = -1;
   std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
                             (a.dir / "seed8-inputs").string() + " --fit seed8",
                         &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_EQ(settings(a.dir / "seed8-inputs").at("smoothing"), "seed");
-  EXPECT_EQ(settings(a.dir / "seed8-inputs").at("area"), "ellipse");
+  EXPECT_EQ(settings_of(a.dir / "seed8-inputs").at("smoothing"), "seed");
+  EXPECT_EQ(settings_of(a.dir / "seed8-inputs").at("area"), "ellipse");
   out = run("analyze " + (a.dir / "s.csv").string() + " --out " + (a.dir / "seed8-raw").string() +
                 " --fit seed8 --smoothing none --area footprint",
             &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_EQ(settings(a.dir / "seed8-raw").at("smoothing"), "none");
-  EXPECT_EQ(settings(a.dir / "seed8-raw").at("area"), "footprint");
+  EXPECT_EQ(settings_of(a.dir / "seed8-raw").at("smoothing"), "none");
+  EXPECT_EQ(settings_of(a.dir / "seed8-raw").at("area"), "footprint");
 }
 
 // --end-rate second-order changes the damping fits (the rate at each contact's ends), is recorded
@@ -329,21 +332,10 @@ TEST(AnalyzeCommand, EndRateSecondOrderIsRecordedAndNeedsTheRawSeries) {
                               &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("end rate second-order"), std::string::npos) << out;
-  const auto settings = [](const fs::path& dir) {
-    return nlohmann::json::parse(read_all(dir / "session.json")).at("settings");
-  };
-  EXPECT_EQ(settings(a.dir / "out").at("end_rate"), "two-frame");
-  EXPECT_EQ(settings(a.dir / "second-order").at("end_rate"), "second-order");
-  const auto heel_cbar = [](const fs::path& csv) {
-    std::vector<std::string> cbar;
-    for (const std::string& line : lines_of(csv)) {
-      const auto f = fields(line);
-      if (f.size() > 13 && f[2] == "heel") cbar.push_back(f[13]);
-    }
-    return cbar;
-  };
-  const auto two = heel_cbar(a.dir / "out" / "regions.csv");
-  const auto three = heel_cbar(a.dir / "second-order" / "regions.csv");
+  EXPECT_EQ(settings_of(a.dir / "out").at("end_rate"), "two-frame");
+  EXPECT_EQ(settings_of(a.dir / "second-order").at("end_rate"), "second-order");
+  const auto two = heel_column(a.dir / "out" / "regions.csv", 13);  // cbar_ns_per_mm3
+  const auto three = heel_column(a.dir / "second-order" / "regions.csv", 13);
   ASSERT_FALSE(two.empty());
   ASSERT_EQ(two.size(), three.size());
   EXPECT_NE(two, three);
