@@ -96,7 +96,8 @@ constexpr std::array<const char*, kPhysCount> kPhysNames{
     "A_mm", "B_mm", "C_mm", "d0_mm", "kbar_n_per_mm3", "n", "cbar_ns_per_mm3", "m"};
 
 // One fitted frame. gdot is either a difference of g at two neighbouring areas (raw series) or
-// the chain rule on a smoothed area rate; both are evaluated with the current P.
+// the chain rule on an area rate (smoothed, or second-order at a run's ends); both are evaluated
+// with the current P.
 struct FitFrame {
   double area_mm2 = 0.0;
   double force_n = 0.0;  ///< the target (smoothed under Smoothing::Seed)
