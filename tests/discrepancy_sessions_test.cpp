@@ -386,6 +386,10 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   // threshold and BIC by hundreds, but its duration goes to the top of its range and its
   // amplitude with it: an optimum on a bound, without a finite standard error, is not an effect
   // the data show, so nothing is named.
+  if (kSanitized) {
+    GTEST_SKIP() << "the whole workflow on a real recording takes six minutes under TSan; "
+                    "its code runs under the sanitizers in discrepancy_test";
+  }
   const auto dir = test::scratch_dir("discrepancy-undetermined");
   const auto csv = test::shared_dir() / "real-data" / "gaitpdb" / "gaitpdb_GaCo01_01.csv";
   if (!std::filesystem::exists(csv)) GTEST_SKIP() << "real recording not found: " << csv;

@@ -156,32 +156,49 @@ std::string named(const DiscrepancyResult& r) {
   return out.empty() ? "none" : out;
 }
 
-TEST(Discrepancy, OnCleanSeriesNamesEachEffectAndClosesTheHeldOutGap) {
-  // "none" with a ceiling stands for sensor saturation at region level (no cells here).
-  const std::vector<std::pair<std::string, CleanCase>> cases{
-      {"none", {"none", {}}},
-      {"stress_relaxation", {"stress_relaxation", {{"strength", 0.4}, {"tau_s", 0.3}}}},
-      {"hysteresis", {"hysteresis", {{"strength", 0.15}, {"transition_mm", 0.3}}}},
-      {"impact_transient", {"impact_transient", {{"amplitude_n", 80.0}, {"duration_s", 0.04}}}},
-      {"sensor_saturation", {"none", {}, 90.0}},
-      {"sensor_creep", {"sensor_creep", {{"gain", 0.3}, {"tau_s", 1.0}}}},
-  };
-  for (const auto& [expected, c] : cases) {
-    const DiscrepancyResult r = find_discrepancy(clean_session(c, 14, 7));
-    fmt::print("clean {}: named {}, held-out {:.2f} % -> {:.2f} % ({:.1f} %)\n", expected, named(r),
-               r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
-    ASSERT_FALSE(r.candidates.empty());
-    if (expected == "none") {
-      EXPECT_TRUE(r.named_effects.empty()) << named(r);
-      EXPECT_FALSE(r.not_named_reason.empty());
-      continue;
-    }
-    ASSERT_FALSE(r.named_effects.empty()) << expected;
-    EXPECT_TRUE(r.not_named_reason.empty()) << r.not_named_reason;
-    EXPECT_EQ(r.named_effects.front().name, expected);
-    EXPECT_GE(r.gap_shrink_pct, 40.0) << expected;
-  }
+struct NamedCleanCase {
+  std::string expected;
+  CleanCase clean;
+};
+
+void PrintTo(const NamedCleanCase& c, std::ostream* os) {
+  *os << c.expected;
 }
+
+// One test per effect, so that ctest runs them side by side (under TSan together they took six
+// minutes in one process).
+class CleanSeries : public ::testing::TestWithParam<NamedCleanCase> {};
+
+TEST_P(CleanSeries, NamesTheEffectAndClosesTheHeldOutGap) {
+  const auto& [expected, c] = GetParam();
+  const DiscrepancyResult r = find_discrepancy(clean_session(c, 14, 7));
+  fmt::print("clean {}: named {}, held-out {:.2f} % -> {:.2f} % ({:.1f} %)\n", expected, named(r),
+             r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
+  ASSERT_FALSE(r.candidates.empty());
+  if (expected == "none") {
+    EXPECT_TRUE(r.named_effects.empty()) << named(r);
+    EXPECT_FALSE(r.not_named_reason.empty());
+    return;
+  }
+  ASSERT_FALSE(r.named_effects.empty()) << expected;
+  EXPECT_TRUE(r.not_named_reason.empty()) << r.not_named_reason;
+  EXPECT_EQ(r.named_effects.front().name, expected);
+  EXPECT_GE(r.gap_shrink_pct, 40.0) << expected;
+}
+
+// "none" with a ceiling stands for sensor saturation at region level (no cells here).
+INSTANTIATE_TEST_SUITE_P(
+    Effects, CleanSeries,
+    ::testing::Values(
+        NamedCleanCase{"none", {"none", {}}},
+        NamedCleanCase{"stress_relaxation",
+                       {"stress_relaxation", {{"strength", 0.4}, {"tau_s", 0.3}}}},
+        NamedCleanCase{"hysteresis", {"hysteresis", {{"strength", 0.15}, {"transition_mm", 0.3}}}},
+        NamedCleanCase{"impact_transient",
+                       {"impact_transient", {{"amplitude_n", 80.0}, {"duration_s", 0.04}}}},
+        NamedCleanCase{"sensor_saturation", {"none", {}, 90.0}},
+        NamedCleanCase{"sensor_creep", {"sensor_creep", {{"gain", 0.3}, {"tau_s", 1.0}}}}),
+    [](const auto& info) { return info.param.expected; });
 
 // Zeroed at its swings as the segmenter does, a creeping sensor keeps little in the stance force
 // and shows in the zeros instead: they rise with the load the sensor has carried. The zero
