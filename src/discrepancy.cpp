@@ -1507,6 +1507,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   double floor_sum = 0;
   for (const Unit& u : units) floor_sum += sum(u.floor2);
   out.noise_floor_nrmse_pct = nrmse(floor_sum, pooled.norm);
+  out.nrmse_scale_n =
+      pooled.frames > 0 ? std::sqrt(pooled.norm / static_cast<double>(pooled.frames)) : 0.0;
 
   std::vector<std::vector<double>> base_preds;
   CandidateOutcome baseline;

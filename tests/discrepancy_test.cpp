@@ -371,6 +371,34 @@ TEST(Discrepancy, LeavesOutRegionStepsFittedOnTheEllipseWhenOthersHaveFootprints
   }
 }
 
+// The scale turns the pooled NRMSE into newtons, so that two sessions whose peaks differ (an
+// effect that lowers or raises them) can be compared: from the input, every compared frame
+// weighs its step-region's peak squared.
+TEST(Discrepancy, NrmseScaleIsTheRootMeanSquarePeakOverTheComparedFrames) {
+  const DiscrepancyInput input = clean_session({"none", {}}, 10, 5);
+  double sum = 0.0;
+  long frames = 0;
+  for (const DiscrepancyStep& ds : input.steps) {
+    for (const RegionAnalysis& ra : ds.analysis.regions) {
+      long contact = 0;
+      double peak = 0.0;
+      for (std::size_t i = 0; i < ra.series.t_s.size(); ++i) {
+        if (!(ra.series.area_mm2[i] > 0.0)) continue;
+        ++contact;
+        peak = std::max(peak, ra.series.force_n[i]);
+      }
+      sum += static_cast<double>(contact) * peak * peak;
+      frames += contact;
+    }
+  }
+  const DiscrepancyResult r = find_discrepancy(input);
+  ASSERT_EQ(r.step_regions, 20);
+  EXPECT_EQ(r.frames, frames);
+  EXPECT_NEAR(r.nrmse_scale_n, std::sqrt(sum / static_cast<double>(frames)), 1e-9);
+  EXPECT_GT(r.nrmse_scale_n, 300.0);
+  EXPECT_LT(r.nrmse_scale_n, 440.0);
+}
+
 TEST(Discrepancy, RefusesBadSettingsAndTooFewSteps) {
   const DiscrepancyInput input = clean_session({"none", {}}, 4, 1);
   EXPECT_THROW(find_discrepancy(input), std::invalid_argument);  // 4 steps, 5 folds

@@ -262,6 +262,10 @@ struct DiscrepancyResult {
   int step_regions_left_out = 0;
   long frames = 0;
   double noise_floor_nrmse_pct = 0.0;  ///< the pooled noise floor on the NRMSE scale
+  /// The NRMSE's scale, sqrt(sum of frames x peak^2 / frames) over the compared step-regions:
+  /// an NRMSE of x % is an RMS residual of x / 100 times this. Sessions whose peaks differ (an
+  /// effect that lowers the force) compare in newtons through it.
+  double nrmse_scale_n = 0.0;
   double baseline_in_sample_nrmse_pct = 0.0;
   double baseline_heldout_nrmse_pct = 0.0;  ///< the baseline has no shared parameters
   double extended_heldout_nrmse_pct = 0.0;

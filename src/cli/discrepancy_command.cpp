@@ -113,6 +113,10 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
        "change of each step-region's zero (its mean reading in the swing windows around "
        "the step) from the foot's step before, scaled by the step-region's peak force"}};
   j["noise_floor_nrmse_pct"] = r.noise_floor_nrmse_pct;
+  j["nrmse_scale"] = {{"newtons", r.nrmse_scale_n},
+                      {"what",
+                       "an NRMSE of x % is an RMS residual of x / 100 times this: the root mean "
+                       "square over the compared frames of their step-region's peak force"}};
   j["baseline_in_sample_nrmse_pct"] = r.baseline_in_sample_nrmse_pct;
   j["baseline_bic"] = r.baseline_bic;
   j["settings"] = {
@@ -207,9 +211,9 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
 
   fmt::print(
       "{}: {} steps, {} step-regions ({} left out: their cells give no footprint); noise floor "
-      "{:.1f} %\n",
+      "{:.1f} %; an NRMSE of 1 % is {:.2f} N RMS\n",
       args.session.string(), result.steps, result.step_regions, result.step_regions_left_out,
-      result.noise_floor_nrmse_pct);
+      result.noise_floor_nrmse_pct, result.nrmse_scale_n / 100.0);
   // The parameters show why a candidate with a clear gain may still not be named: one without
   // a standard error (at a bound of its range, or along a flat direction) is not determined.
   fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}  {}\n", "candidate", "held-out %", "shrink %",

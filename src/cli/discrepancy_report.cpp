@@ -208,8 +208,9 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
   html += fmt::format(
       "<p>{} steps, {} step-regions, {} frames ({} step-regions left out: their cells give no "
       "footprint, and their contact ellipse moves in whole cells). Pooled NRMSE (eq 58, regions "
-      "weighted by their force). Noise floor {:.2f} %.</p>",
-      r.steps, r.step_regions, r.frames, r.step_regions_left_out, r.noise_floor_nrmse_pct);
+      "weighted by their force; 1 % is {:.2f} N RMS). Noise floor {:.2f} %.</p>",
+      r.steps, r.step_regions, r.frames, r.step_regions_left_out, r.nrmse_scale_n / 100.0,
+      r.noise_floor_nrmse_pct);
   if (r.ceiling_plateau_steps >= 0) {
     html += fmt::format(
         "<p>A ceiling in the readings: {} of {} steps have a frame in which two or more cells of "
