@@ -74,14 +74,7 @@ void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Un
   u.V.assign(n, 0.0);
   u.d_mm.assign(n, 0.0);
   u.ddot_mm_per_s.assign(n, 0.0);
-  std::size_t begin = 0;
-  while (begin < n) {
-    if (!(s.area_mm2[begin] > 0.0)) {
-      ++begin;
-      continue;
-    }
-    std::size_t end = begin;
-    while (end < n && s.area_mm2[end] > 0.0) ++end;
+  for (const auto [begin, end] : contact_runs(s.area_mm2)) {
     for (std::size_t i = begin; i < end; ++i) {
       const std::size_t lo = i > begin ? i - 1 : i;
       const std::size_t hi = i + 1 < end ? i + 1 : i;
@@ -99,7 +92,6 @@ void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Un
       u.d_mm[i] = g * C_mm;
       u.ddot_mm_per_s[i] = gdot * C_mm;
     }
-    begin = end;
   }
 }
 

@@ -65,6 +65,22 @@ std::string_view fit_status_name(FitStatus status) {
   return "fit_failed";
 }
 
+std::vector<FrameRun> contact_runs(std::span<const double> area_mm2) {
+  std::vector<FrameRun> runs;
+  std::size_t begin = 0;
+  while (begin < area_mm2.size()) {
+    if (!(area_mm2[begin] > 0.0)) {
+      ++begin;
+      continue;
+    }
+    std::size_t end = begin;
+    while (end < area_mm2.size() && area_mm2[end] > 0.0) ++end;
+    runs.push_back({begin, end});
+    begin = end;
+  }
+  return runs;
+}
+
 double nrmse_pct(std::span<const double> measured, std::span<const double> model) {
   if (measured.size() != model.size()) {
     throw std::invalid_argument("nrmse_pct: measured and model differ in length");
@@ -247,15 +263,7 @@ void polynomial_fit(const std::vector<double>& t, const std::vector<double>& y,
 // gdot never bridges a gap without contact.
 void append_frames(const RegionSeries& s, Smoothing smoothing, EndRate end_rate, std::size_t offset,
                    std::vector<FitFrame>& frames) {
-  const std::size_t n = s.t_s.size();
-  std::size_t begin = 0;
-  while (begin < n) {
-    if (!(s.area_mm2[begin] > 0.0)) {
-      ++begin;
-      continue;
-    }
-    std::size_t end = begin;
-    while (end < n && s.area_mm2[end] > 0.0) ++end;
+  for (const auto [begin, end] : contact_runs(s.area_mm2)) {
     const std::size_t len = end - begin;
     if (smoothing == Smoothing::None) {
       for (std::size_t i = begin; i < end; ++i) {
@@ -305,7 +313,6 @@ void append_frames(const RegionSeries& s, Smoothing smoothing, EndRate end_rate,
         frames.push_back(f);
       }
     }
-    begin = end;
   }
 }
 

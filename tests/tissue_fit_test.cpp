@@ -560,6 +560,21 @@ TEST(TissueFit, EndRateNamesRoundTrip) {
   EXPECT_EQ(parse_end_rate("three-frame"), std::nullopt);
 }
 
+// A NaN or negative area is no contact: a rate must never be taken across one.
+TEST(TissueFit, ContactRunsSplitAtEveryFrameWithoutContact) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<double> area{0.0, 5.0, 6.0, 0.0, 0.0, 7.0, -1.0, 8.0, nan, 9.0, 9.5};
+  const std::vector<FrameRun> runs = contact_runs(area);
+  ASSERT_EQ(runs.size(), 4u);
+  const std::vector<std::pair<std::size_t, std::size_t>> expected{{1, 3}, {5, 6}, {7, 8}, {9, 11}};
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    EXPECT_EQ(runs[r].begin, expected[r].first) << "run " << r;
+    EXPECT_EQ(runs[r].end, expected[r].second) << "run " << r;
+  }
+  EXPECT_TRUE(contact_runs(std::vector<double>{}).empty());
+  EXPECT_TRUE(contact_runs(std::vector<double>{0.0, 0.0}).empty());
+}
+
 // The identifiability demonstration through the fit: two declared (C, d0) pairs give the same
 // K = kbar C^(1+n) d0^(-n) and D, and kbar, cbar rescale by the (C, d0) factors.
 TEST(TissueFit, DeclaredCAndD0OnlyRescaleKbarAndCbar) {

@@ -75,6 +75,14 @@ struct RegionSeries {
   std::vector<double> force_n;
 };
 
+/// Half-open [begin, end) index ranges of the runs of frames with contact (area > 0), in order.
+/// Rates are taken within a run, never across a frame without contact.
+struct FrameRun {
+  std::size_t begin = 0;
+  std::size_t end = 0;
+};
+std::vector<FrameRun> contact_runs(std::span<const double> area_mm2);
+
 enum class FitStatus { Ok, NoContact, Failed };
 std::string_view fit_status_name(FitStatus status);  ///< "ok", "no_contact", "fit_failed"
 

@@ -28,6 +28,80 @@ bool counter_of(std::int64_t value, std::uint64_t& out) {
   return true;
 }
 
+// The structs and their messages name these fields alike, so one body serves both directions.
+template <typename From, typename To>
+void copy_region_frame_fields(const From& in, To& out) {
+  out.force_n = in.force_n;
+  out.active_area_mm2 = in.active_area_mm2;
+  out.centre_x_mm = in.centre_x_mm;
+  out.centre_y_mm = in.centre_y_mm;
+  out.ra_mm = in.ra_mm;
+  out.rb_mm = in.rb_mm;
+  out.angle_rad = in.angle_rad;
+  out.ellipse_area_mm2 = in.ellipse_area_mm2;
+}
+
+template <typename From, typename To>
+void copy_fit_fields(const From& in, To& out) {
+  out.utime = in.utime;
+  out.step = in.step;
+  out.t_heel_strike_s = in.t_heel_strike_s;
+  out.t_toe_off_s = in.t_toe_off_s;
+  out.nrmse_total_pct = in.nrmse_total_pct;
+  out.latency_ms = in.latency_ms;
+}
+
+template <typename From, typename To>
+void copy_region_fit_fields(const From& in, To& out) {
+  out.status = in.status;
+  out.kbar_n_per_mm3 = in.kbar_n_per_mm3;
+  out.n = in.n;
+  out.cbar_ns_per_mm3 = in.cbar_ns_per_mm3;
+  out.m = in.m;
+  out.se_kbar = in.se_kbar;
+  out.se_n = in.se_n;
+  out.se_cbar = in.se_cbar;
+  out.se_m = in.se_m;
+  out.A_mm = in.A_mm;
+  out.B_mm = in.B_mm;
+  out.C_mm = in.C_mm;
+  out.d0_mm = in.d0_mm;
+  out.nrmse_pct = in.nrmse_pct;
+}
+
+template <typename From, typename To>
+void copy_effects_fields(const From& in, To& out) {
+  out.utime = in.utime;
+  out.final_estimate = in.final_estimate;
+  out.steps = in.steps;
+  out.t_first_heel_strike_s = in.t_first_heel_strike_s;
+  out.t_last_toe_off_s = in.t_last_toe_off_s;
+  out.baseline_nrmse_pct = in.baseline_nrmse_pct;
+  out.extended_nrmse_pct = in.extended_nrmse_pct;
+  out.baseline_heldout_nrmse_pct = in.baseline_heldout_nrmse_pct;
+  out.extended_heldout_nrmse_pct = in.extended_heldout_nrmse_pct;
+}
+
+// Calls visit(report member, message member) for every counter of the status report.
+template <typename Visit>
+void for_each_counter(Visit&& visit) {
+  visit(&StatusReport::bytes_received, &status_t::bytes_received);
+  visit(&StatusReport::frames_decoded, &status_t::frames_decoded);
+  visit(&StatusReport::crc_errors, &status_t::crc_errors);
+  visit(&StatusReport::resyncs, &status_t::resyncs);
+  visit(&StatusReport::frames_lost_sequence, &status_t::frames_lost_sequence);
+  visit(&StatusReport::reconnects, &status_t::reconnects);
+  visit(&StatusReport::ring_depth, &status_t::ring_depth);
+  visit(&StatusReport::ring_drops, &status_t::ring_drops);
+  visit(&StatusReport::frames_processed, &status_t::frames_processed);
+  visit(&StatusReport::frames_rejected, &status_t::frames_rejected);
+  visit(&StatusReport::steps_detected, &status_t::steps_detected);
+  visit(&StatusReport::step_backlog, &status_t::step_backlog);
+  visit(&StatusReport::step_drops, &status_t::step_drops);
+  visit(&StatusReport::fits_published, &status_t::fits_published);
+  visit(&StatusReport::fits_failed, &status_t::fits_failed);
+}
+
 }  // namespace
 
 void to_lcm(const FrameReport& report, frame_t& message) {
@@ -38,15 +112,8 @@ void to_lcm(const FrameReport& report, frame_t& message) {
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     const RegionFrameReport& in = report.regions[i];
     region_frame_t& out = message.regions[i];
-    out.force_n = in.force_n;
-    out.active_area_mm2 = in.active_area_mm2;
+    copy_region_frame_fields(in, out);
     out.ellipse_case = static_cast<std::int8_t>(in.ellipse_case);
-    out.centre_x_mm = in.centre_x_mm;
-    out.centre_y_mm = in.centre_y_mm;
-    out.ra_mm = in.ra_mm;
-    out.rb_mm = in.rb_mm;
-    out.angle_rad = in.angle_rad;
-    out.ellipse_area_mm2 = in.ellipse_area_mm2;
   }
 }
 
@@ -60,53 +127,22 @@ void to_lcm(const StepEvent& event, step_t& message) {
 }
 
 void to_lcm(const FitReport& report, fit_t& message) {
-  message.utime = report.utime;
+  copy_fit_fields(report, message);
   message.foot = foot_code(report.foot);
-  message.step = report.step;
-  message.t_heel_strike_s = report.t_heel_strike_s;
-  message.t_toe_off_s = report.t_toe_off_s;
-  message.nrmse_total_pct = report.nrmse_total_pct;
-  message.latency_ms = report.latency_ms;
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     const RegionFitReport& in = report.regions[i];
     region_fit_t& out = message.regions[i];
     out.region = static_cast<std::int8_t>(index_of(in.region));
     out.region_name = region_name(in.region);
-    out.status = in.status;
-    out.kbar_n_per_mm3 = in.kbar_n_per_mm3;
-    out.n = in.n;
-    out.cbar_ns_per_mm3 = in.cbar_ns_per_mm3;
-    out.m = in.m;
-    out.se_kbar = in.se_kbar;
-    out.se_n = in.se_n;
-    out.se_cbar = in.se_cbar;
-    out.se_m = in.se_m;
-    out.A_mm = in.A_mm;
-    out.B_mm = in.B_mm;
-    out.C_mm = in.C_mm;
-    out.d0_mm = in.d0_mm;
-    out.nrmse_pct = in.nrmse_pct;
+    copy_region_fit_fields(in, out);
   }
 }
 
 void to_lcm(const StatusReport& report, status_t& message) {
   message.utime = report.utime;
   message.connection = report.connection;
-  message.bytes_received = counter(report.bytes_received);
-  message.frames_decoded = counter(report.frames_decoded);
-  message.crc_errors = counter(report.crc_errors);
-  message.resyncs = counter(report.resyncs);
-  message.frames_lost_sequence = counter(report.frames_lost_sequence);
-  message.reconnects = counter(report.reconnects);
-  message.ring_depth = counter(report.ring_depth);
-  message.ring_drops = counter(report.ring_drops);
-  message.frames_processed = counter(report.frames_processed);
-  message.frames_rejected = counter(report.frames_rejected);
-  message.steps_detected = counter(report.steps_detected);
-  message.step_backlog = counter(report.step_backlog);
-  message.step_drops = counter(report.step_drops);
-  message.fits_published = counter(report.fits_published);
-  message.fits_failed = counter(report.fits_failed);
+  for_each_counter(
+      [&](auto field, auto message_field) { message.*message_field = counter(report.*field); });
   message.fit_latency_p50_ms = report.fit_latency_p50_ms;
   message.fit_latency_p99_ms = report.fit_latency_p99_ms;
 }
@@ -121,15 +157,7 @@ void to_lcm(const RawFrameReport& report, raw_t& message) {
 }
 
 void to_lcm(const EffectsReport& report, effects_t& message) {
-  message.utime = report.utime;
-  message.final_estimate = report.final_estimate;
-  message.steps = report.steps;
-  message.t_first_heel_strike_s = report.t_first_heel_strike_s;
-  message.t_last_toe_off_s = report.t_last_toe_off_s;
-  message.baseline_nrmse_pct = report.baseline_nrmse_pct;
-  message.extended_nrmse_pct = report.extended_nrmse_pct;
-  message.baseline_heldout_nrmse_pct = report.baseline_heldout_nrmse_pct;
-  message.extended_heldout_nrmse_pct = report.extended_heldout_nrmse_pct;
+  copy_effects_fields(report, message);
   message.num_params = static_cast<std::int16_t>(report.params.size());
   message.params.resize(report.params.size());
   for (std::size_t i = 0; i < report.params.size(); ++i) {
@@ -154,15 +182,8 @@ std::optional<FrameReport> from_lcm(const frame_t& message) {
     const region_frame_t& in = message.regions[i];
     if (in.ellipse_case < 0) return std::nullopt;
     RegionFrameReport& out = report.regions[i];
-    out.force_n = in.force_n;
-    out.active_area_mm2 = in.active_area_mm2;
+    copy_region_frame_fields(in, out);
     out.ellipse_case = static_cast<std::uint8_t>(in.ellipse_case);
-    out.centre_x_mm = in.centre_x_mm;
-    out.centre_y_mm = in.centre_y_mm;
-    out.ra_mm = in.ra_mm;
-    out.rb_mm = in.rb_mm;
-    out.angle_rad = in.angle_rad;
-    out.ellipse_area_mm2 = in.ellipse_area_mm2;
   }
   return report;
 }
@@ -190,32 +211,14 @@ std::optional<FitReport> from_lcm(const fit_t& message) {
   FitReport report;
   const auto foot = foot_of(message.foot);
   if (!foot) return std::nullopt;
-  report.utime = message.utime;
+  copy_fit_fields(message, report);
   report.foot = *foot;
-  report.step = message.step;
-  report.t_heel_strike_s = message.t_heel_strike_s;
-  report.t_toe_off_s = message.t_toe_off_s;
-  report.nrmse_total_pct = message.nrmse_total_pct;
-  report.latency_ms = message.latency_ms;
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     const region_fit_t& in = message.regions[i];
     if (in.region < 0 || static_cast<std::size_t>(in.region) >= kRegionCount) return std::nullopt;
     RegionFitReport& out = report.regions[i];
     out.region = kRegions[static_cast<std::size_t>(in.region)];
-    out.status = in.status;
-    out.kbar_n_per_mm3 = in.kbar_n_per_mm3;
-    out.n = in.n;
-    out.cbar_ns_per_mm3 = in.cbar_ns_per_mm3;
-    out.m = in.m;
-    out.se_kbar = in.se_kbar;
-    out.se_n = in.se_n;
-    out.se_cbar = in.se_cbar;
-    out.se_m = in.se_m;
-    out.A_mm = in.A_mm;
-    out.B_mm = in.B_mm;
-    out.C_mm = in.C_mm;
-    out.d0_mm = in.d0_mm;
-    out.nrmse_pct = in.nrmse_pct;
+    copy_region_fit_fields(in, out);
   }
   return report;
 }
@@ -224,21 +227,10 @@ std::optional<StatusReport> from_lcm(const status_t& message) {
   StatusReport report;
   report.utime = message.utime;
   report.connection = message.connection;
-  const bool ok = counter_of(message.bytes_received, report.bytes_received) &&
-                  counter_of(message.frames_decoded, report.frames_decoded) &&
-                  counter_of(message.crc_errors, report.crc_errors) &&
-                  counter_of(message.resyncs, report.resyncs) &&
-                  counter_of(message.frames_lost_sequence, report.frames_lost_sequence) &&
-                  counter_of(message.reconnects, report.reconnects) &&
-                  counter_of(message.ring_depth, report.ring_depth) &&
-                  counter_of(message.ring_drops, report.ring_drops) &&
-                  counter_of(message.frames_processed, report.frames_processed) &&
-                  counter_of(message.frames_rejected, report.frames_rejected) &&
-                  counter_of(message.steps_detected, report.steps_detected) &&
-                  counter_of(message.step_backlog, report.step_backlog) &&
-                  counter_of(message.step_drops, report.step_drops) &&
-                  counter_of(message.fits_published, report.fits_published) &&
-                  counter_of(message.fits_failed, report.fits_failed);
+  bool ok = true;
+  for_each_counter([&](auto field, auto message_field) {
+    ok = ok && counter_of(message.*message_field, report.*field);
+  });
   if (!ok) return std::nullopt;
   report.fit_latency_p50_ms = message.fit_latency_p50_ms;
   report.fit_latency_p99_ms = message.fit_latency_p99_ms;
@@ -268,15 +260,7 @@ std::optional<EffectsReport> from_lcm(const effects_t& message) {
     return std::nullopt;
   }
   EffectsReport report;
-  report.utime = message.utime;
-  report.final_estimate = message.final_estimate;
-  report.steps = message.steps;
-  report.t_first_heel_strike_s = message.t_first_heel_strike_s;
-  report.t_last_toe_off_s = message.t_last_toe_off_s;
-  report.baseline_nrmse_pct = message.baseline_nrmse_pct;
-  report.extended_nrmse_pct = message.extended_nrmse_pct;
-  report.baseline_heldout_nrmse_pct = message.baseline_heldout_nrmse_pct;
-  report.extended_heldout_nrmse_pct = message.extended_heldout_nrmse_pct;
+  copy_effects_fields(message, report);
   for (const effect_param_t& p : message.params) {
     report.params.push_back({p.effect, p.name, p.value, p.se});
   }
