@@ -109,6 +109,33 @@ TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
   EXPECT_NE(out.find("surprise"), std::string::npos) << out;
 }
 
+// A wrong command line is exit code 2, as a bad file is, and its message names what is wrong;
+// asking for help is success.
+TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
+  const auto dir = test::scratch_dir("cli-usage");
+  int status = -1;
+  std::string out =
+      run("analyze " + (dir / "absent.csv").string() + " --out " + (dir / "o").string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("absent.csv"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "o"));
+
+  const std::string demo = (test::source_dir() / "replay" / "demo-simulated-37-38.csv").string();
+  out = run("discrepancy " + demo + " --out " + (dir / "d").string() + " --folds 1", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--folds"), std::string::npos) << out;
+
+  out = run("segment", &status);
+  EXPECT_EQ(status, 2) << out;
+  out = run("frobnicate", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("frobnicate"), std::string::npos) << out;
+
+  out = run("analyze --help", &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("--report"), std::string::npos) << out;
+}
+
 // analyze logs its timings at debug level: they show exactly when the level allows them.
 TEST(Cli, LogLevelComesFromTheConfigUnlessGivenOnTheCommandLine) {
   const auto dir = test::scratch_dir("cli-log-level");

@@ -24,7 +24,9 @@ int main(int argc, char** argv) {
   using namespace gaitmon::cli;
   CLI::App app{
       "gaitmon: step segmentation and plantar-tissue models from Medilogic pressure insoles"};
-  app.require_subcommand(1);
+  // At most one, checked after parsing: CLI11 checks a required one before it reports a word it
+  // does not know, so `gaitmon frobnicate` would say only that a subcommand is required.
+  app.require_subcommand(0, 1);
   GlobalOptions global;
   app.add_option("--config", global.config_path,
                  "Main config file (default: $GAITMON_CONFIG or the source tree's "
@@ -45,8 +47,11 @@ int main(int argc, char** argv) {
 
   try {
     app.parse(argc, argv);
+    if (app.get_subcommands().empty()) throw CLI::RequiredError("A subcommand");
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // CLI11 prints the message (or the help) here. Its own codes (101-1xx) would set a usage
+    // error apart from a bad file, which scripts in the lab do not need: both are 2.
+    return app.exit(e) == 0 ? 0 : 2;
   } catch (const gaitmon::InputError& e) {
     std::cerr << "gaitmon: bad input: " << e.what() << '\n';
     return 2;
