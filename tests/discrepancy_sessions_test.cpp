@@ -303,6 +303,17 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
     EXPECT_NE(page.str().find("<svg"), std::string::npos);
     EXPECT_NE(page.str().find("Zero level per foot"), std::string::npos);
     EXPECT_EQ(page.str().find("<script"), std::string::npos);
+    // A parameter the data do not determine (saturation's ceiling above every reading here) has
+    // no standard error: null in the JSON, "(no SE)" on the page, and never "nan".
+    bool any_missing_se = false;
+    for (const auto& c : j["candidates"]) {
+      for (const auto& p : c["params"]) {
+        any_missing_se = any_missing_se || p["se"].is_null();
+      }
+    }
+    EXPECT_TRUE(any_missing_se);
+    EXPECT_NE(page.str().find("(no SE)"), std::string::npos);
+    EXPECT_EQ(page.str().find("nan"), std::string::npos);
   }
   EXPECT_EQ(texts[0], texts[1]);
 }

@@ -487,7 +487,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     for (const EffectEstimate& e : extended->effects) {
       std::string params;
       for (const ParamEstimate& p : e.params) {
-        params += fmt::format(" {} = {:.4g} +- {:.2g};", p.name, p.value, p.se);
+        params += fmt::format(" {} = {};", p.name, estimate_text(p.value, p.se, " +- "));
       }
       fmt::print("effect {}:{}\n", e.name, params);
     }

@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "gaitmon/config.hpp"
 
@@ -18,6 +19,11 @@ struct GlobalOptions {
 /// Loads the config named by --config, or the default one, and sets the log level: --log-level,
 /// else the config's [log] level. Every command calls it first.
 Config load_global_config(const GlobalOptions& global);
+
+/// A fitted value and its standard error joined by plus_minus ("+-", " &plusmn; "), or the value
+/// and "(no SE)" where the data do not determine it (a non-finite se), so that no report prints
+/// "nan".
+std::string estimate_text(double value, double se, std::string_view plus_minus);
 
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);

@@ -32,8 +32,7 @@ struct DiscrepancyArgs {
 std::string params_text(const std::vector<ParamEstimate>& params) {
   std::string text;
   for (const ParamEstimate& p : params) {
-    text += std::isfinite(p.se) ? fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se)
-                                : fmt::format(" {}={:.4g} (no SE)", p.name, p.value);
+    text += fmt::format(" {}={}", p.name, estimate_text(p.value, p.se, "+-"));
   }
   return text;
 }

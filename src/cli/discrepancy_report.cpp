@@ -10,6 +10,7 @@
 #include <iterator>
 #include <string>
 
+#include "commands.hpp"
 #include "html.hpp"
 
 namespace gaitmon::cli {
@@ -123,7 +124,7 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
   for (const EffectEstimate& e : r.named_effects) {
     named += "<li><b>" + escape(e.name) + "</b>: ";
     for (const ParamEstimate& p : e.params) {
-      named += fmt::format("{} = {:.4g} &plusmn; {:.2g}; ", escape(p.name), p.value, p.se);
+      named += fmt::format("{} = {}; ", escape(p.name), estimate_text(p.value, p.se, " &plusmn; "));
     }
     named += "</li>";
   }
@@ -139,7 +140,8 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
     for (const CandidateResult& c : list) {
       std::string params;
       for (const ParamEstimate& p : c.params) {
-        params += fmt::format("{} = {:.4g} &plusmn; {:.2g}<br>", escape(p.name), p.value, p.se);
+        params +=
+            fmt::format("{} = {}<br>", escape(p.name), estimate_text(p.value, p.se, " &plusmn; "));
       }
       candidates += fmt::format(
           "<tr><td>{}</td><td>{:.2f}</td><td>{:.1f}</td><td>{:.2f}</td><td>{:.1f}</td><td>{:.0f}"

@@ -12,6 +12,7 @@
 #include <string>
 #include <system_error>
 
+#include "commands.hpp"
 #include "replay/pacer.hpp"
 
 namespace gaitmon::cli {
@@ -77,8 +78,8 @@ void StepPrinter::publish(const EffectsReport& report) {
       "{} over {} steps ({:.1f}-{:.1f} s):", report.final_estimate ? "effects, final," : "effects",
       report.steps, report.t_first_heel_strike_s, report.t_last_toe_off_s);
   for (const EffectParamReport& p : report.params) {
-    fmt::format_to(std::back_inserter(line), " {}.{} = {:.4g} +- {:.2g};", p.effect, p.name,
-                   p.value, p.se);
+    fmt::format_to(std::back_inserter(line), " {}.{} = {};", p.effect, p.name,
+                   estimate_text(p.value, p.se, " +- "));
   }
   fmt::format_to(std::back_inserter(line),
                  " pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)",
