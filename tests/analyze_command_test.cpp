@@ -285,7 +285,7 @@ TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
   ASSERT_EQ(a.status, 0) << a.output;
   int status = -1;
   const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
-                                  (a.dir / "seed8").string() + " --fit seed8",
+                                  (a.dir / "seed8").string() + " --fit seed8 --report",
                               &status);
   ASSERT_EQ(status, 0) << out;
   const auto warning = out.find("warning");
@@ -298,6 +298,13 @@ TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
   const auto& pooling = j.at("regions").at("heel").at("pooling");
   EXPECT_FALSE(pooling.at("pooled").get<bool>());
   EXPECT_NE(pooling.at("note").get<std::string>().find("default fit"), std::string::npos);
+  // The session-level fit cannot determine C either: its SE is null in the JSON, and the report
+  // says so in words rather than printing inf.
+  const auto& c = j.at("regions").at("heel").at("session_fit").at("parameters").at("C_mm");
+  EXPECT_TRUE(c.at("se").is_null()) << c.dump();
+  const std::string html = read_all(a.dir / "seed8" / "report.html");
+  EXPECT_NE(html.find("(undetermined)"), std::string::npos);
+  EXPECT_EQ(html.find("(inf)"), std::string::npos);
 }
 
 // --fit seed8 reproduces the seed's fit, inputs included, unless they are asked for.

@@ -353,7 +353,8 @@ std::string param_table(const RegionSessionAnalysis& r, const SeedTissueStats& s
     const Spread& s = r.*p.spread;
     std::string session = "&ndash;";
     if (r.session_fit.status == FitStatus::Ok) {
-      session = e.free ? fmt::format("{} ({})", num(e.value), num(e.se))
+      session = e.free ? fmt::format("{} ({})", num(e.value),
+                                     std::isfinite(e.se) ? num(e.se) : "undetermined")
                        : fmt::format("{} <i>declared</i>", num(e.value));
       if (e.at_bound) session += " <b>at bound</b>";
     }
