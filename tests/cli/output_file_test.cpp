@@ -1,0 +1,94 @@
+// The analyze and discrepancy outputs: files appear under their final names only together and
+// only when complete; a failed publication takes back what it had already renamed.
+#include "src/cli/output_file.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "test_support.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> names_in(const fs::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) names.push_back(entry.path().filename());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::string read(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+TEST(OutputFile, NothingHasItsFinalNameUntilTheSetIsCommitted) {
+  const fs::path dir = test::scratch_dir("output_commit");
+  OutputSet set(dir);
+  set.add("steps.csv", "a,b\n1,2\n");
+  set.add("session.json", "{}\n");
+  EXPECT_EQ(names_in(dir), (std::vector<std::string>{"session.json.partial", "steps.csv.partial"}));
+
+  const std::vector<fs::path> paths = set.commit();
+  EXPECT_EQ(paths, (std::vector<fs::path>{dir / "steps.csv", dir / "session.json"}));
+  EXPECT_EQ(names_in(dir), (std::vector<std::string>{"session.json", "steps.csv"}));
+  EXPECT_EQ(read(dir / "steps.csv"), "a,b\n1,2\n");
+  EXPECT_EQ(read(dir / "session.json"), "{}\n");
+}
+
+TEST(OutputFile, ASetThatIsNeverCommittedLeavesNothingBehind) {
+  const fs::path dir = test::scratch_dir("output_abandoned");
+  {
+    OutputSet set(dir);
+    set.add("regions.csv", "foot,step\n");
+  }
+  EXPECT_TRUE(names_in(dir).empty());
+}
+
+TEST(OutputFile, AFailedRenameTakesBackTheFilesAlreadyPublished) {
+  const fs::path dir = test::scratch_dir("output_rename_fails");
+  // A folder that is not empty cannot be replaced by a file, so the second rename fails.
+  test::write_text(dir / "session.json" / "keep", "x");
+  {
+    OutputSet set(dir);
+    set.add("steps.csv", "new\n");
+    set.add("session.json", "{}\n");
+    try {
+      set.commit();
+      FAIL() << "commit succeeded over a folder";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find((dir / "session.json").string() + ": cannot rename"),
+                std::string::npos)
+          << e.what();
+    }
+    EXPECT_FALSE(fs::exists(dir / "steps.csv"));
+  }
+  EXPECT_EQ(names_in(dir), std::vector<std::string>{"session.json"});
+}
+
+TEST(OutputFile, AFolderThatCannotBeWrittenIsNamedInTheError) {
+  const fs::path dir = test::scratch_dir("output_missing") / "not_there";
+  OutputSet set(dir);
+  try {
+    set.add("steps.csv", "x\n");
+    FAIL() << "created a file in a folder that does not exist";
+  } catch (const std::runtime_error& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find((dir / "steps.csv.partial").string() + ": cannot create: "),
+              std::string::npos)
+        << message;
+    EXPECT_NE(message.find("No such file or directory"), std::string::npos) << message;
+  }
+}
+
+}  // namespace
+}  // namespace gaitmon::cli
