@@ -21,6 +21,7 @@
 #include <thread>
 #include <utility>
 
+#include "discrepancy_diagnostics.hpp"
 #include "discrepancy_effects.hpp"
 
 namespace gaitmon {
@@ -33,7 +34,9 @@ constexpr std::array<double, 9> kExponentGrid{0.01, 0.12, 0.25, 0.38, 0.5, 0.62,
 using discrepancy_detail::Applied;
 using discrepancy_detail::candidate_specs;
 using discrepancy_detail::CandidateSpec;
+using discrepancy_detail::diagnose;
 using discrepancy_detail::ParamSpec;
+using discrepancy_detail::residual_map;
 using discrepancy_detail::Unit;
 
 double g_of(double area, double P) {
@@ -812,119 +815,7 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
   return out;
 }
 
-// ---- maps, comparisons, diagnostics ----------------------------------------------------------
-
-ResidualMap residual_map(const std::vector<Unit>& units,
-                         const std::vector<std::vector<double>>& preds, int bins) {
-  ResidualMap map;
-  map.bins = bins;
-  std::vector<double> s(kRegionCount * static_cast<std::size_t>(bins), 0.0), s2 = s, f2 = s;
-  std::vector<int> count(s.size(), 0);
-  for (std::size_t ui = 0; ui < units.size(); ++ui) {
-    const Unit& u = units[ui];
-    for (std::size_t i = 0; i < u.y.size(); ++i) {
-      const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
-      const std::size_t c =
-          index_of(u.region) * static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
-      const double r = u.y[i] - preds[ui][i];
-      s[c] += r;
-      s2[c] += r * r;
-      f2[c] += u.floor2[i];
-      ++count[c];
-    }
-  }
-  for (Region region : kRegions) {
-    for (int b = 0; b < bins; ++b) {
-      const std::size_t c =
-          index_of(region) * static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
-      ResidualCell cell;
-      cell.region = region;
-      cell.bin = b;
-      cell.samples = count[c];
-      if (count[c] > 0) {
-        cell.rms_n = std::sqrt(s2[c] / count[c]);
-        cell.bias_n = s[c] / count[c];
-        cell.noise_floor_n = std::sqrt(f2[c] / count[c]);
-      }
-      map.cells.push_back(cell);
-    }
-  }
-  return map;
-}
-
-double pearson(const std::vector<double>& x, const std::vector<double>& y) {
-  const double n = static_cast<double>(x.size());
-  if (n < 3) return 0.0;
-  double mx = 0, my = 0;
-  for (std::size_t i = 0; i < x.size(); ++i) {
-    mx += x[i];
-    my += y[i];
-  }
-  mx /= n;
-  my /= n;
-  double sxy = 0, sxx = 0, syy = 0;
-  for (std::size_t i = 0; i < x.size(); ++i) {
-    sxy += (x[i] - mx) * (y[i] - my);
-    sxx += (x[i] - mx) * (x[i] - mx);
-    syy += (y[i] - my) * (y[i] - my);
-  }
-  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
-}
-
-ResidualDiagnostics diagnose(const Prepared& prep, const std::vector<std::vector<double>>& preds,
-                             int bins) {
-  ResidualDiagnostics d;
-  d.lag1_autocorrelation = prep.pooled.r1;
-  d.effective_sample_fraction = prep.pooled.neff_fraction;
-  std::vector<double> bias(static_cast<std::size_t>(bins), 0.0);
-  std::vector<int> count(bias.size(), 0);
-  std::vector<double> res, dd, rate, sign, since, history, sat, step;
-  double runs = 0, expected = 0, variance = 0;
-  for (std::size_t ui = 0; ui < prep.units.size(); ++ui) {
-    const Unit& u = prep.units[ui];
-    double impulse = 0;
-    int plus = 0, minus = 0, unit_runs = 0;
-    int last_sign = 0;
-    for (std::size_t i = 0; i < u.y.size(); ++i) {
-      const double r = (u.y[i] - preds[ui][i]) / u.peak_n;
-      const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
-      bias[static_cast<std::size_t>(b)] += r;
-      ++count[static_cast<std::size_t>(b)];
-      impulse += u.y[i] * u.dt_s;
-      res.push_back(r);
-      dd.push_back(u.d_mm[i]);
-      rate.push_back(u.ddot_mm_per_s[i]);
-      sign.push_back(u.ddot_mm_per_s[i] > 0 ? 1.0 : (u.ddot_mm_per_s[i] < 0 ? -1.0 : 0.0));
-      since.push_back(u.t[i] - u.t.front());
-      history.push_back(impulse / u.peak_n);
-      sat.push_back(u.sat[i]);
-      step.push_back(u.ordinal);
-      const int sg = r > 0 ? 1 : (r < 0 ? -1 : 0);
-      if (sg == 0) continue;
-      (sg > 0 ? plus : minus)++;
-      if (sg != last_sign) ++unit_runs;
-      last_sign = sg;
-    }
-    const double n = plus + minus;
-    if (plus > 0 && minus > 0 && n > 1) {
-      runs += unit_runs;
-      expected += 1.0 + 2.0 * plus * minus / n;
-      variance += 2.0 * plus * minus * (2.0 * plus * minus - n) / (n * n * (n - 1));
-    }
-  }
-  for (std::size_t b = 0; b < bias.size(); ++b) {
-    d.bias_per_phase_pct.push_back(count[b] > 0 ? 100.0 * bias[b] / count[b] : 0.0);
-  }
-  d.runs_z = variance > 0 ? (runs - expected) / std::sqrt(variance) : 0.0;
-  d.correlations = {{"d_mm", pearson(dd, res)},
-                    {"ddot_mm_per_s", pearson(rate, res)},
-                    {"sign_ddot", pearson(sign, res)},
-                    {"time_since_heel_strike_s", pearson(since, res)},
-                    {"load_history_impulse", pearson(history, res)},
-                    {"saturated_cells", pearson(sat, res)},
-                    {"step_index", pearson(step, res)}};
-  return d;
-}
+// ---- comparisons -----------------------------------------------------------------------------
 
 std::vector<RegionComparison> compare_regions(const std::vector<Unit>& units,
                                               std::span<const double> before,
@@ -1177,7 +1068,9 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.zero_changes = pooled.zero_channel ? pooled.zero_changes : 0;
   out.zero_baseline_heldout_nrmse_pct = nrmse(baseline.heldout.zero_sse(), pooled.zero_norm);
   out.map_before = residual_map(units, base_preds, settings.phase_bins);
-  out.diagnostics = diagnose(prep, base_preds, settings.phase_bins);
+  out.diagnostics = diagnose(units, base_preds, settings.phase_bins);
+  out.diagnostics.lag1_autocorrelation = pooled.r1;
+  out.diagnostics.effective_sample_fraction = pooled.neff_fraction;
   out.zero_levels = zero_level_drift(input);
   out.ceiling_plateau_steps = ceiling_plateau_steps(input);
   const bool ceiling_seen =
