@@ -28,6 +28,11 @@ double pearson(const std::vector<double>& x, const std::vector<double>& y) {
   return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
 }
 
+// The stance's last frame (phase 1) belongs to the last bin.
+int phase_bin(double phase, int bins) {
+  return std::min(bins - 1, static_cast<int>(phase * bins));
+}
+
 }  // namespace
 
 ResidualMap residual_map(std::span<const Unit> units, const std::vector<std::vector<double>>& preds,
@@ -39,7 +44,7 @@ ResidualMap residual_map(std::span<const Unit> units, const std::vector<std::vec
   for (std::size_t ui = 0; ui < units.size(); ++ui) {
     const Unit& u = units[ui];
     for (std::size_t i = 0; i < u.y.size(); ++i) {
-      const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
+      const int b = phase_bin(u.phase[i], bins);
       const std::size_t c =
           index_of(u.region) * static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
       const double r = u.y[i] - preds[ui][i];
@@ -82,7 +87,7 @@ ResidualDiagnostics diagnose(std::span<const Unit> units,
     int last_sign = 0;
     for (std::size_t i = 0; i < u.y.size(); ++i) {
       const double r = (u.y[i] - preds[ui][i]) / u.peak_n;
-      const int b = std::min(bins - 1, static_cast<int>(u.phase[i] * bins));
+      const int b = phase_bin(u.phase[i], bins);
       bias[static_cast<std::size_t>(b)] += r;
       ++count[static_cast<std::size_t>(b)];
       impulse += u.y[i] * u.dt_s;
