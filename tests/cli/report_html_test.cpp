@@ -1,0 +1,221 @@
+// The analyze report drawn from analyses made by hand: the summary, the parameter table beside
+// Appendix I, the regions nothing was fitted in, the step table, links, escaping and no nan.
+#include "src/cli/report_html.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "test_support.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Five frames at 100 Hz from heel strike; only the heel is loaded, and fitted with `nrmse_pct`.
+StepAnalysis heel_step(Foot foot, int step, double t_heel_strike_s, double nrmse_pct) {
+  StepAnalysis s;
+  s.foot = foot;
+  s.step = step;
+  s.t_heel_strike_s = t_heel_strike_s;
+  s.t_toe_off_s = t_heel_strike_s + 0.04;
+  for (int i = 0; i < 5; ++i) s.t_s.push_back(t_heel_strike_s + 0.01 * i);
+  for (std::size_t i = 0; i < kRegionCount; ++i) s.regions[i].region = kRegions[i];
+  RegionAnalysis& heel = s.regions[index_of(Region::Heel)];
+  heel.series = {s.t_s, {0.0, 900.0, 1800.0, 900.0, 0.0}, {0.0, 150.0, 300.0, 150.0, 0.0}};
+  heel.fit.status = FitStatus::Ok;
+  heel.fit.nrmse_pct = nrmse_pct;
+  heel.fit.model_force_n = {0.0, 140.0, 310.0, 150.0, 0.0};
+  heel.fit.kbar_n_per_mm3 = {.value = 0.1 + 0.01 * step, .se = 0.01, .free = true};
+  heel.fit.n = {.value = 0.3, .se = 0.05, .free = true};
+  heel.fit.cbar_ns_per_mm3 = {.value = 0.011, .se = 0.002, .free = true};
+  heel.fit.m = {.value = 1.2, .se = 0.1, .free = true};
+  return s;
+}
+
+struct Fixture {
+  Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  AnalysisSettings settings;
+  std::vector<StepRow> rows;
+  std::vector<StepAnalysis> analyses;
+  SessionAnalysis session;
+
+  Fixture() {
+    rows = {{Foot::Left, 0, 0.1, 0.7, 650.0, StepStatus::Ok, 2.0},
+            {Foot::Right, 1, 0.6, 1.2, 640.0, StepStatus::Ok, 3.0},
+            {Foot::Left, 2, 1.1, 1.7, 655.5, StepStatus::Ok, 2.5},
+            {Foot::Right, 3, 1.6, 1.9, 120.0, StepStatus::Incomplete, std::nullopt},
+            {Foot::Left, 4, 2.1, 2.7, 600.0, StepStatus::Ok, 9.0}};
+    analyses = {heel_step(Foot::Left, 0, 0.1, 1.0), heel_step(Foot::Right, 1, 0.6, 5.0),
+                heel_step(Foot::Left, 2, 1.1, 3.0), heel_step(Foot::Left, 4, 2.1, 50.0)};
+    // A step whose heel fit failed: in no chart, whatever its numbers say.
+    analyses.back().regions[index_of(Region::Heel)].fit.status = FitStatus::Failed;
+    session.nrmse_total_pct = {.count = 3, .median = 2.5, .q1 = 2.0, .q3 = 3.0};
+    for (std::size_t i = 0; i < kRegionCount; ++i) session.regions[i].region = kRegions[i];
+
+    RegionSessionAnalysis& heel = session.regions[index_of(Region::Heel)];
+    heel.steps_with_contact = 3;
+    heel.steps_fitted = 3;
+    heel.aspect = 0.95;
+    heel.session_fit.status = FitStatus::Ok;
+    heel.session_fit.nrmse_pct = 4.3;
+    heel.session_fit.C_mm = {.value = 69.9, .free = false};
+    heel.session_fit.kbar_n_per_mm3 = {.value = 0.12, .se = 0.01, .free = true};
+    heel.session_fit.n = {.value = 0.3, .se = kInf, .free = true};
+    heel.session_fit.cbar_ns_per_mm3 = {
+        .value = 0.011, .se = 0.002, .at_bound = true, .free = true};
+    heel.pooling.pooled = true;
+    heel.pooling.mean = {std::log(0.12), 0.3, std::log(0.011), 1.2};
+    heel.pooling.between_step[0][0] = 0.01;    // 10 % on kbar, pooled as a logarithm
+    heel.pooling.between_step[1][1] = 0.0004;  // 0.02 on n
+    heel.pooling.between_step[2][2] = 0.04;    // 20 % on cbar, a logarithm too
+    heel.kbar_n_per_mm3 = {.count = 3, .median = 0.12, .q1 = 0.11, .q3 = 0.13};
+    heel.nrmse_pct = {.count = 3, .median = 3.0, .q1 = 2.0, .q3 = 4.0};
+
+    RegionSessionAnalysis& toe2 = session.regions[index_of(Region::Toe2)];
+    toe2.steps_with_contact = 2;
+    toe2.steps_on_ellipse = 2;
+    toe2.session_fit.status = FitStatus::Failed;
+    toe2.session_fit.reason = "<2 frames";
+    toe2.pooling.not_pooled = "fewer than 3 steps & no fit";
+  }
+
+  ReportInput input() const {
+    return {.session_name = "walk <1>",
+            .size = InsoleSize::S37_38,
+            .sample_rate_hz = 100.0,
+            .config = &config,
+            .settings = &settings,
+            .steps = rows,
+            .analyses = analyses,
+            .session = &session};
+  }
+};
+
+std::size_t count(const std::string& html, std::string_view what) {
+  std::size_t n = 0;
+  for (std::size_t at = html.find(what); at != std::string::npos; at = html.find(what, at + 1)) {
+    ++n;
+  }
+  return n;
+}
+
+bool has(const std::string& html, std::string_view what) {
+  return html.find(what) != std::string::npos;
+}
+
+TEST(ReportHtml, SummarisesTheSessionAndItsSettings) {
+  const Fixture f;
+  const std::string html = render_report_html(f.input());
+  EXPECT_TRUE(has(html, "<title>gaitmon analyze: walk &lt;1&gt;</title>"));
+  EXPECT_TRUE(has(html,
+                  "<h1>gaitmon analyze: walk &lt;1&gt;</h1><p>Insole 37-38, 100 Hz; 5 "
+                  "steps, 4 complete and analysed. Model correct, fit identifiable, "
+                  "smoothing none, contact area footprint. Median total-force NRMSE 2.5 % "
+                  "(IQR 1.0 %).</p>"));
+  EXPECT_TRUE(has(html, "C and d0 are <b>declared</b>, not fitted"));
+  EXPECT_FALSE(has(html, "<b>--fit seed8</b>"));
+
+  Fixture seed8;
+  seed8.settings.fit.mode = FitMode::Seed8;
+  seed8.settings.fit.free_scale = true;
+  seed8.settings.fit.end_rate = EndRate::SecondOrder;
+  const std::string other = render_report_html(seed8.input());
+  EXPECT_TRUE(has(other,
+                  "fit seed8, smoothing none, contact area footprint, second-order area "
+                  "rate at contact ends, P free."));
+  EXPECT_TRUE(has(other, "<b>--fit seed8</b>: all eight parameters are free"));
+  EXPECT_FALSE(has(other, "C and d0 are <b>declared</b>"));
+}
+
+TEST(ReportHtml, TablesEachParameterBesideAppendixI) {
+  const Fixture f;
+  const std::string html = render_report_html(f.input());
+  // Appendix I, size 37-38, heel: kbar 0.117 (0.027), C 69.9 (8.5), n 0.294 (0.116),
+  // cbar 0.011 (0.001), NRMSE 25.5 (4.2).
+  EXPECT_TRUE(has(html,
+                  "<tr><td>kbar (N/mm\u00b3)</td><td>0.12 (0.01)</td><td>0.12 (0.02)</td>"
+                  "<td>0.12 (10 %)</td><td>0.117 (0.027)</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>n</td><td>0.3 (undetermined)</td><td>&ndash;</td>"
+                  "<td>0.3 (0.02)</td><td>0.294 (0.116)</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>C (mm)</td><td>69.9 <i>declared</i></td><td>&ndash;</td>"
+                  "<td>&ndash;</td><td>69.9 (8.5)</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<td>0.011 (0.002) <b>at bound</b></td><td>&ndash;</td>"
+                  "<td>0.011 (20 %)</td><td>0.011 (0.001)</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>NRMSE (%)</td><td>4.3</td><td>3.0 (2.0)</td><td>&ndash;</td>"
+                  "<td>25.5 (4.2)</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<p>3 steps with contact, 3 fitted; session-level fit: ok. A/B = 0.950 "
+                  "(median measured contact-ellipse aspect).</p>"));
+}
+
+TEST(ReportHtml, DrawsTheTypicalStepAndAllStepsOfAFittedRegion) {
+  const Fixture f;
+  const std::string html = render_report_html(f.input());
+  // NRMSE 1, 5 and 3 %: the median is the left foot's step 2.
+  EXPECT_TRUE(has(html, ">typical step (L 2, NRMSE 3.0 %)</text>"));
+  EXPECT_TRUE(has(html, ">all steps (3 of 3 shown)</text>"));
+  EXPECT_TRUE(has(html, ">contact area given to the fit</text>"));
+  // Three per-step charts of the heel's (force, model, area), four strips, on the heel alone.
+  EXPECT_EQ(count(html, "<svg "), 7u);
+  // A dot per step fitted in each strip: the failed fit has none.
+  EXPECT_EQ(count(html, "<circle "), 4u * 3u);
+}
+
+TEST(ReportHtml, SaysWhyARegionHasNoChartsAndEscapesItsReasons) {
+  const Fixture f;
+  const std::string html = render_report_html(f.input());
+  const std::size_t toe2 = html.find("<section id=\"toe2\">");
+  ASSERT_NE(toe2, std::string::npos);
+  const std::string section = html.substr(toe2, html.find("</section>", toe2) - toe2);
+  EXPECT_TRUE(has(section,
+                  "<p>2 steps with contact, 0 fitted; session-level fit: fit_failed "
+                  "(&lt;2 frames)."));
+  EXPECT_TRUE(has(section, "Fitted on the <b>contact ellipse</b> in 2 of 2 steps"));
+  EXPECT_TRUE(has(section, "<p>No step of this region was fitted.</p>"));
+  EXPECT_TRUE(has(section, "<br>not pooled: fewer than 3 steps &amp; no fit</th>"));
+  EXPECT_FALSE(has(section, "<svg"));
+}
+
+TEST(ReportHtml, ListsEveryStepWithItsStatus) {
+  const Fixture f;
+  const std::string html = render_report_html(f.input());
+  EXPECT_TRUE(has(html,
+                  "<tr><td>L</td><td>2</td><td>1.100</td><td>1.700</td><td>0.600</td>"
+                  "<td>655.5</td><td>ok</td><td>2.5</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>R</td><td>3</td><td>1.600</td><td>1.900</td><td>0.300</td>"
+                  "<td>120.0</td><td>incomplete</td><td></td></tr>"));
+}
+
+TEST(ReportHtml, LinksOnlyWithinThePageAndNeverPrintsNanOrInf) {
+  const Fixture f;
+  const std::string html = render_report_html(f.input());
+  std::size_t links = 0;
+  for (std::size_t at = html.find("href=\""); at != std::string::npos;
+       at = html.find("href=\"", at + 1)) {
+    const std::size_t begin = at + 6;
+    const std::string target = html.substr(begin, html.find('"', begin) - begin);
+    ASSERT_EQ(target.front(), '#') << target;
+    EXPECT_TRUE(has(html, "id=\"" + target.substr(1) + "\"")) << target;
+    ++links;
+  }
+  EXPECT_EQ(links, kRegionCount + 1);
+  for (std::string_view loads : {"<script", "<link", "<img", "src=", "url(", "@import"}) {
+    EXPECT_FALSE(has(html, loads)) << loads;
+  }
+  EXPECT_FALSE(has(html, "nan"));
+  EXPECT_FALSE(has(html, "inf"));
+}
+
+}  // namespace
+}  // namespace gaitmon::cli
