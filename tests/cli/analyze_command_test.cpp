@@ -355,6 +355,43 @@ TEST(AnalyzeCommand, EndRateSecondOrderIsRecordedAndNeedsTheRawSeries) {
   EXPECT_FALSE(fs::exists(a.dir / "refused" / "regions.csv"));
 }
 
+// --free-scale fits P = pi A B per step as well: A and B in regions.csv are then fitted, the
+// setting and the note say so, pooling (which needs P declared) says why it did not pool, and
+// --fit seed8, which frees A and B anyway, refuses it.
+TEST(AnalyzeCommand, FreeScaleFitsTheScaleAndIsRefusedWithSeed8) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  int status = -1;
+  const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                  (a.dir / "free-scale").string() + " --free-scale",
+                              &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("area footprint, free scale)"), std::string::npos) << out;
+  EXPECT_FALSE(settings_of(a.dir / "out").at("free_scale").get<bool>());
+  EXPECT_TRUE(settings_of(a.dir / "free-scale").at("free_scale").get<bool>());
+  const auto j = nlohmann::json::parse(read_all(a.dir / "free-scale" / "session.json"));
+  EXPECT_NE(j.at("note").get<std::string>().find("pi A B fitted (--free-scale)"),
+            std::string::npos);
+  const auto& heel = j.at("regions").at("heel");
+  EXPECT_TRUE(heel.at("session_fit").at("parameters").at("A_mm").at("free").get<bool>());
+  EXPECT_FALSE(heel.at("pooling").at("pooled").get<bool>());
+  EXPECT_NE(heel.at("pooling").at("note").get<std::string>().find("P declared"), std::string::npos);
+  const auto declared_a = heel_column(a.dir / "out" / "regions.csv", 7);  // A_mm
+  const auto fitted_a = heel_column(a.dir / "free-scale" / "regions.csv", 7);
+  ASSERT_FALSE(declared_a.empty());
+  ASSERT_EQ(declared_a.size(), fitted_a.size());
+  for (std::size_t i = 0; i < fitted_a.size(); ++i) EXPECT_NE(fitted_a[i], declared_a[i]) << i;
+
+  const std::string refused =
+      run("analyze " + (a.dir / "s.csv").string() + " --out " +
+              (a.dir / "free-scale-seed8").string() + " --free-scale --fit seed8",
+          &status);
+  EXPECT_EQ(status, 2) << refused;
+  EXPECT_NE(refused.find("--free-scale: applies to --fit identifiable only"), std::string::npos)
+      << refused;
+  EXPECT_FALSE(fs::exists(a.dir / "free-scale-seed8"));
+}
+
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-bad");
   std::string text =
