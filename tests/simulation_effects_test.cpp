@@ -168,34 +168,3 @@ TEST(SimulationEffects, StrongSensorCreepStillGivesOneStepPerStride) {
 
 }  // namespace
 }  // namespace gaitmon
-
-namespace gaitmon {
-namespace {
-
-TEST(SimulationEffects, SimulateCommandChecksEffectParamsJson) {
-  const auto dir = test::scratch_dir("sim-effects-cli");
-  const std::string base =
-      test::gaitmon_binary().string() + " simulate --duration 2 --out " + (dir / "s.csv").string();
-  std::string output;
-  EXPECT_NE(
-      test::run_command(base + " --effect hysteresis --effect-params '{\"strength\":'", &output),
-      0);
-  EXPECT_NE(output.find("not valid JSON"), std::string::npos) << output;
-  EXPECT_NE(
-      test::run_command(base + " --effect hysteresis --effect-params '{\"tau_s\":1}'", &output), 0);
-  EXPECT_NE(output.find("unknown parameter 'tau_s'"), std::string::npos) << output;
-  EXPECT_NE(test::run_command(base + " --effect crosstalk", &output), 0);
-  EXPECT_NE(output.find("unknown simulation effect 'crosstalk'"), std::string::npos) << output;
-  ASSERT_EQ(test::run_command(base + " --effect hysteresis --effect sensor_creep --effect-params "
-                                     "'{\"sensor_creep\":{\"gain\":0.1}}'",
-                              &output),
-            0)
-      << output;
-  std::ifstream in(dir / "s.truth.json");
-  const auto truth = nlohmann::json::parse(in);
-  EXPECT_EQ(truth["options"]["effects"][1]["params"]["gain"], 0.1);
-  EXPECT_EQ(truth["options"]["effects"][0]["params"]["strength"], 0.12);
-}
-
-}  // namespace
-}  // namespace gaitmon

@@ -29,10 +29,14 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
   const auto dot = text.find('.');
   const auto eq = text.find('=');
   if (dot == std::string::npos || eq == std::string::npos || eq < dot) {
-    throw std::invalid_argument("--param '" + text + "': expected REGION.FIELD=VALUE");
+    throw CLI::ValidationError("--param", "'" + text + "': expected REGION.FIELD=VALUE");
   }
   const auto region = parse_region(text.substr(0, dot));
-  if (!region) throw std::invalid_argument("--param '" + text + "': unknown region");
+  if (!region) {
+    std::string known;
+    for (Region r : kRegions) known += (known.empty() ? "" : ", ") + std::string(region_name(r));
+    throw CLI::ValidationError("--param", "'" + text + "': unknown region (" + known + ")");
+  }
   const std::string field = text.substr(dot + 1, eq - dot - 1);
   double value = 0.0;
   try {
@@ -40,9 +44,9 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
     value = std::stod(text.substr(eq + 1), &used);
     if (used != text.size() - eq - 1) throw std::invalid_argument("trailing text");
   } catch (const std::exception&) {
-    throw std::invalid_argument("--param '" + text + "': the value is not a number");
+    throw CLI::ValidationError("--param", "'" + text + "': the value is not a number");
   }
-  if (!(value > 0.0)) throw std::invalid_argument("--param '" + text + "': must be > 0");
+  if (!(value > 0.0)) throw CLI::ValidationError("--param", "'" + text + "': must be > 0");
   auto& slot = options.region_params[index_of(*region)];
   if (!slot) slot = config.tissue(options.size, *region).mean;
   const std::map<std::string, double EllipsoidParams::*> fields{
@@ -56,9 +60,9 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
       {"m", &EllipsoidParams::m}};
   const auto it = fields.find(field);
   if (it == fields.end()) {
-    throw std::invalid_argument("--param '" + text + "': unknown field '" + field +
-                                "' (A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, "
-                                "cbar_ns_per_mm3, m)");
+    throw CLI::ValidationError("--param", "'" + text + "': unknown field '" + field +
+                                              "' (A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, "
+                                              "cbar_ns_per_mm3, m)");
   }
   (*slot).*(it->second) = value;
 }
@@ -68,35 +72,36 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
 /// the simulator (resolve_effect_params).
 void apply_effect_params(const std::string& text, SimulationOptions& options) {
   if (text.empty()) return;
+  const auto bad = [](const std::string& why) {
+    return CLI::ValidationError("--effect-params", why);
+  };
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(text);
   } catch (const nlohmann::json::parse_error& e) {
-    throw std::invalid_argument("--effect-params: not valid JSON (" + std::string(e.what()) + ")");
+    throw bad("not valid JSON (" + std::string(e.what()) + ")");
   }
-  if (!j.is_object()) throw std::invalid_argument("--effect-params: expected a JSON object");
-  const auto numbers = [](const nlohmann::json& obj, const std::string& effect) {
+  if (!j.is_object()) throw bad("expected a JSON object");
+  const auto numbers = [&bad](const nlohmann::json& obj, const std::string& effect) {
     EffectParams params;
-    if (!obj.is_object()) {
-      throw std::invalid_argument("--effect-params: the parameters of '" + effect +
-                                  "' must be a JSON object");
-    }
+    if (!obj.is_object()) throw bad("the parameters of '" + effect + "' must be a JSON object");
     for (const auto& [key, value] : obj.items()) {
-      if (!value.is_number()) {
-        throw std::invalid_argument("--effect-params: '" + key + "' of '" + effect +
-                                    "' must be a number");
-      }
+      if (!value.is_number()) throw bad("'" + key + "' of '" + effect + "' must be a number");
       params[key] = value.get<double>();
     }
-    resolve_effect_params(effect, params);
+    try {
+      resolve_effect_params(effect, params);
+    } catch (const std::invalid_argument& e) {
+      throw bad(e.what());
+    }
     return params;
   };
   const bool nested = !j.empty() && j.begin()->is_object();
   if (!nested) {
     if (options.effects.size() != 1) {
-      throw std::invalid_argument(
-          "--effect-params: with a flat object give exactly one --effect; with several, key the "
-          "parameters by effect name");
+      throw bad(
+          "with a flat object give exactly one --effect; with several, key the parameters by "
+          "effect name");
     }
     options.effect_params[options.effects.front()] = numbers(j, options.effects.front());
     return;
@@ -104,7 +109,7 @@ void apply_effect_params(const std::string& text, SimulationOptions& options) {
   for (const auto& [effect, obj] : j.items()) {
     if (std::find(options.effects.begin(), options.effects.end(), effect) ==
         options.effects.end()) {
-      throw std::invalid_argument("--effect-params: '" + effect + "' is not one of the --effect");
+      throw bad("'" + effect + "' is not one of the --effect");
     }
     options.effect_params[effect] = numbers(obj, effect);
   }
@@ -117,7 +122,13 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   options.model = *parse_model_variant(args.model);
   options.rasterisation = *parse_rasterisation(args.rasterisation);
   for (const auto& p : args.params) apply_param(p, config, options);
-  for (const auto& name : options.effects) simulation_effect_params(name);  // known names only
+  for (const auto& name : options.effects) {
+    try {
+      simulation_effect_params(name);  // known names only
+    } catch (const std::invalid_argument& e) {
+      throw CLI::ValidationError("--effect", e.what());
+    }
+  }
   apply_effect_params(args.effect_params, options);
   if (args.truth.empty()) {
     args.truth = args.out;

@@ -1,0 +1,121 @@
+// `gaitmon simulate` as a user runs it: --param sets one region's tissue truth, --effect and
+// --effect-params add hidden effects, and every malformed value is a usage error (exit 2) that
+// quotes what was given and writes nothing.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+
+nlohmann::json truth_of(const fs::path& session) {
+  std::ifstream in(fs::path(session).replace_extension(".truth.json"));
+  return nlohmann::json::parse(in);
+}
+
+std::string simulate(const fs::path& out, const std::string& args, int* status) {
+  std::string output;
+  *status =
+      test::run_command(test::gaitmon_binary().string() + " simulate --duration 2 --seed 5 --out " +
+                            out.string() + " " + args,
+                        &output);
+  return output;
+}
+
+TEST(SimulateCommand, ParamSetsOneRegionsTissueAndKeepsTheRest) {
+  const auto dir = test::scratch_dir("simulate-param");
+  int status = -1;
+  std::string out = simulate(dir / "plain.csv", "", &status);
+  ASSERT_EQ(status, 0) << out;
+  out = simulate(dir / "param.csv", "--param heel.kbar_n_per_mm3=0.2 --param heel.n=0.4", &status);
+  ASSERT_EQ(status, 0) << out;
+  const auto plain = truth_of(dir / "plain.csv").at("regions");
+  const auto param = truth_of(dir / "param.csv").at("regions");
+  EXPECT_EQ(param.at("heel").at("kbar_n_per_mm3"), 0.2);
+  EXPECT_EQ(param.at("heel").at("n"), 0.4);
+  // The heel's other fields stay Appendix I's means for size 37-38.
+  EXPECT_EQ(param.at("heel").at("C_mm"), 69.9);
+  EXPECT_EQ(param.at("heel").at("d0_mm"), 16.4);
+  EXPECT_EQ(param.at("heel").at("cbar_ns_per_mm3"), 0.011);
+  EXPECT_EQ(plain.at("heel").at("kbar_n_per_mm3"), 0.117);
+  for (const char* region : {"midfoot_posterior", "met1_2", "toes3_5"}) {
+    EXPECT_EQ(param.at(region), plain.at(region)) << region;
+  }
+}
+
+TEST(SimulateCommand, AMalformedParamIsAUsageErrorThatNamesItAndWritesNothing) {
+  const auto dir = test::scratch_dir("simulate-bad-param");
+  const struct {
+    const char* param;
+    const char* says;
+  } cases[] = {
+      {"heel.kbar_n_per_mm3", "'heel.kbar_n_per_mm3': expected REGION.FIELD=VALUE"},
+      {"kbar_n_per_mm3=0.2", "'kbar_n_per_mm3=0.2': expected REGION.FIELD=VALUE"},
+      {"ball.n=0.3", "'ball.n=0.3': unknown region (heel, midfoot_posterior"},
+      {"heel.stiffness=0.2", "'heel.stiffness=0.2': unknown field 'stiffness' (A_mm, B_mm"},
+      {"heel.n=abc", "'heel.n=abc': the value is not a number"},
+      {"heel.n=0.3x", "'heel.n=0.3x': the value is not a number"},
+      {"heel.n=-0.3", "'heel.n=-0.3': must be > 0"},
+      {"heel.n=0", "'heel.n=0': must be > 0"},
+  };
+  for (const auto& c : cases) {
+    int status = -1;
+    const std::string out = simulate(dir / "s.csv", std::string("--param ") + c.param, &status);
+    EXPECT_EQ(status, 2) << c.param << "\n" << out;
+    EXPECT_NE(out.find(std::string("--param: ") + c.says), std::string::npos) << out;
+    EXPECT_FALSE(fs::exists(dir / "s.csv")) << c.param;
+    EXPECT_FALSE(fs::exists(dir / "s.truth.json")) << c.param;
+  }
+}
+
+TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
+  const auto dir = test::scratch_dir("simulate-effects");
+  const struct {
+    const char* args;
+    const char* says;
+  } bad[] = {
+      {"--effect crosstalk", "--effect: unknown simulation effect 'crosstalk'"},
+      {R"(--effect hysteresis --effect-params '{"strength":')", "--effect-params: not valid JSON"},
+      {"--effect hysteresis --effect-params '[0.1]'", "--effect-params: expected a JSON object"},
+      {R"(--effect hysteresis --effect-params '{"tau_s":1}')", "unknown parameter 'tau_s'"},
+      {R"(--effect hysteresis --effect-params '{"strength":"high"}')",
+       "--effect-params: 'strength' of 'hysteresis' must be a number"},
+      {R"(--effect hysteresis --effect-params '{"strength":5}')",
+       "parameter 'strength' = 5.000000 is outside [0.030000, 0.300000]"},
+      {R"(--effect hysteresis --effect sensor_creep --effect-params '{"gain":0.1}')",
+       "--effect-params: with a flat object give exactly one --effect"},
+      {R"(--effect hysteresis --effect-params '{"sensor_creep":{"gain":0.1}}')",
+       "--effect-params: 'sensor_creep' is not one of the --effect"},
+      {R"(--effect hysteresis --effect sensor_creep --effect-params '{"hysteresis":{},"sensor_creep":[1]}')",
+       "--effect-params: the parameters of 'sensor_creep' must be a JSON object"},
+  };
+  for (const auto& c : bad) {
+    int status = -1;
+    const std::string out = simulate(dir / "bad.csv", c.args, &status);
+    EXPECT_EQ(status, 2) << c.args << "\n" << out;
+    EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
+    EXPECT_FALSE(fs::exists(dir / "bad.csv")) << c.args;
+  }
+
+  int status = -1;
+  const std::string out = simulate(dir / "s.csv",
+                                   "--effect hysteresis --effect sensor_creep --effect-params "
+                                   R"('{"sensor_creep":{"gain":0.1}}')",
+                                   &status);
+  ASSERT_EQ(status, 0) << out;
+  const auto effects = truth_of(dir / "s.csv").at("options").at("effects");
+  ASSERT_EQ(effects.size(), 2u);
+  EXPECT_EQ(effects[1]["params"]["gain"], 0.1);
+  EXPECT_EQ(effects[1]["params"]["tau_s"], 1.5);      // the default
+  EXPECT_EQ(effects[0]["params"]["strength"], 0.12);  // the default
+}
+
+}  // namespace
+}  // namespace gaitmon
