@@ -1,13 +1,22 @@
 // `gaitmon record` end to end: `gaitmon fake-insole --pty` streams a session through a real
 // pseudo-terminal, the serial driver and the decoder; the recording reads back as the same
-// frames at the same times.
+// frames at the same times. Frames the recording cannot hold are skipped and counted, and a link
+// that delivers nothing leaves no file.
 #include <gtest/gtest.h>
+#include <pty.h>
 #include <signal.h>
+#include <sys/ioctl.h>
+#include <termios.h>
+#include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "drivers/wire_format.hpp"
+#include "gaitmon/config.hpp"
 #include "gaitmon/session.hpp"
 #include "lcm/bus_support.hpp"
 #include "monitor_support.hpp"
@@ -63,6 +72,124 @@ TEST(RecordCommand, WritesWhatTheDeviceSentAsASessionFile) {
     ASSERT_EQ(recorded[i].t_s, original[i].t_s) << "frame " << i;
     ASSERT_EQ(recorded[i].bits, original[i].bits) << "frame " << i;
   }
+}
+
+// A pseudo-terminal whose master side the test writes as a device would.
+struct Pty {
+  int master = -1;
+  int slave = -1;
+  std::string name;
+  Pty() {
+    if (openpty(&master, &slave, nullptr, nullptr, nullptr) != 0) return;
+    termios tio{};
+    tcgetattr(slave, &tio);
+    cfmakeraw(&tio);  // bytes written before the recorder configures the port pass unchanged
+    tcsetattr(slave, TCSANOW, &tio);
+    name = ttyname(slave);
+  }
+  ~Pty() {
+    if (slave >= 0) ::close(slave);
+    if (master >= 0) ::close(master);
+  }
+  Pty(const Pty&) = delete;
+  Pty& operator=(const Pty&) = delete;
+};
+
+TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
+  const fs::path dir = test::scratch_dir("record-skips");
+  const fs::path out = dir / "recorded.csv";
+  Pty pty;
+  ASSERT_FALSE(pty.name.empty());
+  ChildProcess record(
+      {test::gaitmon_binary().string(), "record", "--out", out.string(), "--serial", pty.name});
+  ASSERT_FALSE(record
+                   .read_until(ChildProcess::Stdout, "link connected",
+                               Clock::now() + std::chrono::seconds(20))
+                   .empty());
+
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const drivers::WireFormat format(config.wire);
+  std::vector<std::uint8_t> stream;
+  std::array<std::uint32_t, 2> sequence{};
+  const auto add = [&](Foot foot, InsoleSize size, std::uint16_t sensors, std::uint32_t time_us) {
+    SensorFrame f;
+    f.foot = foot;
+    f.size = size;
+    f.sensor_count = sensors;
+    f.sequence = ++sequence[static_cast<std::size_t>(foot)];
+    f.device_time_us = time_us;
+    for (std::size_t i = 0; i < sensors; ++i) f.bits[i] = static_cast<std::uint8_t>(i + time_us);
+    std::vector<std::uint8_t> bytes(4096);
+    bytes.resize(drivers::encode_frame(format, f, bytes));
+    stream.insert(stream.end(), bytes.begin(), bytes.end());
+  };
+  for (std::uint32_t t : {0u, 10000u, 20000u}) {
+    add(Foot::Left, InsoleSize::S37_38, 107, t);
+    add(Foot::Right, InsoleSize::S37_38, 107, t);
+  }
+  add(Foot::Left, InsoleSize::S41_42, 129, 30000);  // another insole: skipped
+  add(Foot::Left, InsoleSize::S37_38, 107, 20000);  // the left foot's last time again: skipped
+  add(Foot::Left, InsoleSize::S37_38, 107, 30000);
+  ASSERT_EQ(::write(pty.master, stream.data(), stream.size()), static_cast<ssize_t>(stream.size()));
+
+  // Stop once the recorder has read every byte: the slave's input queue (which this process
+  // shares through its own slave descriptor) has drained.
+  const auto until = Clock::now() + std::chrono::seconds(20);
+  int unread = 1;
+  while (Clock::now() < until && ioctl(pty.slave, FIONREAD, &unread) == 0 && unread > 0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_EQ(unread, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  record.signal(SIGINT);
+  const auto status = record.wait(Clock::now() + std::chrono::seconds(10));
+  ASSERT_TRUE(status.has_value());
+  const auto lines = record.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(5));
+  std::string text;
+  for (const auto& l : lines) text += l + "\n";
+  ASSERT_EQ(*status, 0) << text;
+  EXPECT_NE(text.find("frame skipped: foot L: a 41-42 insole with 129 sensors in a 37-38 "
+                      "recording"),
+            std::string::npos)
+      << text;
+  // The second skip is counted; its warning is held back by the log's rate limit.
+  EXPECT_NE(text.find("(7 frames); 2 skipped, 0 dropped (ring full); decoder: 1129 bytes, 0 CRC "
+                      "errors, 0 resyncs, 0 frames lost to sequence gaps"),
+            std::string::npos)
+      << text;
+
+  SessionHeader header;
+  const std::vector<Frame> recorded = read_all(out, &header);
+  EXPECT_EQ(header.insole_size, InsoleSize::S37_38);
+  EXPECT_EQ(header.sensors, 107u);
+  ASSERT_EQ(recorded.size(), 7u);
+  EXPECT_EQ(recorded.back().foot, Foot::Left);
+  EXPECT_DOUBLE_EQ(recorded.back().t_s, 0.03);
+  EXPECT_EQ(recorded.back().bits[1], static_cast<std::uint8_t>(1 + 30000));
+}
+
+TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
+  const fs::path dir = test::scratch_dir("record-nothing");
+  const fs::path out = dir / "recorded.csv";
+  Pty pty;
+  ASSERT_FALSE(pty.name.empty());
+  ChildProcess record(
+      {test::gaitmon_binary().string(), "record", "--out", out.string(), "--serial", pty.name});
+  ASSERT_FALSE(record
+                   .read_until(ChildProcess::Stdout, "link connected",
+                               Clock::now() + std::chrono::seconds(20))
+                   .empty());
+  record.signal(SIGTERM);
+  const auto status = record.wait(Clock::now() + std::chrono::seconds(10));
+  ASSERT_TRUE(status.has_value());
+  EXPECT_EQ(*status, 1);
+  const std::string err = record.stderr_text(Clock::now() + std::chrono::seconds(5));
+  EXPECT_NE(
+      err.find("gaitmon: error: no frame was received from " + pty.name + "; nothing written"),
+      std::string::npos)
+      << err;
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(out.string() + ".partial"));
 }
 
 }  // namespace
