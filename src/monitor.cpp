@@ -20,6 +20,7 @@
 #include <stdexcept>
 #include <stop_token>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -423,13 +424,18 @@ struct Monitor::Impl {
     const auto now = Clock::now();
     if (now < next_status) return;
     next_status = now + status_period;
-    const std::uint64_t drops = ring.drops();
-    if (drops > ring_drops_logged) {
-      spdlog::warn("monitor: ring full: {} frames dropped in the last {:.1f} s, {} in all",
-                   drops - ring_drops_logged, config.monitor.status_period_s, drops);
-      ring_drops_logged = drops;
-    }
+    log_ring_drops(fmt::format("in the last {:.1f} s", config.monitor.status_period_s));
     send(status(false));
+  }
+
+  // Once per status period, and at the end for what the last period left: a run shorter than
+  // one period still says that it lost frames.
+  void log_ring_drops(std::string_view when) {
+    const std::uint64_t drops = ring.drops();
+    if (drops <= ring_drops_logged) return;
+    spdlog::warn("monitor: ring full: {} frames dropped {}, {} in all", drops - ring_drops_logged,
+                 when, drops);
+    ring_drops_logged = drops;
   }
 
   // ---- workers ----
@@ -695,6 +701,7 @@ struct Monitor::Impl {
     if (detector.joinable()) detector.join();
     pool.join();
     finish_effects();
+    log_ring_drops("since the last status");
     send(status(true));
     stopped = true;
   }

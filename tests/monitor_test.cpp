@@ -5,6 +5,8 @@
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <atomic>
@@ -13,7 +15,9 @@
 #include <condition_variable>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
+#include <sstream>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -325,12 +329,20 @@ TEST(Monitor, FullRingDropsAndCountsFrames) {
   MonitorOptions options;
   options.analysis = quick_fits();
   options.publish_raw = true;
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
   Monitor monitor(config, options, publisher);
   std::uint64_t refused = 0;
   for (const SensorFrame& frame : frames) refused += monitor.offer(frame) ? 0 : 1;
   monitor.stop();
+  spdlog::default_logger()->sinks().pop_back();
   const MonitorCounters c = monitor.counters();
   ASSERT_GT(refused, 0u) << "the detector kept up with an 8-frame ring; nothing was exercised";
+  // Logged too, however short the run: the last status period's drops at the end.
+  const std::string text = log.str();
+  EXPECT_NE(text.find("monitor: ring full: "), std::string::npos) << text;
+  EXPECT_NE(text.find(fmt::format(", {} in all", refused)), std::string::npos) << text;
   EXPECT_EQ(c.ring_drops, refused);
   EXPECT_EQ(c.frames_offered, frames.size());
   EXPECT_EQ(c.frames_processed + c.ring_drops, frames.size());
