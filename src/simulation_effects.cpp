@@ -75,7 +75,6 @@ std::size_t tissue_key(const TissueSample& s) {
 class StressRelaxation final : public SimulationEffect {
  public:
   explicit StressRelaxation(const EffectParams& p) : g_(p.at("strength")), lag_(p.at("tau_s")) {}
-  std::string_view name() const override { return "stress_relaxation"; }
   double tissue_force_n(const TissueSample& s, double force_n) override {
     return force_n - g_ * lag_.step(tissue_key(s), s.t_s, force_n);
   }
@@ -89,7 +88,6 @@ class Hysteresis final : public SimulationEffect {
  public:
   explicit Hysteresis(const EffectParams& p)
       : h_(p.at("strength")), transition_mm_(p.at("transition_mm")) {}
-  std::string_view name() const override { return "hysteresis"; }
   double tissue_force_n(const TissueSample& s, double force_n) override {
     const std::size_t key = tissue_key(s);
     if (key >= state_.size()) state_.resize(key + 1);
@@ -118,7 +116,6 @@ class ImpactTransient final : public SimulationEffect {
  public:
   explicit ImpactTransient(const EffectParams& p)
       : amplitude_n_(p.at("amplitude_n")), duration_s_(p.at("duration_s")) {}
-  std::string_view name() const override { return "impact_transient"; }
   double tissue_force_n(const TissueSample& s, double force_n) override {
     if (s.region != Region::Heel) return force_n;
     const double tau = s.t_s - s.t_contact_start_s;
@@ -134,7 +131,6 @@ class ImpactTransient final : public SimulationEffect {
 class SensorSaturation final : public SimulationEffect {
  public:
   explicit SensorSaturation(const EffectParams& p) : ceiling_bits_(p.at("ceiling_bits")) {}
-  std::string_view name() const override { return "sensor_saturation"; }
   double sensor_bits(const SensorSample& /*sample*/, double bits) override {
     return std::min(bits, ceiling_bits_);
   }
@@ -146,7 +142,6 @@ class SensorSaturation final : public SimulationEffect {
 class SensorCreep final : public SimulationEffect {
  public:
   explicit SensorCreep(const EffectParams& p) : beta_(p.at("gain")), lag_(p.at("tau_s")) {}
-  std::string_view name() const override { return "sensor_creep"; }
   double sensor_bits(const SensorSample& s, double bits) override {
     // Sensors are numbered from 0 per foot; the right foot's follow the left's.
     const std::size_t key = s.sensor * 2 + static_cast<std::size_t>(s.foot);

@@ -213,7 +213,6 @@ struct SensorSample {
 class SimulationEffect {
  public:
   virtual ~SimulationEffect() = default;
-  virtual std::string_view name() const = 0;
   /// Tissue stage: the region's force (N) from the model, before it is rasterised.
   virtual double tissue_force_n(const TissueSample& /*sample*/, double force_n) { return force_n; }
   /// Sensor stage: a reading (bits, unrounded) before dc bias, noise, rounding and clipping.
