@@ -13,12 +13,6 @@ std::string_view foot_name(Foot foot) {
   return foot == Foot::Left ? "L" : "R";
 }
 
-std::optional<Foot> parse_foot(std::string_view text) {
-  if (text == "L") return Foot::Left;
-  if (text == "R") return Foot::Right;
-  return std::nullopt;
-}
-
 std::string_view region_name(Region region) {
   return kRegionNames[index_of(region)];
 }

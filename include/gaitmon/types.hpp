@@ -15,7 +15,6 @@ inline constexpr std::array<Foot, 2> kFeet{Foot::Left, Foot::Right};
 
 /// "L" or "R", as in session files and outputs.
 std::string_view foot_name(Foot foot);
-std::optional<Foot> parse_foot(std::string_view text);
 
 /// The seed's eight anatomical regions, posterior to anterior then lateral to medial toes.
 enum class Region : std::uint8_t {
