@@ -95,17 +95,26 @@ struct Pty {
   Pty& operator=(const Pty&) = delete;
 };
 
-TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
-  const fs::path dir = test::scratch_dir("record-skips");
-  const fs::path out = dir / "recorded.csv";
+// `gaitmon record` on a fresh pseudo-terminal, started and connected.
+struct RecordFromPty {
+  fs::path out;
   Pty pty;
-  ASSERT_FALSE(pty.name.empty());
-  ChildProcess record(
-      {test::gaitmon_binary().string(), "record", "--out", out.string(), "--serial", pty.name});
-  ASSERT_FALSE(record
-                   .read_until(ChildProcess::Stdout, "link connected",
-                               Clock::now() + std::chrono::seconds(20))
-                   .empty());
+  ChildProcess record;
+  explicit RecordFromPty(const std::string& scratch)
+      : out(test::scratch_dir(scratch) / "recorded.csv"),
+        record({test::gaitmon_binary().string(), "record", "--out", out.string(), "--serial",
+                pty.name}) {}
+  bool connected() {
+    return !pty.name.empty() && !record
+                                     .read_until(ChildProcess::Stdout, "link connected",
+                                                 Clock::now() + std::chrono::seconds(20))
+                                     .empty();
+  }
+};
+
+TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
+  RecordFromPty r("record-skips");
+  ASSERT_TRUE(r.connected());
 
   const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
   const drivers::WireFormat format(config.wire);
@@ -130,21 +139,23 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
   add(Foot::Left, InsoleSize::S41_42, 129, 30000);  // another insole: skipped
   add(Foot::Left, InsoleSize::S37_38, 107, 20000);  // the left foot's last time again: skipped
   add(Foot::Left, InsoleSize::S37_38, 107, 30000);
-  ASSERT_EQ(::write(pty.master, stream.data(), stream.size()), static_cast<ssize_t>(stream.size()));
+  ASSERT_EQ(::write(r.pty.master, stream.data(), stream.size()),
+            static_cast<ssize_t>(stream.size()));
 
   // Stop once the recorder has read every byte: the slave's input queue (which this process
   // shares through its own slave descriptor) has drained.
   const auto until = Clock::now() + std::chrono::seconds(20);
   int unread = 1;
-  while (Clock::now() < until && ioctl(pty.slave, FIONREAD, &unread) == 0 && unread > 0) {
+  while (Clock::now() < until && ioctl(r.pty.slave, FIONREAD, &unread) == 0 && unread > 0) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   ASSERT_EQ(unread, 0);
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  record.signal(SIGINT);
-  const auto status = record.wait(Clock::now() + std::chrono::seconds(10));
+  r.record.signal(SIGINT);
+  const auto status = r.record.wait(Clock::now() + std::chrono::seconds(10));
   ASSERT_TRUE(status.has_value());
-  const auto lines = record.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(5));
+  const auto lines =
+      r.record.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(5));
   std::string text;
   for (const auto& l : lines) text += l + "\n";
   ASSERT_EQ(*status, 0) << text;
@@ -159,7 +170,7 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
       << text;
 
   SessionHeader header;
-  const std::vector<Frame> recorded = read_all(out, &header);
+  const std::vector<Frame> recorded = read_all(r.out, &header);
   EXPECT_EQ(header.insole_size, InsoleSize::S37_38);
   EXPECT_EQ(header.sensors, 107u);
   ASSERT_EQ(recorded.size(), 7u);
@@ -169,27 +180,19 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
 }
 
 TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
-  const fs::path dir = test::scratch_dir("record-nothing");
-  const fs::path out = dir / "recorded.csv";
-  Pty pty;
-  ASSERT_FALSE(pty.name.empty());
-  ChildProcess record(
-      {test::gaitmon_binary().string(), "record", "--out", out.string(), "--serial", pty.name});
-  ASSERT_FALSE(record
-                   .read_until(ChildProcess::Stdout, "link connected",
-                               Clock::now() + std::chrono::seconds(20))
-                   .empty());
-  record.signal(SIGTERM);
-  const auto status = record.wait(Clock::now() + std::chrono::seconds(10));
+  RecordFromPty r("record-nothing");
+  ASSERT_TRUE(r.connected());
+  r.record.signal(SIGTERM);
+  const auto status = r.record.wait(Clock::now() + std::chrono::seconds(10));
   ASSERT_TRUE(status.has_value());
   EXPECT_EQ(*status, 1);
-  const std::string err = record.stderr_text(Clock::now() + std::chrono::seconds(5));
+  const std::string err = r.record.stderr_text(Clock::now() + std::chrono::seconds(5));
   EXPECT_NE(
-      err.find("gaitmon: error: no frame was received from " + pty.name + "; nothing written"),
+      err.find("gaitmon: error: no frame was received from " + r.pty.name + "; nothing written"),
       std::string::npos)
       << err;
-  EXPECT_FALSE(fs::exists(out));
-  EXPECT_FALSE(fs::exists(out.string() + ".partial"));
+  EXPECT_FALSE(fs::exists(r.out));
+  EXPECT_FALSE(fs::exists(r.out.string() + ".partial"));
 }
 
 }  // namespace
