@@ -53,9 +53,6 @@ struct UsbSource::Impl {
   std::string lost_reason;
   const BytesHandler* on_bytes = nullptr;
   std::vector<Slot> slots;
-  /// Pools with a transfer that never completed after cancellation: kept, with their buffers,
-  /// for the life of the source, since libusb may still write into them.
-  std::vector<std::vector<Slot>> abandoned;
 
   static void LIBUSB_CALL completed(libusb_transfer* transfer) {
     auto* slot = static_cast<Slot*>(transfer->user_data);
@@ -107,7 +104,8 @@ struct UsbSource::Impl {
     }
   }
 
-  // Streams from an open, claimed device until it is lost or stop() is called.
+  // Streams from an open, claimed device until it is lost or stop() is called. The slots stay
+  // allocated until free_slots(), after the handle is closed.
   void stream(libusb_device_handle* handle) {
     lost = false;
     slots.assign(static_cast<std::size_t>(settings.transfers), Slot{});
@@ -135,16 +133,13 @@ struct UsbSource::Impl {
            std::chrono::steady_clock::now() < give_up) {
       handle_events_for(std::chrono::milliseconds(50));
     }
-    bool wedged = false;
-    for (Slot& slot : slots) {
-      if (slot.in_flight) {
-        wedged = true;
-      } else {
-        libusb_free_transfer(slot.transfer);
-        slot.transfer = nullptr;
-      }
-    }
-    if (wedged) abandoned.push_back(std::move(slots));  // moving keeps the slots' addresses
+  }
+
+  // A transfer that never came back from its cancellation is safe to free only once the handle
+  // is closed: libusb then drops it from its in-flight list, and closing the usbfs file makes
+  // the kernel kill its URB, so nothing writes into the buffer any more.
+  void free_slots() {
+    for (Slot& slot : slots) libusb_free_transfer(slot.transfer);
     slots.clear();
   }
 };
@@ -191,6 +186,7 @@ void UsbSource::run(const BytesHandler& on_bytes, const StateHandler& on_state) 
         }
       }
       libusb_close(handle);
+      d.free_slots();
     }
     if (d.stopping.load()) break;
     d.wait(backoff);

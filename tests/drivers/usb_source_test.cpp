@@ -1,6 +1,6 @@
-// The USB driver without hardware: the completion handler fed canned transfers, and a device
-// that is absent (Connecting until stop(), which is prompt). Streaming from a real device and
-// reconnection after an unplug need hardware and are not tested here.
+// The USB driver without a device: the completion handler fed canned transfers, and a device
+// that is absent (Connecting until stop(), which is prompt). Streaming, device loss and
+// reconnection run against an emulated usbfs in usb_source_usbfs_test.
 #include "drivers/usb_source.hpp"
 
 #include <gtest/gtest.h>
