@@ -18,6 +18,7 @@
 #include <tuple>
 #include <vector>
 
+#include "e2e/live_support.hpp"
 #include "lcm/bus_support.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
@@ -28,64 +29,10 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 using test::ChildProcess;
+using test::expect_fits_match_regions;
+using test::read_csv;
+using test::roomy_config;
 using Clock = std::chrono::steady_clock;
-
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> fields;
-  std::stringstream in(line);
-  std::string field;
-  while (std::getline(in, field, ',')) fields.push_back(field);
-  if (!line.empty() && line.back() == ',') fields.emplace_back();
-  return fields;
-}
-
-// A CSV of `gaitmon analyze` as rows of column -> text.
-std::vector<std::map<std::string, std::string>> read_csv(const fs::path& path) {
-  std::ifstream in(path);
-  std::string line;
-  std::getline(in, line);
-  const auto columns = split(line);
-  std::vector<std::map<std::string, std::string>> rows;
-  while (std::getline(in, line)) {
-    const auto fields = split(line);
-    std::map<std::string, std::string> row;
-    for (std::size_t i = 0; i < columns.size() && i < fields.size(); ++i)
-      row[columns[i]] = fields[i];
-    rows.push_back(row);
-  }
-  return rows;
-}
-
-// analyze prints 4-6 significant digits; LCM carries full doubles.
-void expect_printed(double value, const std::string& printed, const std::string& what) {
-  const double expected = std::stod(printed);
-  EXPECT_NEAR(value, expected, 1e-3 * std::abs(expected) + 1e-12) << what;
-}
-
-// The shipped config with room for every step and frame: the comparison needs all of them,
-// whatever the load on the machine. Per-frame reports are off: UDP has no flow control, and
-// 800 frame messages a second (4 x real time) overflow a listener's socket buffer when the
-// machine is busy, taking step and fit messages with them. The comparison needs only steps and
-// fits; frame_t crosses the real bus in tests/lcm/lcm_bus_test.cpp.
-fs::path roomy_config(const fs::path& dir) {
-  for (const char* file : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
-    fs::copy_file(test::source_dir() / "config" / file, dir / file);
-  }
-  std::ifstream in(dir / "gaitmon.toml");
-  std::stringstream text;
-  text << in.rdbuf();
-  std::string toml = text.str();
-  const auto set = [&](const std::string& from, const std::string& to) {
-    const auto at = toml.find(from);
-    if (at == std::string::npos) throw std::logic_error("not in the config: " + from);
-    toml.replace(at, from.size(), to);
-  };
-  set("max_step_backlog = 32", "max_step_backlog = 100000");
-  set("capacity_frames = 4096", "capacity_frames = 65536");
-  set("publish_frames = true", "publish_frames = false");
-  test::write_text(dir / "gaitmon.toml", toml);
-  return dir / "gaitmon.toml";
-}
 
 TEST(LiveRun, FakeInsoleThroughSerialAndUdpmEqualsAnalyze) {
   const test::Bus& bus = test::private_bus();
@@ -160,32 +107,7 @@ TEST(LiveRun, FakeInsoleThroughSerialAndUdpmEqualsAnalyze) {
       << output;
 
   // Fits, as the Lua client decoded them, against analyze's regions.csv.
-  std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>> regions;
-  for (auto& row : read_csv(dir / "analyze" / "regions.csv")) {
-    regions[{row["foot"], std::stoi(row["step"]), row["region"]}] = row;
-  }
-  ASSERT_GT(fits.size(), 20u);
-  EXPECT_EQ(fits.size() * kRegionCount, regions.size());
-  for (const json& fit : fits) {
-    const std::string foot = fit["foot"] == 0 ? "L" : "R";
-    for (const json& r : fit["regions"]) {
-      const std::string name = r["region_name"];
-      const std::string where =
-          foot + " step " + std::to_string(fit["step"].get<int>()) + " " + name;
-      const auto it = regions.find({foot, fit["step"].get<int>(), name});
-      ASSERT_NE(it, regions.end()) << where;
-      const std::string status = r["status"];
-      EXPECT_EQ(it->second.at("status").substr(0, it->second.at("status").find(':')),
-                status.substr(0, status.find(':')))
-          << where;
-      if (status != "ok") continue;
-      expect_printed(r["kbar_n_per_mm3"], it->second.at("kbar_n_per_mm3"), where + " kbar");
-      expect_printed(r["n"], it->second.at("n"), where + " n");
-      expect_printed(r["cbar_ns_per_mm3"], it->second.at("cbar_ns_per_mm3"), where + " cbar");
-      expect_printed(r["m"], it->second.at("m"), where + " m");
-      expect_printed(r["nrmse_pct"], it->second.at("nrmse_pct"), where + " nrmse");
-    }
-  }
+  expect_fits_match_regions(fits, dir / "analyze" / "regions.csv", 21);
 
   // Steps, as lcm-logger recorded them, against analyze's steps.csv.
   std::map<std::pair<std::string, int>, std::pair<double, double>> logged_steps;
