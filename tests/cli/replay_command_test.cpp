@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "lcm/bus_support.hpp"
+#include "live_support.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
 
@@ -49,39 +50,8 @@ std::vector<Message> decode(const std::vector<test::LogEvent>& events, const std
   return out;
 }
 
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> fields;
-  std::stringstream in(line);
-  std::string field;
-  while (std::getline(in, field, ',')) fields.push_back(field);
-  if (!line.empty() && line.back() == ',') fields.emplace_back();
-  return fields;
-}
-
-// regions.csv of `gaitmon analyze`, keyed by foot, step and region.
-std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>>
-read_regions_csv(const fs::path& path) {
-  std::ifstream in(path);
-  std::string line;
-  std::getline(in, line);
-  const std::vector<std::string> columns = split(line);
-  std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>> rows;
-  while (std::getline(in, line)) {
-    const std::vector<std::string> fields = split(line);
-    std::map<std::string, std::string> row;
-    for (std::size_t i = 0; i < columns.size() && i < fields.size(); ++i) {
-      row[columns[i]] = fields[i];
-    }
-    rows[{row["foot"], std::stoi(row["step"]), row["region"]}] = row;
-  }
-  return rows;
-}
-
-// analyze prints 4-6 significant digits; the replay's values are full doubles.
-void expect_printed(double value, const std::string& printed, const std::string& what) {
-  const double expected = std::stod(printed);
-  EXPECT_NEAR(value, expected, 1e-3 * std::abs(expected) + 1e-12) << what;
-}
+using test::expect_printed;
+using test::read_regions_csv;
 
 TEST(ReplayCommand, FitsEqualAnalyzeOnTheSameSession) {
   const fs::path dir = test::scratch_dir("replay-vs-analyze");

@@ -18,8 +18,8 @@
 #include <tuple>
 #include <vector>
 
-#include "e2e/live_support.hpp"
 #include "lcm/bus_support.hpp"
+#include "live_support.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
 
@@ -47,13 +47,8 @@ TEST(LiveRun, FakeInsoleThroughSerialAndUdpmEqualsAnalyze) {
 
   ChildProcess logger({"lcm-logger", "--lcm-url=" + bus.url, "-c", "GAITMON_(STEP|FIT|STATUS)",
                        "-q", "-f", log.string()});
-  ChildProcess lua({"lua5.2", test::source_dir().string() + "/tests/lcm/subscriber.lua", "--url",
-                    bus.url, "--types", GAITMON_LCM_LUA_DIR, "--timeout-s", "300",
-                    "GAITMON_FIT=fit_t", "GAITMON_STATUS=status_t"});
-  ASSERT_FALSE(
-      lua.read_until(ChildProcess::Stdout, "ready", Clock::now() + std::chrono::seconds(20))
-          .empty())
-      << "the Lua client did not start";
+  const std::unique_ptr<ChildProcess> lua = test::fit_and_status_client(bus);
+  ASSERT_TRUE(lua);
   ChildProcess fake({binary, "fake-insole", session.string(), "--pty", "--speed", "4", "--hold"});
   const auto pty = fake.read_line(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(20));
   ASSERT_TRUE(pty.has_value()) << "fake-insole printed no pty";
@@ -65,7 +60,7 @@ TEST(LiveRun, FakeInsoleThroughSerialAndUdpmEqualsAnalyze) {
   bool all_decoded = false;
   const auto deadline = Clock::now() + std::chrono::seconds(240);
   while (!all_decoded && Clock::now() < deadline) {
-    const auto line = lua.read_line(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(1));
+    const auto line = lua->read_line(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(1));
     if (!line || line->empty() || line->front() != '{') continue;
     json message = json::parse(*line);
     ASSERT_FALSE(message.contains("error")) << *line;
@@ -84,7 +79,7 @@ TEST(LiveRun, FakeInsoleThroughSerialAndUdpmEqualsAnalyze) {
   // The fits finished after the last status line we read, and the final status.
   json final_status;
   for (const std::string& line :
-       lua.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(2))) {
+       lua->read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(2))) {
     if (line.empty() || line.front() != '{') continue;
     json message = json::parse(line);
     if (message["channel"] == "GAITMON_FIT") fits.push_back(message["message"]);

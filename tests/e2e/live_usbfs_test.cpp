@@ -15,8 +15,8 @@
 
 #include "drivers/usbfs_insole.hpp"
 #include "drivers/wire_format.hpp"
-#include "e2e/live_support.hpp"
 #include "lcm/bus_support.hpp"
+#include "live_support.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
 
@@ -76,13 +76,8 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
                                                    {"product_id = 0x0000", "product_id = 0x0001"}});
   test::UsbfsInsole insole;
   insole.plug();
-  ChildProcess lua({"lua5.2", test::source_dir().string() + "/tests/lcm/subscriber.lua", "--url",
-                    bus.url, "--types", GAITMON_LCM_LUA_DIR, "--timeout-s", "300",
-                    "GAITMON_FIT=fit_t", "GAITMON_STATUS=status_t"});
-  ASSERT_FALSE(
-      lua.read_until(ChildProcess::Stdout, "ready", Clock::now() + std::chrono::seconds(20))
-          .empty())
-      << "the Lua client did not start";
+  const std::unique_ptr<ChildProcess> lua = test::fit_and_status_client(bus);
+  ASSERT_TRUE(lua);
   const std::string binary = test::gaitmon_binary().string();
   ChildProcess run({binary, "--config", config.string(), "--log-level", "info", "run", "--usb",
                     "--lcm-url", bus.url});
@@ -93,7 +88,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   std::vector<json> fits;
   for (std::size_t i = 0; i < half; ++i) insole.send(transfers[i]);
   ASSERT_FALSE(read_bus_until(
-                   lua, fits,
+                   *lua, fits,
                    [&](const json& s) {
                      return s["frames_decoded"].get<std::size_t>() == frames_before[half];
                    },
@@ -113,7 +108,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   for (std::size_t i = half; i < transfers.size(); ++i) insole.send(transfers[i]);
   ASSERT_FALSE(
       read_bus_until(
-          lua, fits,
+          *lua, fits,
           [&](const json& s) { return s["frames_decoded"].get<std::size_t>() == frames.size(); },
           std::chrono::seconds(240))
           .is_null())
@@ -125,7 +120,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   EXPECT_EQ(*run_status, 0);
   // The workers finish every queued fit before the final status.
   const json final_status = read_bus_until(
-      lua, fits, [](const json& s) { return s["connection"] == "finished"; },
+      *lua, fits, [](const json& s) { return s["connection"] == "finished"; },
       std::chrono::seconds(10));
   ASSERT_FALSE(final_status.is_null()) << "no final status";
   EXPECT_EQ(final_status["reconnects"], 1);

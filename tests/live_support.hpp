@@ -1,13 +1,15 @@
-// What the live end-to-end tests share: the config they run with, analyze's CSVs, and the
-// comparison of the fits that crossed the bus with analyze's on the same session.
+// What the tests of the live commands share: the config they run with, a Lua client on the bus,
+// analyze's CSVs, and the comparison of the fits that crossed the bus with analyze's.
 #pragma once
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
@@ -17,6 +19,7 @@
 #include <vector>
 
 #include "gaitmon/types.hpp"
+#include "lcm/bus_support.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon::test {
@@ -46,6 +49,14 @@ inline std::vector<std::map<std::string, std::string>> read_csv(const fs::path& 
       row[columns[i]] = fields[i];
     rows.push_back(row);
   }
+  return rows;
+}
+
+// regions.csv of `gaitmon analyze`, keyed by foot, step and region.
+inline std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>>
+read_regions_csv(const fs::path& path) {
+  std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>> rows;
+  for (auto& row : read_csv(path)) rows[{row["foot"], std::stoi(row["step"]), row["region"]}] = row;
   return rows;
 }
 
@@ -83,15 +94,27 @@ inline fs::path roomy_config(const fs::path& dir,
   return dir / "gaitmon.toml";
 }
 
+/// The Lua client built from the lcm-gen types (tests/lcm/subscriber.lua) on `bus`, printing
+/// fits and statuses as JSON lines; returned once it listens, or null after a failure.
+inline std::unique_ptr<ChildProcess> fit_and_status_client(const Bus& bus) {
+  auto lua = std::make_unique<ChildProcess>(std::vector<std::string>{
+      "lua5.2", source_dir().string() + "/tests/lcm/subscriber.lua", "--url", bus.url, "--types",
+      GAITMON_LCM_LUA_DIR, "--timeout-s", "300", "GAITMON_FIT=fit_t", "GAITMON_STATUS=status_t"});
+  if (lua->read_until(ChildProcess::Stdout, "ready",
+                      std::chrono::steady_clock::now() + std::chrono::seconds(20))
+          .empty()) {
+    ADD_FAILURE() << "the Lua client did not start";
+    return nullptr;
+  }
+  return lua;
+}
+
 /// Fits as a subscriber decoded them (fit_t as JSON) against analyze's regions.csv: every fit a
 /// row per region, with the same status and parameters.
 inline void expect_fits_match_regions(const std::vector<nlohmann::json>& fits,
                                       const fs::path& regions_csv, std::size_t min_fits) {
   using nlohmann::json;
-  std::map<std::tuple<std::string, int, std::string>, std::map<std::string, std::string>> regions;
-  for (auto& row : read_csv(regions_csv)) {
-    regions[{row["foot"], std::stoi(row["step"]), row["region"]}] = row;
-  }
+  const auto regions = read_regions_csv(regions_csv);
   ASSERT_GE(fits.size(), min_fits);
   EXPECT_EQ(fits.size() * kRegionCount, regions.size());
   for (const json& fit : fits) {
