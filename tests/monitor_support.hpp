@@ -86,6 +86,17 @@ inline std::vector<SensorFrame> session_frames(const std::filesystem::path& path
   return out;
 }
 
+/// Every frame of a session file as the file has it.
+inline std::vector<Frame> file_frames(const std::filesystem::path& path,
+                                      SessionHeader* header = nullptr) {
+  SessionReader reader(path);
+  if (header != nullptr) *header = reader.header();
+  std::vector<Frame> frames;
+  Frame frame;
+  while (reader.next(frame)) frames.push_back(frame);
+  return frames;
+}
+
 /// Writes the frames of `from` with t_s < until_s to `to`; returns `to`.
 inline std::filesystem::path cut_session(const std::filesystem::path& from,
                                          const std::filesystem::path& to, double until_s) {

@@ -13,6 +13,8 @@
 #include <system_error>
 
 #include "commands.hpp"
+#include "drivers/serial_source.hpp"
+#include "drivers/usb_source.hpp"
 #include "replay/pacer.hpp"
 
 namespace gaitmon::cli {
@@ -30,6 +32,16 @@ double parse_speed(const std::string& text) {
     throw CLI::ValidationError("--speed", "must be a number > 0 or max, got " + text);
   }
   return speed;
+}
+
+std::unique_ptr<drivers::ByteSource> make_insole_source(const Config& config, bool usb) {
+  if (usb) return std::make_unique<drivers::UsbSource>(config.usb);
+  return std::make_unique<drivers::SerialSource>(config.serial);
+}
+
+std::string insole_source_name(const Config& config, bool usb) {
+  return usb ? fmt::format("USB {:04x}:{:04x}", config.usb.vendor_id, config.usb.product_id)
+             : config.serial.device;
 }
 
 void LinkStatus::on_state(drivers::LinkState state, std::string_view detail) {

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <string_view>
@@ -12,12 +13,19 @@
 
 #include "drivers/byte_source.hpp"
 #include "drivers/frame_decoder.hpp"
+#include "gaitmon/config.hpp"
 #include "gaitmon/publisher.hpp"
 
 namespace gaitmon::cli {
 
 /// "max" (replay::kMaxSpeed) or a number > 0. Throws CLI::ValidationError otherwise.
 double parse_speed(const std::string& text);
+
+/// The insole link of `run` and `record`: the USB driver of [usb] with `usb`, else the serial
+/// driver of [serial]. The USB driver starts libusb's threads, so block the stop signals first.
+std::unique_ptr<drivers::ByteSource> make_insole_source(const Config& config, bool usb);
+/// The link's name for logs and messages: the serial device, or "USB vvvv:pppp".
+std::string insole_source_name(const Config& config, bool usb);
 
 /// The link's state and reconnections, written by the driver thread's state handler and read by
 /// the status (any thread).

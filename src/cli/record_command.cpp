@@ -14,7 +14,6 @@
 
 #include "commands.hpp"
 #include "drivers/frame_decoder.hpp"
-#include "drivers/serial_source.hpp"
 #include "gaitmon/device_clock.hpp"
 #include "gaitmon/frame_ring.hpp"
 #include "gaitmon/log_throttle.hpp"
@@ -27,6 +26,7 @@ namespace {
 struct RecordArgs {
   std::filesystem::path out;
   std::string serial;
+  bool usb = false;
 };
 
 std::string utc_now_iso8601() {
@@ -109,16 +109,22 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
   if (!args.serial.empty()) config.serial.device = args.serial;
   const std::filesystem::path partial = args.out.string() + ".partial";
 
-  drivers::SerialSource source(config.serial);
-  // Signals first: every thread started below inherits the blocked mask.
-  StopOnSignal on_signal([&](int) { source.stop(); });
+  // Signals first: every thread started below inherits the blocked mask, those libusb starts
+  // inside UsbSource's constructor included.
+  std::atomic<drivers::ByteSource*> live_source{nullptr};
+  StopOnSignal on_signal([&](int) {
+    if (drivers::ByteSource* s = live_source.load()) s->stop();
+  });
+  const std::unique_ptr<drivers::ByteSource> source = make_insole_source(config, args.usb);
+  live_source.store(source.get());
+  const std::string source_name = insole_source_name(config, args.usb);
 
   // The driver thread never waits on the disk: frames go through a ring to a writer thread, and
   // a full ring drops (and counts) them as in `gaitmon run`.
   FrameRing ring(config.ring.capacity_frames);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
   LinkStatus link;
-  SessionRecorder recorder(partial, config.sample_rate_hz, config.serial.device);
+  SessionRecorder recorder(partial, config.sample_rate_hz, source_name);
   std::atomic<bool> driver_done{false};
   std::exception_ptr writer_error;
   std::thread writer([&] {
@@ -136,15 +142,18 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
       }
     } catch (...) {
       writer_error = std::current_exception();
-      source.stop();
+      source->stop();
     }
   });
-  spdlog::info("record: {} -> {}", config.serial.device, args.out.string());
-  source.run(
-      [&](std::span<const std::uint8_t> bytes) {
-        decoder.feed(bytes, [&](const SensorFrame& frame) { (void)ring.try_push(frame); });
-      },
-      [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+  spdlog::info("record: {} -> {}", source_name, args.out.string());
+  // A signal that came before live_source was set found nothing to stop.
+  if (on_signal.received() == 0) {
+    source->run(
+        [&](std::span<const std::uint8_t> bytes) {
+          decoder.feed(bytes, [&](const SensorFrame& frame) { (void)ring.try_push(frame); });
+        },
+        [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+  }
   driver_done.store(true, std::memory_order_release);
   writer.join();
   if (writer_error) {
@@ -153,8 +162,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
     std::rethrow_exception(writer_error);
   }
   if (!recorder.close()) {
-    throw std::runtime_error("no frame was received from " + config.serial.device +
-                             "; nothing written");
+    throw std::runtime_error("no frame was received from " + source_name + "; nothing written");
   }
   std::filesystem::rename(partial, args.out);
   const drivers::DecoderCounters c = decoder.counters();
@@ -174,8 +182,10 @@ void add_record_command(CLI::App& app, const GlobalOptions& global) {
       "Records what the insole link delivers as a session CSV v1 (times from the device "
       "clock); Ctrl-C ends the recording");
   sub->add_option("--out,-o", args->out, "Session CSV to write")->required();
-  sub->add_option("--serial", args->serial,
-                  "Serial device (default: [serial] device of the config)");
+  CLI::Option* serial = sub->add_option("--serial", args->serial,
+                                        "Serial device (default: [serial] device of the config)");
+  sub->add_flag("--usb", args->usb, "Read the insole over USB ([usb] of the config)")
+      ->excludes(serial);
   sub->callback([&global, args] { run_record(global, *args); });
 }
 

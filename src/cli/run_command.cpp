@@ -8,8 +8,6 @@
 
 #include "commands.hpp"
 #include "drivers/frame_decoder.hpp"
-#include "drivers/serial_source.hpp"
-#include "drivers/usb_source.hpp"
 #include "gaitmon/lcm_publisher.hpp"
 #include "gaitmon/monitor.hpp"
 #include "live.hpp"
@@ -37,11 +35,7 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
     if (Monitor* m = running.load()) m->close();
     if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
-  if (args.usb) {
-    source = std::make_unique<drivers::UsbSource>(config.usb);
-  } else {
-    source = std::make_unique<drivers::SerialSource>(config.serial);
-  }
+  source = make_insole_source(config, args.usb);
   live_source.store(source.get());
 
   LcmPublisher lcm(config.lcm);
@@ -55,11 +49,7 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   options.driver_status = [&](StatusReport& status) { link.fill(status, decoder); };
   Monitor monitor(config, options, printer);
   running.store(&monitor);
-  spdlog::info("run: {} -> LCM {}",
-               args.usb
-                   ? fmt::format("USB {:04x}:{:04x}", config.usb.vendor_id, config.usb.product_id)
-                   : config.serial.device,
-               config.lcm.url);
+  spdlog::info("run: {} -> LCM {}", insole_source_name(config, args.usb), config.lcm.url);
 
   // The driver thread is this one: bytes -> decoder -> ring. offer() never waits; a full ring
   // drops the frame and counts it.

@@ -29,15 +29,6 @@ namespace fs = std::filesystem;
 using test::ChildProcess;
 using Clock = std::chrono::steady_clock;
 
-std::vector<Frame> read_all(const fs::path& path, SessionHeader* header = nullptr) {
-  SessionReader reader(path);
-  if (header != nullptr) *header = reader.header();
-  std::vector<Frame> frames;
-  Frame frame;
-  while (reader.next(frame)) frames.push_back(frame);
-  return frames;
-}
-
 TEST(RecordCommand, WritesWhatTheDeviceSentAsASessionFile) {
   const fs::path dir = test::scratch_dir("record");
   const fs::path session = test::cut_session(
@@ -61,8 +52,8 @@ TEST(RecordCommand, WritesWhatTheDeviceSentAsASessionFile) {
 
   SessionHeader original_header;
   SessionHeader recorded_header;
-  const std::vector<Frame> original = read_all(session, &original_header);
-  const std::vector<Frame> recorded = read_all(out, &recorded_header);
+  const std::vector<Frame> original = test::file_frames(session, &original_header);
+  const std::vector<Frame> recorded = test::file_frames(out, &recorded_header);
   EXPECT_EQ(recorded_header.insole_size, original_header.insole_size);
   EXPECT_EQ(recorded_header.sensors, original_header.sensors);
   EXPECT_EQ(recorded_header.sample_rate_hz, 100.0);
@@ -170,7 +161,7 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
       << text;
 
   SessionHeader header;
-  const std::vector<Frame> recorded = read_all(r.out, &header);
+  const std::vector<Frame> recorded = test::file_frames(r.out, &header);
   EXPECT_EQ(header.insole_size, InsoleSize::S37_38);
   EXPECT_EQ(header.sensors, 107u);
   ASSERT_EQ(recorded.size(), 7u);

@@ -14,6 +14,8 @@
 #include <cstring>
 #include <string>
 
+#include "drivers/wire_format.hpp"
+
 // libusb frees a transfer's URB array when the URB is reaped. A test whose URBs are never given
 // back leaves those arrays (56 bytes each, allocated inside libusb_submit_transfer) with libusb;
 // the transfers themselves, which the driver owns, are freed and not covered by this.
@@ -233,6 +235,21 @@ gboolean UsbfsInsole::reap(UMockdevIoctlClient* client, UMockdevIoctlData* arg) 
   umockdev_ioctl_data_unref(out);
   umockdev_ioctl_data_unref(done);
   return complete(client, 0, 0);
+}
+
+std::vector<std::vector<std::uint8_t>> wire_transfers(const std::vector<SensorFrame>& frames,
+                                                      std::size_t per_transfer) {
+  const drivers::WireFormat format;
+  std::vector<std::vector<std::uint8_t>> transfers;
+  for (std::size_t first = 0; first < frames.size(); first += per_transfer) {
+    std::vector<std::uint8_t> bytes;
+    for (std::size_t i = first; i < std::min(first + per_transfer, frames.size()); ++i) {
+      std::uint8_t frame[drivers::kMaxFrameBytes];
+      bytes.insert(bytes.end(), frame, frame + drivers::encode_frame(format, frames[i], frame));
+    }
+    transfers.push_back(std::move(bytes));
+  }
+  return transfers;
 }
 
 int run_tests_with_umockdev(int argc, char** argv) {

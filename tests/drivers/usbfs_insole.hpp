@@ -12,6 +12,8 @@
 #include <mutex>
 #include <vector>
 
+#include "gaitmon/sensor_frame.hpp"
+
 namespace gaitmon::test {
 
 /// pid.codes' test ids, which the emulated insole has.
@@ -79,6 +81,11 @@ class UsbfsInsole {
   std::deque<std::vector<std::uint8_t>> chunks_;
   Counts counts_;
 };
+
+/// Frames in the wire format with the default framing, `per_transfer` to a bulk transfer (the
+/// last one may have fewer), as a device that buffers would send them.
+std::vector<std::vector<std::uint8_t>> wire_transfers(const std::vector<SensorFrame>& frames,
+                                                      std::size_t per_transfer);
 
 /// The main() of a test program that uses UsbfsInsole: re-executes the program with
 /// libumockdev-preload.so.0 in LD_PRELOAD (as `umockdev-wrapper` would; the preload must be in

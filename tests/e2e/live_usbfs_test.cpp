@@ -14,7 +14,6 @@
 #include <vector>
 
 #include "drivers/usbfs_insole.hpp"
-#include "drivers/wire_format.hpp"
 #include "lcm/bus_support.hpp"
 #include "live_support.hpp"
 #include "monitor_support.hpp"
@@ -57,19 +56,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
       test::source_dir() / "replay" / "demo-simulated-37-38.csv", dir / "demo20.csv", 20.0);
   const std::vector<SensorFrame> frames = test::session_frames(session);
 
-  // Ten frames to a bulk transfer, as a device that buffers would send them.
-  const drivers::WireFormat format;
-  std::vector<std::vector<std::uint8_t>> transfers;
-  std::vector<std::size_t> frames_before;  // frames in the transfers before each one
-  for (std::size_t first = 0; first < frames.size(); first += 10) {
-    std::vector<std::uint8_t> bytes;
-    frames_before.push_back(first);
-    for (std::size_t i = first; i < std::min(first + 10, frames.size()); ++i) {
-      std::uint8_t frame[drivers::kMaxFrameBytes];
-      bytes.insert(bytes.end(), frame, frame + drivers::encode_frame(format, frames[i], frame));
-    }
-    transfers.push_back(std::move(bytes));
-  }
+  const std::vector<std::vector<std::uint8_t>> transfers = test::wire_transfers(frames, 10);
   const std::size_t half = transfers.size() / 2;
 
   const fs::path config = test::roomy_config(dir, {{"vendor_id = 0x0000", "vendor_id = 0x1209"},
@@ -87,13 +74,12 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
 
   std::vector<json> fits;
   for (std::size_t i = 0; i < half; ++i) insole.send(transfers[i]);
-  ASSERT_FALSE(read_bus_until(
-                   *lua, fits,
-                   [&](const json& s) {
-                     return s["frames_decoded"].get<std::size_t>() == frames_before[half];
-                   },
-                   std::chrono::seconds(120))
-                   .is_null())
+  ASSERT_FALSE(
+      read_bus_until(
+          *lua, fits,
+          [&](const json& s) { return s["frames_decoded"].get<std::size_t>() == half * 10; },
+          std::chrono::seconds(120))
+          .is_null())
       << "the first half never arrived";
 
   insole.unplug();
