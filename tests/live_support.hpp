@@ -1,9 +1,10 @@
 // What the tests of the live commands share: the config they run with, a Lua client on the bus,
-// analyze's CSVs, and the comparison of the fits that crossed the bus with analyze's.
+// analyze's CSVs, and the comparisons of what they produced (fits, recordings) with the truth.
 #pragma once
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -18,8 +19,10 @@
 #include <utility>
 #include <vector>
 
+#include "gaitmon/session.hpp"
 #include "gaitmon/types.hpp"
 #include "lcm/bus_support.hpp"
+#include "monitor_support.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon::test {
@@ -137,6 +140,27 @@ inline void expect_fits_match_regions(const std::vector<nlohmann::json>& fits,
       expect_printed(r["nrmse_pct"], it->second.at("nrmse_pct"), where + " nrmse");
     }
   }
+}
+
+/// A recording against the session a device streamed: the same insole, and every frame with the
+/// same foot, time and readings. Returns the recording's header for the caller's own checks.
+inline SessionHeader expect_recording_of(const fs::path& recording, const fs::path& session) {
+  SessionHeader original_header;
+  SessionHeader recorded_header;
+  const std::vector<Frame> original = file_frames(session, &original_header);
+  const std::vector<Frame> recorded = file_frames(recording, &recorded_header);
+  EXPECT_EQ(recorded_header.insole_size, original_header.insole_size);
+  EXPECT_EQ(recorded_header.sensors, original_header.sensors);
+  EXPECT_EQ(recorded.size(), original.size());
+  for (std::size_t i = 0; i < std::min(original.size(), recorded.size()); ++i) {
+    if (recorded[i].foot == original[i].foot && recorded[i].t_s == original[i].t_s &&
+        recorded[i].bits == original[i].bits)
+      continue;
+    ADD_FAILURE() << "recorded frame " << i << " (at " << recorded[i].t_s
+                  << " s) differs from the streamed one in foot, time or readings";
+    break;
+  }
+  return recorded_header;
 }
 
 }  // namespace gaitmon::test

@@ -66,23 +66,13 @@ TEST(RecordUsb, RecordsAnEmulatedUsbInsoleUnpluggedHalfwayFrameForFrame) {
   ASSERT_TRUE(status.has_value()) << "gaitmon record still running 10 s after SIGINT";
   EXPECT_EQ(*status, 0);
 
-  SessionHeader original_header;
-  SessionHeader recorded_header;
-  const std::vector<Frame> original = test::file_frames(session, &original_header);
-  const std::vector<Frame> recorded = test::file_frames(out, &recorded_header);
-  EXPECT_EQ(recorded_header.insole_size, original_header.insole_size);
-  EXPECT_EQ(recorded_header.sensors, original_header.sensors);
-  ASSERT_EQ(recorded.size(), original.size());
-  for (std::size_t i = 0; i < original.size(); ++i) {
-    ASSERT_EQ(recorded[i].foot, original[i].foot) << "frame " << i;
-    ASSERT_EQ(recorded[i].t_s, original[i].t_s) << "frame " << i;
-    ASSERT_EQ(recorded[i].bits, original[i].bits) << "frame " << i;
-  }
+  const SessionHeader recorded_header = test::expect_recording_of(out, session);
   EXPECT_EQ(recorded_header.note, "recorded by gaitmon record from USB 1209:0001");
   const auto rest = record.read_rest(ChildProcess::Stdout, soon());
   ASSERT_FALSE(rest.empty());
   const std::string& summary = rest.back();
-  EXPECT_NE(summary.find("(" + std::to_string(original.size()) + " frames); 0 skipped, 0 dropped"),
+  EXPECT_NE(summary.find("(" + std::to_string(test::file_frames(session).size()) +
+                         " frames); 0 skipped, 0 dropped"),
             std::string::npos)
       << summary;
 }
