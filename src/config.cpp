@@ -209,6 +209,15 @@ std::string joined_region_names() {
   return out;
 }
 
+// The [sizes] table of a per-size data file, which may name insole sizes only.
+TableReader sizes_table(TableReader& root) {
+  TableReader sizes = root.table("sizes");
+  refuse_unknown_names(
+      sizes, [](std::string_view name) { return parse_insole_size(name).has_value(); },
+      joined_size_names());
+  return sizes;
+}
+
 toml::table parse_document(const fs::path& path, const std::string& unreadable_file,
                            const std::string& unreadable_key) {
   std::error_code ec;
@@ -382,10 +391,7 @@ void read_regions(TableReader table, InsoleSpec& spec) {
 void read_insoles(const fs::path& path, const std::string& main_file, Config& config) {
   const toml::table doc = parse_document(path, main_file, "insoles_file");
   TableReader root(doc, path.string(), "");
-  TableReader sizes = root.table("sizes");
-  refuse_unknown_names(
-      sizes, [](std::string_view name) { return parse_insole_size(name).has_value(); },
-      joined_size_names());
+  TableReader sizes = sizes_table(root);
   for (InsoleSize size : kInsoleSizes) {
     TableReader entry = sizes.table(insole_size_name(size));
     InsoleSpec& spec = config.insoles[index_of(size)];
@@ -456,10 +462,7 @@ void read_tissue_region(TableReader table, SeedTissueStats& stats) {
 void read_tissue(const fs::path& path, const std::string& main_file, Config& config) {
   const toml::table doc = parse_document(path, main_file, "tissue_file");
   TableReader root(doc, path.string(), "");
-  TableReader sizes = root.table("sizes");
-  refuse_unknown_names(
-      sizes, [](std::string_view name) { return parse_insole_size(name).has_value(); },
-      joined_size_names());
+  TableReader sizes = sizes_table(root);
   for (InsoleSize size : kInsoleSizes) {
     TableReader entry = sizes.table(insole_size_name(size));
     refuse_unknown_names(
