@@ -1,29 +1,20 @@
 // `gaitmon fake-insole`: a fake insole device. Streams a session CSV v1 in the project's wire
 // format through a pseudo-terminal (or stdout), paced like the recording, with optional
 // deterministic link faults for tests.
-#include <fcntl.h>
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
-#include <sys/ioctl.h>
-#include <termios.h>
 #include <unistd.h>
 
-#include <array>
 #include <atomic>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <span>
 #include <stdexcept>
 #include <string>
-#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -32,6 +23,7 @@
 #include "live.hpp"
 #include "replay/fault_injector.hpp"
 #include "replay/pacer.hpp"
+#include "replay/pseudo_terminal.hpp"
 #include "replay/session_byte_source.hpp"
 
 namespace gaitmon::cli {
@@ -58,89 +50,9 @@ struct FakeInsoleArgs {
   fs::path summary;
 };
 
-[[noreturn]] void fail_errno(const std::string& what) {
-  throw std::system_error(errno, std::generic_category(), what);
-}
-
-// A pseudo-terminal in raw mode. This end also keeps the slave open, so that bytes written
-// before a reader opens it wait in the pty, and its input queue can be watched for draining.
-class Pty {
- public:
-  Pty() {
-    master_ = posix_openpt(O_RDWR | O_NOCTTY);
-    if (master_ < 0) fail_errno("posix_openpt");
-    if (grantpt(master_) != 0) fail_errno("grantpt");
-    if (unlockpt(master_) != 0) fail_errno("unlockpt");
-    std::array<char, 128> name{};
-    if (ptsname_r(master_, name.data(), name.size()) != 0) fail_errno("ptsname_r");
-    path_ = name.data();
-    slave_ = ::open(path_.c_str(), O_RDWR | O_NOCTTY);
-    if (slave_ < 0) fail_errno("open " + path_);
-    termios tio{};
-    if (tcgetattr(slave_, &tio) != 0) fail_errno("tcgetattr");
-    cfmakeraw(&tio);
-    if (tcsetattr(slave_, TCSANOW, &tio) != 0) fail_errno("tcsetattr");
-  }
-  ~Pty() {
-    ::close(master_);
-    ::close(slave_);
-  }
-  Pty(const Pty&) = delete;
-  Pty& operator=(const Pty&) = delete;
-
-  int fd() const { return master_; }
-  const std::string& path() const { return path_; }
-  /// Bytes written but not yet read by the other side.
-  int unread() const {
-    int n = 0;
-    return ioctl(slave_, FIONREAD, &n) == 0 ? n : 0;
-  }
-
- private:
-  int master_ = -1;
-  int slave_ = -1;
-  std::string path_;
-};
-
-// Replaced by rename, so a reader never sees the link missing or half-written.
-void point_link(const fs::path& link, const std::string& target) {
-  const fs::path tmp = link.string() + ".tmp";
-  fs::remove(tmp);
-  fs::create_symlink(target, tmp);
-  fs::rename(tmp, link);
-}
-
-// False when interrupted by a stop signal.
-bool write_all(int fd, std::span<const std::uint8_t> bytes) {
-  while (!bytes.empty()) {
-    const ssize_t n = ::write(fd, bytes.data(), bytes.size());
-    if (n < 0) {
-      if (errno == EINTR) {
-        if (g_stop.load()) return false;
-        continue;
-      }
-      fail_errno("write");
-    }
-    bytes = bytes.subspan(static_cast<std::size_t>(n));
-  }
-  return true;
-}
-
 void announce(const std::string& path) {
   std::fputs((path + "\n").c_str(), stdout);
   std::fflush(stdout);
-}
-
-// Waits until the reader has taken everything written (three empty checks in a row, since
-// bytes pass through the pty's flip buffer first), at most 10 s. Returns the bytes left.
-int drain(const Pty& pty) {
-  const auto give_up = std::chrono::steady_clock::now() + 10s;
-  int empty_checks = 0;
-  while (empty_checks < 3 && std::chrono::steady_clock::now() < give_up && !g_stop.load()) {
-    empty_checks = pty.unread() == 0 ? empty_checks + 1 : 0;
-    std::this_thread::sleep_for(20ms);
-  }
-  return pty.unread();
 }
 
 void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
@@ -164,12 +76,12 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
   sigaction(SIGTERM, &action, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
 
-  std::unique_ptr<Pty> pty;
+  std::unique_ptr<replay::PseudoTerminal> pty;
   std::vector<std::string> paths;
   const auto open_pty = [&] {
-    pty = std::make_unique<Pty>();
+    pty = std::make_unique<replay::PseudoTerminal>();
     paths.push_back(pty->path());
-    if (!args.link.empty()) point_link(args.link, pty->path());
+    if (!args.link.empty()) replay::point_link(args.link, pty->path());
     announce(pty->path());
   };
   if (args.pty) open_pty();
@@ -181,7 +93,7 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
   std::vector<std::uint8_t> batch;
   std::vector<std::uint8_t> wire;
   const auto flush = [&] {
-    const bool ok = write_all(pty ? pty->fd() : STDOUT_FILENO, batch);
+    const bool ok = replay::write_all(pty ? pty->fd() : STDOUT_FILENO, batch, &g_stop);
     batch.clear();
     return ok;
   };
@@ -196,7 +108,7 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
       // Unplugged, as udev drops a /dev/serial/by-id link: a link left on the old pty could lead
       // a reader into whichever process gets that pty number next.
       fs::remove(args.link);
-      pty.reset();  // the device disappears: the reader sees EIO
+      pty.reset();  // the device disappears: the reader is hung up
       std::this_thread::sleep_for(std::chrono::milliseconds(args.reopen_gap_ms));
       open_pty();
       ++reopens;
@@ -208,7 +120,7 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
     if (batch.size() >= 64 * 1024 || !std::isinf(speed)) stopped = !flush();
   }
   if (!stopped) stopped = !flush();
-  const int unread = pty ? drain(*pty) : 0;
+  const int unread = pty ? pty->wait_drained(10s, &g_stop) : 0;
   while (args.hold && !g_stop.load()) std::this_thread::sleep_for(50ms);
   pty.reset();
 

@@ -3,10 +3,7 @@
 // frames at the same times. Frames the recording cannot hold are skipped and counted, and a link
 // that delivers nothing leaves no file.
 #include <gtest/gtest.h>
-#include <pty.h>
 #include <signal.h>
-#include <sys/ioctl.h>
-#include <termios.h>
 #include <unistd.h>
 
 #include <array>
@@ -21,6 +18,7 @@
 #include "lcm/bus_support.hpp"
 #include "live_support.hpp"
 #include "monitor_support.hpp"
+#include "replay/pseudo_terminal.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -55,41 +53,20 @@ TEST(RecordCommand, WritesWhatTheDeviceSentAsASessionFile) {
   EXPECT_EQ(recorded_header.sample_rate_hz, 100.0);
 }
 
-// A pseudo-terminal whose master side the test writes as a device would.
-struct Pty {
-  int master = -1;
-  int slave = -1;
-  std::string name;
-  Pty() {
-    if (openpty(&master, &slave, nullptr, nullptr, nullptr) != 0) return;
-    termios tio{};
-    tcgetattr(slave, &tio);
-    cfmakeraw(&tio);  // bytes written before the recorder configures the port pass unchanged
-    tcsetattr(slave, TCSANOW, &tio);
-    name = ttyname(slave);
-  }
-  ~Pty() {
-    if (slave >= 0) ::close(slave);
-    if (master >= 0) ::close(master);
-  }
-  Pty(const Pty&) = delete;
-  Pty& operator=(const Pty&) = delete;
-};
-
 // `gaitmon record` on a fresh pseudo-terminal, started and connected.
 struct RecordFromPty {
   fs::path out;
-  Pty pty;
+  replay::PseudoTerminal pty;
   ChildProcess record;
   explicit RecordFromPty(const std::string& scratch)
       : out(test::scratch_dir(scratch) / "recorded.csv"),
         record({test::gaitmon_binary().string(), "record", "--out", out.string(), "--serial",
-                pty.name}) {}
+                pty.path()}) {}
   bool connected() {
-    return !pty.name.empty() && !record
-                                     .read_until(ChildProcess::Stdout, "link connected",
-                                                 Clock::now() + std::chrono::seconds(20))
-                                     .empty();
+    return !record
+                .read_until(ChildProcess::Stdout, "link connected",
+                            Clock::now() + std::chrono::seconds(20))
+                .empty();
   }
 };
 
@@ -120,17 +97,10 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
   add(Foot::Left, InsoleSize::S41_42, 129, 30000);  // another insole: skipped
   add(Foot::Left, InsoleSize::S37_38, 107, 20000);  // the left foot's last time again: skipped
   add(Foot::Left, InsoleSize::S37_38, 107, 30000);
-  ASSERT_EQ(::write(r.pty.master, stream.data(), stream.size()),
-            static_cast<ssize_t>(stream.size()));
+  ASSERT_TRUE(replay::write_all(r.pty.fd(), stream));
 
-  // Stop once the recorder has read every byte: the slave's input queue (which this process
-  // shares through its own slave descriptor) has drained.
-  const auto until = Clock::now() + std::chrono::seconds(20);
-  int unread = 1;
-  while (Clock::now() < until && ioctl(r.pty.slave, FIONREAD, &unread) == 0 && unread > 0) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  ASSERT_EQ(unread, 0);
+  // Stop once the recorder has read every byte.
+  ASSERT_EQ(r.pty.wait_drained(std::chrono::seconds(20)), 0);
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   r.record.signal(SIGINT);
   const auto status = r.record.wait(Clock::now() + std::chrono::seconds(10));
@@ -169,7 +139,7 @@ TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
   EXPECT_EQ(*status, 1);
   const std::string err = r.record.stderr_text(Clock::now() + std::chrono::seconds(5));
   EXPECT_NE(
-      err.find("gaitmon: error: no frame was received from " + r.pty.name + "; nothing written"),
+      err.find("gaitmon: error: no frame was received from " + r.pty.path() + "; nothing written"),
       std::string::npos)
       << err;
   EXPECT_FALSE(fs::exists(r.out));

@@ -2,11 +2,7 @@
 // arrive decoded; a pty that closes and comes back under the same link path is reconnected.
 #include "drivers/serial_source.hpp"
 
-#include <fcntl.h>
 #include <gtest/gtest.h>
-#include <pty.h>
-#include <termios.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <condition_variable>
@@ -19,6 +15,7 @@
 
 #include "drivers/frame_decoder.hpp"
 #include "gaitmon/session.hpp"
+#include "replay/pseudo_terminal.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon::drivers {
@@ -27,50 +24,12 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-// One pseudo-terminal in raw mode. The test keeps its slave end open too, so bytes written
-// before the driver opens the slave wait in the pty instead of being lost.
-class Pty {
- public:
-  Pty() {
-    if (openpty(&master_, &slave_, nullptr, nullptr, nullptr) != 0)
-      throw std::runtime_error("openpty");
-    termios tio{};
-    tcgetattr(slave_, &tio);
-    cfmakeraw(&tio);
-    tcsetattr(slave_, TCSANOW, &tio);
-    path_ = ttyname(slave_);
-  }
-  ~Pty() { close(); }
-  Pty(const Pty&) = delete;
-  Pty& operator=(const Pty&) = delete;
+using replay::point_link;
+using replay::PseudoTerminal;
 
-  const std::string& path() const { return path_; }
-  void write_all(const std::vector<std::uint8_t>& bytes) {
-    std::size_t at = 0;
-    while (at < bytes.size()) {
-      const ssize_t n = ::write(master_, bytes.data() + at, bytes.size() - at);
-      if (n <= 0) throw std::runtime_error("write to pty master");
-      at += static_cast<std::size_t>(n);
-    }
-  }
-  void close() {
-    if (master_ >= 0) ::close(master_);
-    if (slave_ >= 0) ::close(slave_);
-    master_ = slave_ = -1;
-  }
-
- private:
-  int master_ = -1;
-  int slave_ = -1;
-  std::string path_;
-};
-
-// Replaces `link` atomically, as fake-insole does.
-void point_link(const fs::path& link, const std::string& target) {
-  const fs::path tmp = link.string() + ".tmp";
-  fs::remove(tmp);
-  fs::create_symlink(target, tmp);
-  fs::rename(tmp, link);
+// Writes as the device would.
+void write_frames(const PseudoTerminal& pty, const std::vector<std::uint8_t>& bytes) {
+  ASSERT_TRUE(replay::write_all(pty.fd(), bytes));
 }
 
 std::vector<std::uint8_t> frames_bytes(Foot foot, std::uint32_t first, std::uint32_t count) {
@@ -162,9 +121,9 @@ SerialSettings settings_for(const fs::path& device) {
 }
 
 TEST(SerialSource, DeliversFramesWrittenToAPty) {
-  Pty pty;
+  PseudoTerminal pty;
   Harness harness(settings_for(pty.path()));
-  pty.write_all(frames_bytes(Foot::Left, 0, 300));
+  write_frames(pty, frames_bytes(Foot::Left, 0, 300));
   ASSERT_TRUE(harness.wait_frames(300));
   const auto sequences = harness.sequences();
   for (std::uint32_t i = 0; i < 300; ++i) ASSERT_EQ(sequences[i], i);
@@ -180,22 +139,22 @@ TEST(SerialSource, DeliversFramesWrittenToAPty) {
 
 TEST(SerialSource, ReconnectsWhenThePtyComesBackUnderTheLink) {
   const fs::path link = test::scratch_dir("serial-reconnect") / "insole";
-  auto first = std::make_unique<Pty>();
+  auto first = std::make_unique<PseudoTerminal>();
   point_link(link, first->path());
   Harness harness(settings_for(link));
-  first->write_all(frames_bytes(Foot::Right, 0, 50));
+  write_frames(*first, frames_bytes(Foot::Right, 0, 50));
   ASSERT_TRUE(harness.wait_frames(50));
 
   // The device disappears, its link first (as udev's): a link left on the closed pty could be
   // reopened onto another process's pty that got the same number.
   fs::remove(link);
-  first->close();
+  first.reset();
   ASSERT_TRUE(harness.wait_states(3));
   EXPECT_EQ(harness.states()[2].first, LinkState::Disconnected);
   std::this_thread::sleep_for(100ms);  // a few failed reopen attempts
-  auto second = std::make_unique<Pty>();
+  auto second = std::make_unique<PseudoTerminal>();
   point_link(link, second->path());
-  second->write_all(frames_bytes(Foot::Right, 50, 50));
+  write_frames(*second, frames_bytes(Foot::Right, 50, 50));
   ASSERT_TRUE(harness.wait_frames(100));
   const auto sequences = harness.sequences();
   for (std::uint32_t i = 0; i < 100; ++i) ASSERT_EQ(sequences[i], i);
@@ -222,9 +181,9 @@ TEST(SerialSource, WaitsForAMissingDeviceAndStopsCleanly) {
   ASSERT_EQ(states.size(), 1U);  // failed attempts are not reported again and again
   EXPECT_EQ(states[0].first, LinkState::Connecting);
 
-  Pty pty;  // the device appears late
+  PseudoTerminal pty;  // the device appears late
   point_link(link, pty.path());
-  pty.write_all(frames_bytes(Foot::Left, 0, 10));
+  write_frames(pty, frames_bytes(Foot::Left, 0, 10));
   ASSERT_TRUE(harness.wait_frames(10));
 
   const auto before = std::chrono::steady_clock::now();
