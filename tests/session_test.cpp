@@ -5,40 +5,20 @@
 #include <gtest/gtest.h>
 
 #include <array>
-#include <atomic>
 #include <bit>
-#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <iterator>
 #include <limits>
-#include <new>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "allocation_count.hpp"
 #include "gaitmon/error.hpp"
 #include "test_support.hpp"
-
-// Counting every allocation of the process lets a test prove that next() allocates nothing per
-// frame; the replacement keeps the default behaviour otherwise.
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-[[gnu::noinline]] void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-[[gnu::noinline]] void operator delete(void* p) noexcept {
-  std::free(p);
-}
-[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept {
-  std::free(p);
-}
 
 namespace gaitmon {
 namespace {
@@ -327,15 +307,15 @@ TEST(SessionReader, NextAllocatesNothingAfterTheFirstFrame) {
   }
   SessionReader reader(write_file("allocations.csv", text));
   Frame frame;
-  const long at_start = g_allocations.load();
+  const std::uint64_t at_start = test::allocations.load();
   ASSERT_TRUE(reader.next(frame));
   // The first frame sizes the buffer, which shows the counter sees the reader's allocations.
-  EXPECT_GE(g_allocations.load() - at_start, 1);
+  EXPECT_GE(test::allocations.load() - at_start, 1U);
   const std::uint8_t* storage = frame.bits.data();
-  const long before = g_allocations.load();
+  const std::uint64_t before = test::allocations.load();
   int frames = 1;
   while (reader.next(frame)) ++frames;
-  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(test::allocations.load() - before, 0U);
   EXPECT_EQ(frames, 200);
   EXPECT_EQ(frame.bits.data(), storage);
   EXPECT_EQ(frame.bits[199 % kN], 199);

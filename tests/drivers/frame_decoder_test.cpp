@@ -5,30 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
-#include <cstdlib>
-#include <new>
 #include <random>
 #include <string_view>
 #include <thread>
 #include <vector>
 
+#include "allocation_count.hpp"
 #include "gaitmon/session.hpp"
-
-namespace {
-std::atomic<std::uint64_t> g_allocations{0};
-}  // namespace
-
-[[gnu::noinline]] void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-[[gnu::noinline]] void operator delete(void* p) noexcept {
-  std::free(p);
-}
-[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept {
-  std::free(p);
-}
 
 namespace gaitmon::drivers {
 namespace {
@@ -430,12 +413,12 @@ TEST(FrameDecoder, AllocatesNothingPerFrame) {
     ++frames;
     checksum += f.bits[3];
   };
-  const std::uint64_t before = g_allocations.load();
+  const std::uint64_t before = test::allocations.load();
   for (std::size_t at = 0; at < stream.size(); at += 61) {
     decoder.feed(std::span(stream).subspan(at, std::min<std::size_t>(61, stream.size() - at)),
                  sink);
   }
-  EXPECT_EQ(g_allocations.load() - before, 0U);
+  EXPECT_EQ(test::allocations.load() - before, 0U);
   EXPECT_GT(frames, 950U);
   EXPECT_GT(checksum, 0U);
 }
