@@ -39,15 +39,11 @@ Config shipped_config() {
   return load_config(test::source_dir() / "config" / "gaitmon.toml");
 }
 
-fs::path demo_session() {
-  return test::source_dir() / "replay" / "demo-simulated-37-38.csv";
-}
-
 // The first 30 s of the bundled demo: about 50 analysed steps, enough for every rule and short
 // enough for the sanitizer builds.
 fs::path demo_30s() {
-  static const fs::path path =
-      test::cut_session(demo_session(), test::scratch_dir("monitor-demo") / "demo30.csv", 30.0);
+  static const fs::path path = test::cut_session(
+      test::demo_session(), test::scratch_dir("monitor-demo") / "demo30.csv", 30.0);
   return path;
 }
 

@@ -18,6 +18,7 @@
 
 #include "allocation_count.hpp"
 #include "gaitmon/error.hpp"
+#include "monitor_support.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -67,14 +68,6 @@ class RemoveScratch : public ::testing::Environment {
 
 fs::path write_file(const std::string& name, const std::string& text) {
   return test::write_text(scratch() / name, text);
-}
-
-std::vector<Frame> read_all(const fs::path& path) {
-  SessionReader reader(path);
-  std::vector<Frame> frames;
-  Frame frame;
-  while (reader.next(frame)) frames.push_back(frame);
-  return frames;
 }
 
 std::string file_text(const fs::path& path) {
@@ -287,7 +280,7 @@ TEST(SessionReader, FeetInterleaveInAnyOrder) {
                            frame_line("0.2", "L", zeros()) + frame_line("0.3", "L", zeros()) +
                            frame_line("0.4", "L", zeros()) + frame_line("0.6", "R", zeros()) +
                            frame_line("0.45", "L", zeros());
-  const auto frames = read_all(write_file("interleaved.csv", text));
+  const auto frames = test::file_frames(write_file("interleaved.csv", text));
   ASSERT_EQ(frames.size(), 6u);
   const std::vector<double> t{0.5, 0.2, 0.3, 0.4, 0.6, 0.45};
   const std::vector<Foot> feet{Foot::Right, Foot::Left,  Foot::Left,
@@ -721,7 +714,7 @@ TEST(SessionWriter, RejectsATimeThatDoesNotIncreaseForItsFoot) {
   EXPECT_THROW(writer.write(Frame{std::numeric_limits<double>::infinity(), Foot::Right, bits}),
                std::invalid_argument);
   writer.close();
-  EXPECT_EQ(read_all(path).size(), 2u);
+  EXPECT_EQ(test::file_frames(path).size(), 2u);
 }
 
 TEST(SessionWriter, RejectsAHeaderThatWouldNotReadBack) {

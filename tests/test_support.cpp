@@ -22,6 +22,10 @@ std::filesystem::path shared_dir() {
   return GAITMON_SHARED_DIR;
 }
 
+std::filesystem::path demo_session() {
+  return source_dir() / "replay" / "demo-simulated-37-38.csv";
+}
+
 std::filesystem::path gaitmon_binary() {
 #ifdef GAITMON_BINARY
   return GAITMON_BINARY;

@@ -12,6 +12,8 @@ namespace gaitmon::test {
 std::filesystem::path source_dir();
 /// The project's shared/ folder beside the checkout (seed data, real recordings).
 std::filesystem::path shared_dir();
+/// The bundled demo session, replay/demo-simulated-37-38.csv (simulated, 60 s, two feet).
+std::filesystem::path demo_session();
 /// The gaitmon executable built with the tests (empty in benchmarks).
 std::filesystem::path gaitmon_binary();
 /// A fresh, empty scratch folder unique to this process and `name`, removed at exit unless

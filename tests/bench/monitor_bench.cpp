@@ -189,8 +189,8 @@ BENCHMARK(BM_MonitorReplayTenMinutes)
 // Frames of the bundled 60 s demo offered at their own pace (as a live insole delivers them);
 // the latency of each fit from the step's finalisation to its publication.
 void BM_MonitorLatencyRealTime(benchmark::State& state) {
-  static const std::vector<gaitmon::SensorFrame> frames = gaitmon::test::session_frames(
-      gaitmon::test::source_dir() / "replay" / "demo-simulated-37-38.csv");
+  static const std::vector<gaitmon::SensorFrame> frames =
+      gaitmon::test::session_frames(gaitmon::test::demo_session());
   std::vector<double> latencies;
   for (auto _ : state) {
     LatencyPublisher publisher;

@@ -120,7 +120,7 @@ TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
   EXPECT_NE(out.find("absent.csv"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "o"));
 
-  const std::string demo = (test::source_dir() / "replay" / "demo-simulated-37-38.csv").string();
+  const std::string demo = test::demo_session().string();
   out = run("discrepancy " + demo + " --out " + (dir / "d").string() + " --folds 1", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--folds"), std::string::npos) << out;

@@ -30,8 +30,7 @@ using Clock = std::chrono::steady_clock;
 
 TEST(RecordCommand, WritesWhatTheDeviceSentAsASessionFile) {
   const fs::path dir = test::scratch_dir("record");
-  const fs::path session = test::cut_session(
-      test::source_dir() / "replay" / "demo-simulated-37-38.csv", dir / "demo10.csv", 10.0);
+  const fs::path session = test::cut_session(test::demo_session(), dir / "demo10.csv", 10.0);
   const fs::path out = dir / "recorded.csv";
   const std::string binary = test::gaitmon_binary().string();
   ChildProcess fake({binary, "fake-insole", session.string(), "--pty", "--speed", "max"});

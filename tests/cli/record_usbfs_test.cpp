@@ -35,8 +35,7 @@ bool all_taken(const test::UsbfsInsole& insole) {
 
 TEST(RecordUsb, RecordsAnEmulatedUsbInsoleUnpluggedHalfwayFrameForFrame) {
   const fs::path dir = test::scratch_dir("record-usbfs");
-  const fs::path session = test::cut_session(
-      test::source_dir() / "replay" / "demo-simulated-37-38.csv", dir / "demo10.csv", 10.0);
+  const fs::path session = test::cut_session(test::demo_session(), dir / "demo10.csv", 10.0);
   const auto transfers = test::wire_transfers(test::session_frames(session), 10);
   const std::size_t half = transfers.size() / 2;
   const fs::path config = test::roomy_config(dir, {{"vendor_id = 0x0000", "vendor_id = 0x1209"},

@@ -31,8 +31,7 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 fs::path demo_30s(const fs::path& dir) {
-  return test::cut_session(test::source_dir() / "replay" / "demo-simulated-37-38.csv",
-                           dir / "demo30.csv", 30.0);
+  return test::cut_session(test::demo_session(), dir / "demo30.csv", 30.0);
 }
 
 template <typename Message>

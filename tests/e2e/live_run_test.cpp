@@ -38,8 +38,7 @@ TEST(LiveRun, FakeInsoleThroughSerialAndUdpmEqualsAnalyze) {
   const test::Bus& bus = test::private_bus();
   std::cout << "LCM bus: " << bus.description << std::endl;
   const fs::path dir = test::scratch_dir("live-run");
-  const fs::path session = test::cut_session(
-      test::source_dir() / "replay" / "demo-simulated-37-38.csv", dir / "demo30.csv", 30.0);
+  const fs::path session = test::cut_session(test::demo_session(), dir / "demo30.csv", 30.0);
   const std::size_t total_frames = test::session_frames(session).size();
   const fs::path config = roomy_config(dir);
   const fs::path log = dir / "bus.lcmlog";

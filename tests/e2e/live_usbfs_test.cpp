@@ -52,8 +52,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   const test::Bus& bus = test::private_bus();
   std::cout << "LCM bus: " << bus.description << std::endl;
   const fs::path dir = test::scratch_dir("live-usbfs");
-  const fs::path session = test::cut_session(
-      test::source_dir() / "replay" / "demo-simulated-37-38.csv", dir / "demo20.csv", 20.0);
+  const fs::path session = test::cut_session(test::demo_session(), dir / "demo20.csv", 20.0);
   const std::vector<SensorFrame> frames = test::session_frames(session);
 
   const std::vector<std::vector<std::uint8_t>> transfers = test::wire_transfers(frames, 10);

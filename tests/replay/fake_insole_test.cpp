@@ -17,6 +17,7 @@
 #include "drivers/frame_decoder.hpp"
 #include "drivers/serial_source.hpp"
 #include "gaitmon/session.hpp"
+#include "monitor_support.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon::drivers {
@@ -25,24 +26,12 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-fs::path demo_session() {
-  return test::source_dir() / "replay" / "demo-simulated-37-38.csv";
-}
-
-std::vector<Frame> read_all(const fs::path& path) {
-  SessionReader reader(path);
-  std::vector<Frame> frames;
-  Frame frame;
-  while (reader.next(frame)) frames.push_back(frame);
-  return frames;
-}
-
 // The fake device as a child process; the first line of its stdout is the pty's path.
 class FakeInsole {
  public:
   explicit FakeInsole(const std::string& options) {
     const std::string command = test::gaitmon_binary().string() + " fake-insole " +
-                                demo_session().string() + " --pty " + options;
+                                test::demo_session().string() + " --pty " + options;
     pipe_ = popen(command.c_str(), "r");
     if (pipe_ == nullptr) throw std::runtime_error("popen");
     std::array<char, 256> line{};
@@ -150,7 +139,7 @@ TEST(FakeInsole, StreamsTheSessionThroughAPty) {
   Receiver receiver(fake.path());
   ASSERT_TRUE(receiver.stop_after_disconnects(1, 60s));
   EXPECT_EQ(fake.finish(), 0);
-  const std::vector<Frame> file = read_all(demo_session());
+  const std::vector<Frame> file = test::file_frames(test::demo_session());
   ASSERT_EQ(receiver.frames().size(), file.size());
   expect_frames_match(receiver.frames(), file);
   for (std::size_t i = 0; i < file.size(); ++i) ASSERT_EQ(receiver.frames()[i].foot, file[i].foot);
@@ -185,7 +174,7 @@ TEST(FakeInsole, EveryInjectedFaultShowsUpInTheCounters) {
   EXPECT_EQ(c.header_errors, 0U);
   EXPECT_EQ(c.garbage_bytes, s["garbage_bytes"].get<std::uint64_t>() + 123 * (crc + truncated) -
                                  s["dropped_bytes"].get<std::uint64_t>());
-  const std::vector<Frame> file = read_all(demo_session());
+  const std::vector<Frame> file = test::file_frames(test::demo_session());
   EXPECT_EQ(receiver.frames().size(), file.size() - crc - truncated);
   expect_frames_match(receiver.frames(), file);
   // Every frame not faulted arrived; every faulted one before a foot's last frame is lost.
@@ -223,7 +212,7 @@ TEST(FakeInsole, APtyClosedAndReopenedIsReconnectedThroughTheLink) {
   EXPECT_EQ(std::vector<LinkState>(receiver.states().begin(),
                                    receiver.states().begin() + static_cast<long>(want.size())),
             want);
-  const std::vector<Frame> file = read_all(demo_session());
+  const std::vector<Frame> file = test::file_frames(test::demo_session());
   const DecoderCounters c = receiver.counters();
   // Bytes still in the old pty at the close are lost, as with an unplug; the sequence
   // numbers account for every one of those frames.

@@ -12,6 +12,7 @@
 
 #include "drivers/frame_decoder.hpp"
 #include "gaitmon/error.hpp"
+#include "monitor_support.hpp"
 #include "replay/fault_injector.hpp"
 #include "test_support.hpp"
 
@@ -23,19 +24,6 @@ using drivers::DecoderCounters;
 using drivers::FrameDecoder;
 using drivers::LinkState;
 using drivers::WireFormat;
-
-fs::path demo_session() {
-  return test::source_dir() / "replay" / "demo-simulated-37-38.csv";
-}
-
-// Every frame of a session, in file order.
-std::vector<Frame> read_all(const fs::path& path) {
-  SessionReader reader(path);
-  std::vector<Frame> frames;
-  Frame frame;
-  while (reader.next(frame)) frames.push_back(frame);
-  return frames;
-}
 
 // A short two-foot session with recognisable readings.
 fs::path small_session(const std::string& name, double duration_s) {
@@ -95,9 +83,9 @@ void expect_matches_file(const std::vector<SensorFrame>& got, const std::vector<
 }
 
 TEST(SessionByteSource, PlaysTheDemoThroughTheDecoderFrameForFrame) {
-  SessionByteSource source(demo_session(), WireFormat(), kMaxSpeed);
+  SessionByteSource source(test::demo_session(), WireFormat(), kMaxSpeed);
   const Played played = play(source);
-  expect_matches_file(played.frames, read_all(demo_session()));
+  expect_matches_file(played.frames, test::file_frames(test::demo_session()));
   EXPECT_EQ(source.frames_sent(), played.frames.size());
   EXPECT_EQ(played.counters.garbage_bytes, 0U);
   EXPECT_EQ(played.counters.lost_frames_total(), 0U);
@@ -115,7 +103,7 @@ TEST(SessionByteSource, UsesTheConfiguredLayout) {
   const WireFormat format(settings);
   const fs::path path = small_session("layout", 0.5);
   SessionByteSource source(path, format, kMaxSpeed);
-  expect_matches_file(play(source, format).frames, read_all(path));
+  expect_matches_file(play(source, format).frames, test::file_frames(path));
 }
 
 TEST(SessionByteSource, PacesAtTheRequestedSpeed) {
@@ -126,11 +114,11 @@ TEST(SessionByteSource, PacesAtTheRequestedSpeed) {
   const double elapsed_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   EXPECT_GE(elapsed_s, 0.99 / 10.0);  // never early; how late is load-dependent
-  expect_matches_file(played.frames, read_all(path));
+  expect_matches_file(played.frames, test::file_frames(path));
 }
 
 TEST(SessionByteSource, StopEndsAPacedReplaySoon) {
-  SessionByteSource source(demo_session(), WireFormat(), 1.0);  // 60 s at real time
+  SessionByteSource source(test::demo_session(), WireFormat(), 1.0);  // 60 s at real time
   std::thread stopper([&] {
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
     source.stop();
@@ -148,7 +136,7 @@ TEST(SessionByteSource, StopEndsAPacedReplaySoon) {
 TEST(SessionByteSource, RefusesABadSessionAndSpeed) {
   const fs::path bad = test::write_text(test::scratch_dir("bad") / "bad.csv", "t_s,foot\n");
   EXPECT_THROW(SessionByteSource(bad, WireFormat(), 1.0), InputError);
-  EXPECT_THROW(SessionByteSource(demo_session(), WireFormat(), 0.0), std::invalid_argument);
+  EXPECT_THROW(SessionByteSource(test::demo_session(), WireFormat(), 0.0), std::invalid_argument);
 }
 
 TEST(FaultInjector, EveryInjectedFaultIsCountedByTheDecoder) {
@@ -160,7 +148,7 @@ TEST(FaultInjector, EveryInjectedFaultIsCountedByTheDecoder) {
   options.crc_rate = 0.02;
   options.truncate_rate = 0.02;
   FaultInjector injector(options, format);
-  const std::vector<Frame> frames = read_all(demo_session());
+  const std::vector<Frame> frames = test::file_frames(test::demo_session());
   SessionEncoder encoder(format, InsoleSize::S37_38);
   std::vector<std::uint8_t> stream;
   std::vector<std::uint8_t> wire;
