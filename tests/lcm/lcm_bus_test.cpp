@@ -99,15 +99,6 @@ void warm_up(LcmPublisher& publisher, std::vector<Listener*> listeners,
   FAIL() << "the listeners heard nothing for 20 s; on stderr they said:\n" << said;
 }
 
-void publish_samples(LcmPublisher& publisher) {
-  publisher.publish(test::sample_frame());
-  publisher.publish(test::sample_step());
-  publisher.publish(test::sample_fit());
-  publisher.publish(test::sample_status());
-  publisher.publish(test::sample_raw());
-  publisher.publish(test::sample_effects());
-}
-
 void read_messages(Listener& listener, std::size_t count) {
   const auto deadline = Clock::now() + std::chrono::seconds(10);
   while (listener.messages.size() < count && Clock::now() < deadline) {
@@ -215,7 +206,7 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
     return false;
   });
   ASSERT_TRUE(lua_listener.warm);
-  publish_samples(publisher);
+  test::publish_samples(publisher);
   read_messages(lua_listener, 6);
   EXPECT_EQ(publisher.failed_publishes(), 0U);
 
@@ -299,7 +290,7 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
                     }};
   LcmPublisher publisher(settings());
   warm_up(publisher, {&listener}, [] { return true; });
-  publish_samples(publisher);
+  test::publish_samples(publisher);
   read_messages(listener, 6);
   ASSERT_EQ(listener.messages.size(), 6U);
 

@@ -90,12 +90,7 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
     settings.url = "file://" + log.string() + "?mode=w";
     settings.raw_enabled = true;
     LcmPublisher publisher(settings);
-    publisher.publish(test::sample_frame());
-    publisher.publish(test::sample_step());
-    publisher.publish(test::sample_fit());
-    publisher.publish(test::sample_status());
-    publisher.publish(test::sample_raw());
-    publisher.publish(test::sample_effects());
+    test::publish_samples(publisher);
     ASSERT_EQ(publisher.published(), 6U);
   }
   test::write_text(dir / "Decode.java", kDecodeJava);

@@ -242,12 +242,7 @@ TEST_F(LcmPublisherMemq, UsesTheConfiguredChannels) {
   LcmSettings settings = memq_settings();
   settings.channels = {"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW", "A_EFFECTS"};
   LcmPublisher publisher(bus, settings);
-  publisher.publish(test::sample_frame());
-  publisher.publish(test::sample_step());
-  publisher.publish(test::sample_fit());
-  publisher.publish(test::sample_status());
-  publisher.publish(test::sample_raw());
-  publisher.publish(test::sample_effects());
+  test::publish_samples(publisher);
   drain(*bus);
   std::multiset<std::string> channels;
   for (const auto& [channel, bytes] : received.messages) channels.insert(channel);

@@ -168,12 +168,7 @@ void expect_delivered(const Delivery& d, const std::string& channel, const Repor
 TEST_F(LcmSubscriberMemq, EveryReportComesBackAsPublished) {
   LcmSubscriber subscriber(bus, settings, {}, record());
   LcmPublisher publisher(bus, settings);
-  publisher.publish(test::sample_frame());
-  publisher.publish(test::sample_step());
-  publisher.publish(test::sample_fit());
-  publisher.publish(test::sample_status());
-  publisher.publish(test::sample_raw());
-  publisher.publish(test::sample_effects());
+  test::publish_samples(publisher);
   drain(subscriber);
   ASSERT_EQ(deliveries.size(), 6U);
   expect_delivered(deliveries[0], "GAITMON_FRAME", test::sample_frame());

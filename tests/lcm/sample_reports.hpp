@@ -125,4 +125,14 @@ inline EffectsReport sample_effects() {
   return r;
 }
 
+/// One of each sample, in the order of the Publisher interface.
+inline void publish_samples(Publisher& publisher) {
+  publisher.publish(sample_frame());
+  publisher.publish(sample_step());
+  publisher.publish(sample_fit());
+  publisher.publish(sample_status());
+  publisher.publish(sample_raw());
+  publisher.publish(sample_effects());
+}
+
 }  // namespace gaitmon::test
