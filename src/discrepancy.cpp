@@ -109,7 +109,7 @@ std::pair<double, double> nnls2(std::span<const double> y, std::span<const doubl
 using Chain = std::vector<const Applied*>;
 
 struct Workspace {
-  std::vector<double> F, a, f, fk, fd;
+  std::vector<double> F, a, f, f0, fk, fd;
 };
 
 void run_chain(const Chain& chain, std::size_t ui, const Unit& u, std::span<const double> F,
@@ -181,18 +181,20 @@ void solve_nonlinear(const Chain& chain, std::size_t ui, const Unit& u, std::siz
     auto [K, D] = nnls2(u.y, E, u.V);
     model(K, D);
     double value = sse_of(u.y, w.f);
+    // w.f holds the model at (K, D) at the top of every iteration: the line search ends on the
+    // point it accepts.
     for (int it = 0; it < 6; ++it) {
       const double hK = std::max(1e-9, 1e-4 * std::abs(K));
       const double hD = std::max(1e-9, 1e-4 * std::abs(D));
+      w.f0 = w.f;
       model(K + hK, D);
       w.fk = w.f;
       model(K, D + hD);
       w.fd = w.f;
-      model(K, D);
       for (std::size_t i = 0; i < n; ++i) {
-        w.fk[i] = (w.fk[i] - w.f[i]) / hK;
-        w.fd[i] = (w.fd[i] - w.f[i]) / hD;
-        target[i] = u.y[i] - w.f[i] + K * w.fk[i] + D * w.fd[i];  // the linearised target
+        w.fk[i] = (w.fk[i] - w.f0[i]) / hK;
+        w.fd[i] = (w.fd[i] - w.f0[i]) / hD;
+        target[i] = u.y[i] - w.f0[i] + K * w.fk[i] + D * w.fd[i];  // the linearised target
       }
       const auto [K1, D1] = nnls2(target, w.fk, w.fd);
       double step = 1.0;

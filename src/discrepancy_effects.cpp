@@ -185,37 +185,42 @@ class ImpactEffect final : public Applied {
 // (98.8, 73.8 and 42.5 bits where the simulator's cells stopped at 110, 85 and 60).
 class SaturationEffect final : public Applied {
  public:
+  // A paraboloid pressure over the contact peaks at twice its mean, so the peak reading is
+  // p = 2 F / (newtons_per_bit x cells in contact), and q = c / p = q_scale_ x area / F.
   SaturationEffect(double ceiling_bits, double cell_area_mm2, double newtons_per_bit)
-      : ceiling_(ceiling_bits), cell_area_(cell_area_mm2), npb_(newtons_per_bit) {}
+      : q_scale_(ceiling_bits * newtons_per_bit / (2.0 * cell_area_mm2)) {}
   bool affects(const Unit&) const override { return true; }
   bool affine() const override { return false; }
   void apply(std::size_t, const Unit& u, std::span<const double> F, std::span<double> out,
              std::size_t /*choice*/) const override {
+    const std::vector<double>& table = fraction_table();
     for (std::size_t i = 0; i < F.size(); ++i) {
       out[i] = F[i];
       if (!(u.area[i] > 0.0) || !(F[i] > 0.0)) continue;
-      // A paraboloid pressure over the contact peaks at twice its mean.
-      const double measured_peak_bits = 2.0 * F[i] / npb_ / (u.area[i] / cell_area_);
-      out[i] = F[i] * measured_fraction(ceiling_ / measured_peak_bits);
+      out[i] = F[i] * measured_fraction(table, q_scale_ * u.area[i] / F[i]);
     }
   }
 
+ private:
   /// The force the cells read over the model's force at the measured footprint, given
-  /// q = c / p_m: phi^-(2 + n) (1 - L^2) with L = 1 - q phi(L)^(1 + n), 1 where q >= 1.
-  static double measured_fraction(double q) {
-    static const std::vector<double> table = [] {
-      std::vector<double> t(kTablePoints);
-      for (std::size_t k = 0; k < kTablePoints; ++k) t[k] = solve_fraction(q_of(k));
-      return t;
-    }();
+  /// q = c / p_m: phi^-(2 + n) (1 - L^2) with L = 1 - q phi(L)^(1 + n), 1 where q >= 1;
+  /// interpolated in a table of q in [0, 1].
+  static double measured_fraction(const std::vector<double>& table, double q) {
     if (!(q < 1.0)) return 1.0;
     const double x = std::max(q, 0.0) * static_cast<double>(kTablePoints - 1);
     const auto k = std::min(static_cast<std::size_t>(x), kTablePoints - 2);
     const double w = x - static_cast<double>(k);
     return (1.0 - w) * table[k] + w * table[k + 1];
   }
+  static const std::vector<double>& fraction_table() {
+    static const std::vector<double> table = [] {
+      std::vector<double> t(kTablePoints);
+      for (std::size_t k = 0; k < kTablePoints; ++k) t[k] = solve_fraction(q_of(k));
+      return t;
+    }();
+    return table;
+  }
 
- private:
   static constexpr std::size_t kTablePoints = 2001;
   static constexpr double kExponentN = 0.3;
   static double q_of(std::size_t k) {
@@ -228,9 +233,7 @@ class SaturationEffect final : public Applied {
     for (int it = 0; it < 60; ++it) L = std::max(0.0, 1.0 - q * std::pow(phi(L), 1.0 + kExponentN));
     return std::pow(phi(L), -(2.0 + kExponentN)) * (1.0 - L * L);
   }
-  double ceiling_;
-  double cell_area_;
-  double npb_;
+  double q_scale_;
 };
 
 std::vector<double> linspace(double lo, double hi, int n) {
