@@ -26,11 +26,7 @@ using namespace std::chrono_literals;
 
 using replay::point_link;
 using replay::PseudoTerminal;
-
-// Writes as the device would.
-void write_frames(const PseudoTerminal& pty, const std::vector<std::uint8_t>& bytes) {
-  ASSERT_TRUE(replay::write_all(pty.fd(), bytes));
-}
+using replay::write_all;
 
 std::vector<std::uint8_t> frames_bytes(Foot foot, std::uint32_t first, std::uint32_t count) {
   const WireFormat format;
@@ -123,7 +119,7 @@ SerialSettings settings_for(const fs::path& device) {
 TEST(SerialSource, DeliversFramesWrittenToAPty) {
   PseudoTerminal pty;
   Harness harness(settings_for(pty.path()));
-  write_frames(pty, frames_bytes(Foot::Left, 0, 300));
+  write_all(pty.fd(), frames_bytes(Foot::Left, 0, 300));
   ASSERT_TRUE(harness.wait_frames(300));
   const auto sequences = harness.sequences();
   for (std::uint32_t i = 0; i < 300; ++i) ASSERT_EQ(sequences[i], i);
@@ -142,7 +138,7 @@ TEST(SerialSource, ReconnectsWhenThePtyComesBackUnderTheLink) {
   auto first = std::make_unique<PseudoTerminal>();
   point_link(link, first->path());
   Harness harness(settings_for(link));
-  write_frames(*first, frames_bytes(Foot::Right, 0, 50));
+  write_all(first->fd(), frames_bytes(Foot::Right, 0, 50));
   ASSERT_TRUE(harness.wait_frames(50));
 
   // The device disappears, its link first (as udev's): a link left on the closed pty could be
@@ -154,7 +150,7 @@ TEST(SerialSource, ReconnectsWhenThePtyComesBackUnderTheLink) {
   std::this_thread::sleep_for(100ms);  // a few failed reopen attempts
   auto second = std::make_unique<PseudoTerminal>();
   point_link(link, second->path());
-  write_frames(*second, frames_bytes(Foot::Right, 50, 50));
+  write_all(second->fd(), frames_bytes(Foot::Right, 50, 50));
   ASSERT_TRUE(harness.wait_frames(100));
   const auto sequences = harness.sequences();
   for (std::uint32_t i = 0; i < 100; ++i) ASSERT_EQ(sequences[i], i);
@@ -183,7 +179,7 @@ TEST(SerialSource, WaitsForAMissingDeviceAndStopsCleanly) {
 
   PseudoTerminal pty;  // the device appears late
   point_link(link, pty.path());
-  write_frames(pty, frames_bytes(Foot::Left, 0, 10));
+  write_all(pty.fd(), frames_bytes(Foot::Left, 0, 10));
   ASSERT_TRUE(harness.wait_frames(10));
 
   const auto before = std::chrono::steady_clock::now();

@@ -1,10 +1,13 @@
-// The fake insole's pseudo-terminal: raw bytes, unread counting and draining, the hang-up a
-// reader sees, errors that name the failed call, and the link that is never missing.
+// The fake insole's pseudo-terminal: raw bytes, unread counting and draining, a write that gives
+// up at a stop, the hang-up a reader sees, errors that name the failed call, and the link that
+// is never missing.
 #include "replay/pseudo_terminal.hpp"
 
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <poll.h>
+#include <pthread.h>
+#include <signal.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -111,6 +114,42 @@ TEST(PseudoTerminal, WritesMoreThanThePtyHoldsThroughPartialWrites) {
   take.join();
   EXPECT_EQ(got, bytes);
   ::close(reader);
+}
+
+extern "C" void interrupt_only(int) {}
+
+// fake-insole's stop signals have no SA_RESTART, so a write blocked on a full pty returns EINTR;
+// with the stop flag set, write_all gives up instead of writing on. A signal that arrives once
+// some bytes went through ends that write short instead, and the next write blocks again, so
+// the signal is repeated until the writer returns.
+TEST(PseudoTerminal, AWriteInterruptedOnceStopIsSetGivesUp) {
+  PseudoTerminal pty;
+  struct sigaction action {};
+  action.sa_handler = interrupt_only;
+  struct sigaction saved {};
+  ASSERT_EQ(sigaction(SIGUSR1, &action, &saved), 0);
+  std::atomic<bool> stop{false};
+  std::atomic<int> result{-1};
+  const std::vector<std::uint8_t> bytes(1 << 20, 1);  // far more than a pty holds
+  std::thread writer([&] { result = write_all(pty.fd(), bytes, &stop) ? 1 : 0; });
+  std::this_thread::sleep_for(100ms);
+  EXPECT_EQ(result.load(), -1) << "nobody reads, so the write blocks";
+  stop = true;
+  const auto give_up = std::chrono::steady_clock::now() + 20s;
+  while (result.load() == -1 && std::chrono::steady_clock::now() < give_up) {
+    pthread_kill(writer.native_handle(), SIGUSR1);
+    std::this_thread::sleep_for(20ms);
+  }
+  const bool returned = result.load() != -1;
+  if (!returned) {  // unblock the writer so that the test can end
+    const int reader = open_reader(pty);
+    read_exactly(reader, bytes.size());
+    ::close(reader);
+  }
+  writer.join();
+  sigaction(SIGUSR1, &saved, nullptr);
+  ASSERT_TRUE(returned) << "write_all did not give up within 20 s of the stop";
+  EXPECT_EQ(result.load(), 0);
 }
 
 // A read blocked at that moment fails with EIO instead; which of the two a reader meets depends
