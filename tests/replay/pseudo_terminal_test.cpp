@@ -180,16 +180,20 @@ TEST(PseudoTerminal, AFailedWriteNamesTheCall) {
 
 // With one descriptor left, the pty's device end opens and its reader's end cannot. Returns 0
 // when the error names the reader's path and the device end was closed again; runs in a child
-// process, whose descriptor limit it lowers.
+// process, whose soft descriptor limit it lowers and then restores: UBSan's check of a call on
+// the caught exception opens a pipe, and with no descriptor left it reports a bad object.
 int open_with_one_descriptor_left() {
+  rlimit saved{};
+  if (getrlimit(RLIMIT_NOFILE, &saved) != 0) return 2;
   const int probe = ::dup(0);
   ::close(probe);
-  const rlimit limit{static_cast<rlim_t>(probe + 1), static_cast<rlim_t>(probe + 1)};
+  const rlimit limit{static_cast<rlim_t>(probe + 1), saved.rlim_max};
   if (setrlimit(RLIMIT_NOFILE, &limit) != 0) return 3;
   try {
     PseudoTerminal pty;
     return 4;
   } catch (const std::system_error& e) {
+    if (setrlimit(RLIMIT_NOFILE, &saved) != 0) return 8;
     if (e.code().value() != EMFILE) return 5;
     if (std::string(e.what()).rfind("open /dev/pts/", 0) != 0) return 6;
   }
