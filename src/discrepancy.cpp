@@ -73,14 +73,27 @@ void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Un
   }
 }
 
+// The two columns' products, for solving against many y.
+struct Gram2 {
+  double xx = 0, xz = 0, zz = 0;
+};
+
+Gram2 gram2(std::span<const double> x, std::span<const double> z) {
+  Gram2 g;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    g.xx += x[i] * x[i];
+    g.xz += x[i] * z[i];
+    g.zz += z[i] * z[i];
+  }
+  return g;
+}
+
 // Non-negative least squares of y on two columns (a x + b z).
 std::pair<double, double> nnls2(std::span<const double> y, std::span<const double> x,
-                                std::span<const double> z) {
-  double xx = 0, xz = 0, zz = 0, xy = 0, zy = 0;
+                                std::span<const double> z, const Gram2& g) {
+  const auto [xx, xz, zz] = g;
+  double xy = 0, zy = 0;
   for (std::size_t i = 0; i < y.size(); ++i) {
-    xx += x[i] * x[i];
-    xz += x[i] * z[i];
-    zz += z[i] * z[i];
     xy += x[i] * y[i];
     zy += z[i] * y[i];
   }
@@ -103,20 +116,29 @@ std::pair<double, double> nnls2(std::span<const double> y, std::span<const doubl
   return sse(a_only, 0.0) <= sse(0.0, b_only) ? std::pair{a_only, 0.0} : std::pair{0.0, b_only};
 }
 
+std::pair<double, double> nnls2(std::span<const double> y, std::span<const double> x,
+                                std::span<const double> z) {
+  return nnls2(y, x, z, gram2(x, z));
+}
+
 // ---- fitting ----------------------------------------------------------------------------------
 
 // A chain of applied effects in physical order (tissue, then sensor).
 using Chain = std::vector<const Applied*>;
 
 struct Workspace {
-  std::vector<double> F, a, f, f0, fk, fd;
+  std::vector<double> F, a, f, f0, fk, fd, off, at_zero, target, tv;
+  std::vector<std::vector<double>> te;
+  std::vector<Gram2> gram;
 };
 
+// `skip_additive` leaves out the effects that only add to F.
 void run_chain(const Chain& chain, std::size_t ui, const Unit& u, std::span<const double> F,
-               std::span<double> out, Workspace& w, std::size_t choice) {
+               std::span<double> out, Workspace& w, std::size_t choice,
+               bool skip_additive = false) {
   std::copy(F.begin(), F.end(), out.begin());
   for (const Applied* e : chain) {
-    if (!e->affects(u)) continue;
+    if (!e->affects(u) || (skip_additive && e->additive())) continue;
     w.a.assign(out.begin(), out.end());
     e->apply(ui, u, w.a, out, std::min(choice, e->choices(u) - 1));
   }
@@ -139,29 +161,58 @@ struct UnitSolution {
   }
 };
 
-// Every effect of the chain is affine in F: the measured force is off + K T(E) + D T(V), with T
-// the chain less its offset, and K, D >= 0 solve exactly.
-void solve_affine(const Chain& chain, std::size_t ui, const Unit& u, std::size_t choice,
+// Every effect of the chain is affine in F: the measured force is T(0) + K L(E) + D L(V), with
+// L(x) = T(x) - T(0) the chain's linear part, and K, D >= 0 solve exactly. An effect that only
+// adds to F is all in T(0), so L is computed without it; where such effects alone vary with the
+// step's choice (impact's onset), L is the same for every choice and is computed once: it took
+// 12 runs of the chain per choice, and impact has 21.
+void solve_affine(const Chain& chain, std::size_t ui, const Unit& u, std::size_t choices,
                   Workspace& w, UnitSolution& best) {
   const std::size_t n = u.y.size();
-  std::vector<double> off(n), tv(n), te(n), target(n);
-  std::fill(w.F.begin(), w.F.end(), 0.0);
-  run_chain(chain, ui, u, w.F, off, w, choice);
-  run_chain(chain, ui, u, u.V, tv, w, choice);
-  for (std::size_t i = 0; i < n; ++i) {
-    tv[i] -= off[i];
-    target[i] = u.y[i] - off[i];
+  bool adds = false;
+  bool linear_varies = false;
+  for (const Applied* e : chain) {
+    if (!e->affects(u)) continue;
+    adds = adds || e->additive();
+    linear_varies = linear_varies || (!e->additive() && e->choices(u) > 1);
   }
-  for (std::size_t k = 0; k < u.En.size(); ++k) {
-    run_chain(chain, ui, u, u.En[k], te, w, choice);
-    for (std::size_t i = 0; i < n; ++i) te[i] -= off[i];
-    const auto [K, D] = nnls2(target, te, tv);
-    double s = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double r = target[i] - K * te[i] - D * tv[i];
-      s += r * r;
+  w.off.resize(n);
+  w.at_zero.resize(n);
+  w.target.resize(n);
+  w.tv.resize(n);
+  w.te.resize(u.En.size());
+  w.gram.resize(u.En.size());
+  std::fill(w.F.begin(), w.F.end(), 0.0);
+  const auto linear = [&](std::span<const double> x, std::vector<double>& out, std::size_t c) {
+    out.resize(n);
+    run_chain(chain, ui, u, x, out, w, c, true);
+    for (std::size_t i = 0; i < n; ++i) out[i] -= w.at_zero[i];
+  };
+  for (std::size_t c = 0; c < choices; ++c) {
+    run_chain(chain, ui, u, w.F, w.off, w, c);
+    if (c == 0 || linear_varies) {
+      if (adds) {
+        run_chain(chain, ui, u, w.F, w.at_zero, w, c, true);
+      } else {
+        w.at_zero = w.off;
+      }
+      linear(u.V, w.tv, c);
+      for (std::size_t k = 0; k < u.En.size(); ++k) {
+        linear(u.En[k], w.te[k], c);
+        w.gram[k] = gram2(w.te[k], w.tv);
+      }
     }
-    best.offer(s, k, choice, K, D);
+    for (std::size_t i = 0; i < n; ++i) w.target[i] = u.y[i] - w.off[i];
+    for (std::size_t k = 0; k < u.En.size(); ++k) {
+      const std::vector<double>& te = w.te[k];
+      const auto [K, D] = nnls2(w.target, te, w.tv, w.gram[k]);
+      double s = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const double r = w.target[i] - K * te[i] - D * w.tv[i];
+        s += r * r;
+      }
+      best.offer(s, k, c, K, D);
+    }
   }
 }
 
@@ -237,12 +288,10 @@ double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& 
   w.F.resize(u.y.size());
   w.f.resize(u.y.size());
   UnitSolution best;
-  for (std::size_t c = 0; c < choices; ++c) {
-    if (affine) {
-      solve_affine(chain, ui, u, c, w, best);
-    } else {
-      solve_nonlinear(chain, ui, u, c, w, best);
-    }
+  if (affine) {
+    solve_affine(chain, ui, u, choices, w, best);
+  } else {
+    for (std::size_t c = 0; c < choices; ++c) solve_nonlinear(chain, ui, u, c, w, best);
   }
   if (pred != nullptr) {
     for (std::size_t i = 0; i < u.y.size(); ++i) {

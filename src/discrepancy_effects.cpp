@@ -155,6 +155,7 @@ class ImpactEffect final : public Applied {
   std::size_t choices(const Unit& u) const override {
     return u.region == Region::Heel ? kOnsetChoices : 1;
   }
+  bool additive() const override { return true; }
   void apply(std::size_t, const Unit& u, std::span<const double> F, std::span<double> out,
              std::size_t choice) const override {
     const double t0 = u.t_contact_s - static_cast<double>(choice) * kOnsetStepFrames * u.dt_s;

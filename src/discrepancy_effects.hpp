@@ -59,6 +59,9 @@ class Applied {
   /// fits it best, as it takes its n (impact's onset between two frames). 1 for none.
   virtual std::size_t choices(const Unit& /*u*/) const { return 1; }
   virtual bool affine() const { return true; }
+  /// out = F + something that does not depend on F: the chain's linear part is the same with
+  /// and without it, whatever the choice.
+  virtual bool additive() const { return false; }
   /// What the effect adds to unit `ui`'s reading in the swing windows its zero was taken from
   /// (N): the share of it that the per-step zeroing took off. Only a sensor effect that reads
   /// without a load has one.
