@@ -40,6 +40,21 @@ const Simulated& simulated() {
   return sim;
 }
 
+InsoleLayout layout_of(const Simulated& sim) {
+  return {sim.config.insole(InsoleSize::S37_38), sim.config.sensor};
+}
+
+/// Every step of the walk, analysed with `settings`.
+std::vector<StepAnalysis> analyse_every_step(const AnalysisSettings& settings) {
+  const Simulated& sim = simulated();
+  const InsoleLayout layout = layout_of(sim);
+  std::vector<StepAnalysis> steps;
+  for (const Step& step : sim.steps) {
+    steps.push_back(analyse_step(step, layout, sim.config, settings));
+  }
+  return steps;
+}
+
 AnalysisSettings seed_smoothing() {
   AnalysisSettings settings;
   settings.fit.smoothing = Smoothing::Seed;
@@ -116,7 +131,7 @@ TEST(DeclaredParams, KeepsAppendixIScaleAndCAndD0AndSplitsByAspect) {
 TEST(AnalyseStep, FitsEveryRegionWithContactOfASimulatedStep) {
   const Simulated& sim = simulated();
   ASSERT_GE(sim.steps.size(), 6u) << "7 s at 1.1 s strides gives at least 3 whole steps per foot";
-  const InsoleLayout layout(sim.config.insole(InsoleSize::S37_38), sim.config.sensor);
+  const InsoleLayout layout = layout_of(sim);
   const Step& step = sim.steps[1];
   const StepAnalysis a = analyse_step(step, layout, sim.config, seed_smoothing());
   EXPECT_EQ(a.foot, step.foot);
@@ -149,7 +164,7 @@ TEST(AnalyseStep, FitsEveryRegionWithContactOfASimulatedStep) {
 TEST(AnalyseStep, DeclaresCAndD0FromAppendixIAndTheAspectFromTheEllipses) {
   const Simulated& sim = simulated();
   ASSERT_FALSE(sim.steps.empty());
-  const InsoleLayout layout(sim.config.insole(InsoleSize::S37_38), sim.config.sensor);
+  const InsoleLayout layout = layout_of(sim);
   const Step& step = sim.steps[0];
   const StepAnalysis a = analyse_step(step, layout, sim.config, AnalysisSettings{});
   // Appendix I, size 37-38 (config/tissue_seed_appendix_i.toml).
@@ -183,7 +198,7 @@ TEST(AnalyseStep, DeclaresCAndD0FromAppendixIAndTheAspectFromTheEllipses) {
 TEST(AnalyseStep, TotalNrmseIsEq58OnTheSummedForces) {
   const Simulated& sim = simulated();
   ASSERT_FALSE(sim.steps.empty());
-  const InsoleLayout layout(sim.config.insole(InsoleSize::S37_38), sim.config.sensor);
+  const InsoleLayout layout = layout_of(sim);
   const StepAnalysis a = analyse_step(sim.steps[2], layout, sim.config, AnalysisSettings{});
   const std::size_t frames = a.t_s.size();
   double max_measured = 0.0;
@@ -207,12 +222,8 @@ TEST(AnalyseStep, TotalNrmseIsEq58OnTheSummedForces) {
 
 TEST(AnalyseSession, FitsEachRegionOverAllStepsAndSummarisesTheSteps) {
   const Simulated& sim = simulated();
-  const InsoleLayout layout(sim.config.insole(InsoleSize::S37_38), sim.config.sensor);
   const AnalysisSettings settings = seed_smoothing();
-  std::vector<StepAnalysis> steps;
-  for (const Step& step : sim.steps) {
-    steps.push_back(analyse_step(step, layout, sim.config, settings));
-  }
+  const std::vector<StepAnalysis> steps = analyse_every_step(settings);
   const SessionAnalysis s = analyse_session(steps, sim.config, InsoleSize::S37_38, settings);
   for (Region region : kRegions) {
     SCOPED_TRACE(std::string(region_name(region)));
@@ -244,15 +255,11 @@ TEST(AnalyseSession, FitsEachRegionOverAllStepsAndSummarisesTheSteps) {
 // all when the settings ask for the ellipse.
 TEST(AnalyseSession, CountsTheStepsFittedOnTheContactEllipseForWantOfAFootprint) {
   const Simulated& sim = simulated();
-  const InsoleLayout layout(sim.config.insole(InsoleSize::S37_38), sim.config.sensor);
   for (AreaSource area : {AreaSource::Footprint, AreaSource::Ellipse}) {
     SCOPED_TRACE(std::string(area_source_name(area)));
     AnalysisSettings settings;
     settings.area = area;
-    std::vector<StepAnalysis> steps;
-    for (const Step& step : sim.steps) {
-      steps.push_back(analyse_step(step, layout, sim.config, settings));
-    }
+    const std::vector<StepAnalysis> steps = analyse_every_step(settings);
     const SessionAnalysis s = analyse_session(steps, sim.config, InsoleSize::S37_38, settings);
     for (Region region : kRegions) {
       SCOPED_TRACE(std::string(region_name(region)));
