@@ -14,6 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include "test_support.hpp"
+
 namespace gaitmon {
 namespace {
 
@@ -21,26 +23,7 @@ constexpr double kW = 7.5;
 constexpr double kH = 15.0;
 constexpr double kCellArea = 112.5;
 
-/// Cells from a picture, most anterior row first: '#' active, '.' inactive. A row starting
-/// with '>' is shifted half a cell medially, as centred rows of different length are.
-std::vector<ActiveCell> cells_of(const std::vector<std::string>& rows) {
-  std::vector<ActiveCell> cells;
-  const auto n = static_cast<int>(rows.size());
-  for (int r = 0; r < n; ++r) {
-    std::string row = rows[static_cast<std::size_t>(r)];
-    double offset = 0.0;
-    if (!row.empty() && row.front() == '>') {
-      offset = 0.5;
-      row.erase(0, 1);
-    }
-    for (std::size_t i = 0; i < row.size(); ++i) {
-      if (row[i] == '#') {
-        cells.push_back({(static_cast<double>(i) + offset) * kW, (n - 1 - r) * kH, false});
-      }
-    }
-  }
-  return cells;
-}
+using test::cells_of;
 
 ContactEllipse fit(const std::vector<ActiveCell>& cells, Region region = Region::Met3_5,
                    bool first_instant = false) {

@@ -88,4 +88,25 @@ double sample_sd(const std::vector<double>& values) {
   return std::sqrt(ss / static_cast<double>(values.size() - 1));
 }
 
+std::vector<ActiveCell> cells_of(const std::vector<std::string>& rows) {
+  const CellSize size;
+  std::vector<ActiveCell> cells;
+  const auto n = static_cast<int>(rows.size());
+  for (int r = 0; r < n; ++r) {
+    std::string row = rows[static_cast<std::size_t>(r)];
+    double offset = 0.0;
+    if (!row.empty() && row.front() == '>') {
+      offset = 0.5;
+      row.erase(0, 1);
+    }
+    for (std::size_t i = 0; i < row.size(); ++i) {
+      if (row[i] == '#') {
+        cells.push_back({(static_cast<double>(i) + offset) * size.width_mm,
+                         (n - 1 - r) * size.height_mm, false});
+      }
+    }
+  }
+  return cells;
+}
+
 }  // namespace gaitmon::test

@@ -1,10 +1,12 @@
-// Paths, scratch folders and small statistics for tests and benchmarks; free of any test
-// framework.
+// Paths, scratch folders, small statistics and cell pictures for tests and benchmarks; free of
+// any test framework.
 #pragma once
 
 #include <filesystem>
 #include <string>
 #include <vector>
+
+#include "gaitmon/contact_ellipse.hpp"
 
 namespace gaitmon::test {
 
@@ -25,5 +27,9 @@ std::filesystem::path write_text(const std::filesystem::path& path, const std::s
 int run_command(const std::string& command, std::string* output = nullptr);
 /// The sample standard deviation (n - 1); needs at least two values.
 double sample_sd(const std::vector<double>& values);
+/// Active cells of the default 7.5 x 15 mm size from a picture, most anterior row first: '#'
+/// active, '.' inactive. A row starting with '>' is shifted half a cell medially, as centred
+/// rows of different length are.
+std::vector<ActiveCell> cells_of(const std::vector<std::string>& rows);
 
 }  // namespace gaitmon::test

@@ -6,30 +6,12 @@
 #include <vector>
 
 #include "gaitmon/contact_ellipse.hpp"
+#include "test_support.hpp"
 
 namespace {
 
 using gaitmon::ActiveCell;
-
-/// Cells from a picture, most anterior row first; '>' shifts a row half a cell.
-std::vector<ActiveCell> cells_of(const std::vector<std::string>& rows) {
-  std::vector<ActiveCell> cells;
-  const auto n = static_cast<int>(rows.size());
-  for (int r = 0; r < n; ++r) {
-    std::string row = rows[static_cast<std::size_t>(r)];
-    double offset = 0.0;
-    if (!row.empty() && row.front() == '>') {
-      offset = 0.5;
-      row.erase(0, 1);
-    }
-    for (std::size_t i = 0; i < row.size(); ++i) {
-      if (row[i] == '#') {
-        cells.push_back({(static_cast<double>(i) + offset) * 7.5, (n - 1 - r) * 15.0, false});
-      }
-    }
-  }
-  return cells;
-}
+using gaitmon::test::cells_of;
 
 const std::vector<ActiveCell> kHeel21 = cells_of({".###.", "#####", "#####", "#####", ".###."});
 const std::vector<ActiveCell> kForefoot14 = cells_of({">###", "####", ">###", "####"});
