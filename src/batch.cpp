@@ -1,6 +1,8 @@
 // Drives the per-foot segmenters from a session file, exactly as the live monitor would.
 #include "gaitmon/batch.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <optional>
 #include <vector>
@@ -29,9 +31,16 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
   const SegmenterLimits limits = segmenter_limits(info.header.sample_rate_hz);
   std::array<std::optional<StepSegmenter>, 2> segmenters;
   for (Foot foot : kFeet) {
-    segmenters[static_cast<std::size_t>(foot)].emplace(
-        foot, info.header.sensors, config.segmentation, spec.adaptive_threshold_pct,
-        newtons_per_bit, limits);
+    try {
+      segmenters[static_cast<std::size_t>(foot)].emplace(
+          foot, info.header.sensors, config.segmentation, spec.adaptive_threshold_pct,
+          newtons_per_bit, limits);
+    } catch (const std::invalid_argument& e) {
+      // The session's rate against the config's windows in frames: both are valid alone.
+      throw InputError(path.string(), reader.line(),
+                       fmt::format("sample_rate_hz {} does not fit [segmentation] of {}: {}",
+                                   info.header.sample_rate_hz, config.source.string(), e.what()));
+    }
   }
   const auto file_bytes = static_cast<double>(std::filesystem::file_size(path));
   std::vector<Step> finalised;

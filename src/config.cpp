@@ -239,12 +239,22 @@ toml::table parse_document(const fs::path& path, const std::string& unreadable_f
   }
 }
 
+// An insole is about 100 mm wide with up to 9 cells a row: a cell or a spacing beyond 50 mm is
+// a typo, and would only fail later, in the geometry, without naming the key.
+double at_most_a_cell(TableReader& table, std::string_view key, double value) {
+  constexpr double kMaxMm = 50.0;
+  if (value > kMaxMm) table.fail(key, fmt::format("must be <= {} mm, got {}", kMaxMm, value));
+  return value;
+}
+
 void read_sensor(TableReader table, SensorGeometry& sensor) {
-  sensor.width_mm = number_above(table, "width_mm", 0.0);
-  sensor.height_mm = number_above(table, "height_mm", 0.0);
+  sensor.width_mm = at_most_a_cell(table, "width_mm", number_above(table, "width_mm", 0.0));
+  sensor.height_mm = at_most_a_cell(table, "height_mm", number_above(table, "height_mm", 0.0));
   // Overlapping cells would count the same patch of sole twice.
-  sensor.pitch_x_mm = number_at_least(table, "pitch_x_mm", sensor.width_mm);
-  sensor.pitch_y_mm = number_at_least(table, "pitch_y_mm", sensor.height_mm);
+  sensor.pitch_x_mm =
+      at_most_a_cell(table, "pitch_x_mm", number_at_least(table, "pitch_x_mm", sensor.width_mm));
+  sensor.pitch_y_mm =
+      at_most_a_cell(table, "pitch_y_mm", number_at_least(table, "pitch_y_mm", sensor.height_mm));
   const std::string alignment = table.string("row_alignment");
   if (alignment == "centred") {
     sensor.alignment = RowAlignment::Centred;
@@ -707,8 +717,9 @@ Config load_config(const fs::path& main_file) {
   const toml::table doc = parse_document(main_file, file, "(file)");
   TableReader root(doc, file, "");
   config.sample_rate_hz = number_above(root, "sample_rate_hz", 0.0);
-  if (config.sample_rate_hz > 10000.0) {
-    root.fail("sample_rate_hz", fmt::format("must be <= 10000, got {}", config.sample_rate_hz));
+  if (config.sample_rate_hz < kMinSampleRateHz || config.sample_rate_hz > kMaxSampleRateHz) {
+    root.fail("sample_rate_hz", fmt::format("must be in [{}, {}], got {}", kMinSampleRateHz,
+                                            kMaxSampleRateHz, config.sample_rate_hz));
   }
   const fs::path insoles_file = named_file(root, "insoles_file", main_file);
   const fs::path tissue_file = named_file(root, "tissue_file", main_file);

@@ -6,7 +6,8 @@
 namespace gaitmon {
 
 InputError::InputError(std::string file, std::uint64_t line, std::string reason)
-    : std::runtime_error(file + ":" + std::to_string(line) + ": " + reason),
+    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
+                         reason),
       file_(std::move(file)),
       line_(line),
       reason_(std::move(reason)) {}

@@ -763,6 +763,10 @@ Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publis
         "Monitor: workers, max_step_backlog and status_period_s must be "
         "positive");
   }
+  // Checked once here: a segmenter that cannot be built would reject every frame.
+  (void)StepSegmenter(Foot::Left, 1, config.segmentation, 0.0,
+                      config.calibration.newtons_per_bit(config.sensor.area_mm2()),
+                      segmenter_limits(options.sample_rate_hz));
   impl_ = std::make_unique<Impl>(config, std::move(options), publisher);
 }
 

@@ -1,6 +1,8 @@
 // Session CSV v1: a streaming reader (chunked reads, reused buffers) and a buffered writer.
 #include "gaitmon/session.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
 #include <cerrno>
@@ -63,10 +65,20 @@ std::string format_double(double value) {
 }
 
 // Quotes a piece of input for an error message, cut short so a runaway line stays readable.
+// Control bytes are shown as \xNN: a NUL would end the message where a C string is printed, and
+// a CR would overwrite it on a terminal.
 std::string quote(std::string_view text) {
   constexpr std::size_t kShown = 40;
-  if (text.size() <= kShown) return "'" + std::string(text) + "'";
-  return "'" + std::string(text.substr(0, kShown)) + "...'";
+  std::string quoted = "'";
+  for (const char c : text.substr(0, kShown)) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte < 0x20 || byte == 0x7f) {
+      quoted += fmt::format("\\x{:02x}", byte);
+    } else {
+      quoted += c;
+    }
+  }
+  return quoted + (text.size() > kShown ? "...'" : "'");
 }
 
 bool parse_finite(std::string_view text, double& value) {
@@ -355,6 +367,10 @@ void SessionReader::Impl::apply_metadata(std::string_view key, std::string_view 
       if (!parse_positive(value, header.sample_rate_hz)) {
         fail(line, "sample_rate_hz " + quote(value) + " is not a finite number > 0");
       }
+      if (header.sample_rate_hz < kMinSampleRateHz || header.sample_rate_hz > kMaxSampleRateHz) {
+        fail(line, fmt::format("sample_rate_hz {} is outside [{}, {}] Hz", quote(value),
+                               kMinSampleRateHz, kMaxSampleRateHz));
+      }
       break;
     case Key::Sensors: {
       const auto count = parse_count(value);
@@ -568,8 +584,9 @@ void check_header(const SessionHeader& header) {
         "session header: sensors is " + std::to_string(header.sensors) + " but insole size " +
         std::string(insole_size_name(header.insole_size)) + " has " + std::to_string(expected));
   }
-  if (!std::isfinite(header.sample_rate_hz) || header.sample_rate_hz <= 0.0) {
-    throw std::invalid_argument("session header: sample_rate_hz must be finite and > 0");
+  if (!(header.sample_rate_hz >= kMinSampleRateHz && header.sample_rate_hz <= kMaxSampleRateHz)) {
+    throw std::invalid_argument(fmt::format("session header: sample_rate_hz must be in [{}, {}]",
+                                            kMinSampleRateHz, kMaxSampleRateHz));
   }
   if (header.body_mass_kg &&
       (!std::isfinite(*header.body_mass_kg) || *header.body_mass_kg <= 0.0)) {

@@ -125,5 +125,36 @@ TEST(SegmentSession, ReportsTheFileAndLineOfABadFrame) {
   }
 }
 
+TEST(SegmentSession, ARateTooLowForTheConfigsWindowsNamesBoth) {
+  Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  // At 10 Hz a swing midpoint lies at most 15 frames from its step: a 20-frame window cannot fit.
+  config.segmentation.swing_window_frames = 20;
+  const auto dir = test::scratch_dir("batch-rate");
+  std::string text =
+      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 10\n# sensors: 93\nt_s,foot";
+  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
+  text += "\n0,L";
+  for (int i = 1; i <= 93; ++i) text += ",0";
+  text += "\n";
+  const auto path = test::write_text(dir / "slow.csv", text);
+  try {
+    segment_session(path, config, [](Step&&) {});
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), path.string());
+    EXPECT_NE(std::string(e.what()).find("sample_rate_hz 10 does not fit [segmentation] of " +
+                                         config.source.string()),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("swing_window_frames"), std::string::npos) << e.what();
+  }
+  config.segmentation.swing_window_frames = 15;
+  std::vector<Step> steps;
+  const SegmentedSessionInfo info =
+      segment_session(path, config, [&](Step&& step) { steps.push_back(std::move(step)); });
+  EXPECT_EQ(info.frames_per_foot[0], 1);
+  EXPECT_TRUE(steps.empty());
+}
+
 }  // namespace
 }  // namespace gaitmon

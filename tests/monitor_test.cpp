@@ -549,6 +549,18 @@ TEST(Monitor, AFailedAnalysisIsPublishedWithItsStatus) {
   EXPECT_EQ(publisher.statuses().back().fits_failed, fits.size());
 }
 
+TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {
+  Config config = shipped_config();
+  config.segmentation.swing_window_frames = 20;
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.sample_rate_hz = 10.0;  // a swing midpoint at most 15 frames from its step
+  EXPECT_THROW(Monitor(config, options, publisher), std::invalid_argument);
+  config.segmentation.swing_window_frames = 15;
+  Monitor monitor(config, options, publisher);
+  monitor.stop();
+}
+
 TEST(Monitor, RejectsBadFramesAndRestartsWhenTheDeviceClockGoesBack) {
   const Config config = shipped_config();
   const std::vector<Step> steps = batch_steps(demo_30s(), config);

@@ -88,7 +88,7 @@ void expect_reader_error(const std::function<SessionReader()>& open, const std::
   } catch (const InputError& e) {
     EXPECT_EQ(e.line(), line) << e.what();
     EXPECT_EQ(e.file(), source);
-    EXPECT_THAT(e.what(), HasSubstr(source + ":" + std::to_string(line) + ": "));
+    EXPECT_THAT(e.what(), HasSubstr(source + (line > 0 ? ":" + std::to_string(line) : "") + ": "));
     EXPECT_THAT(e.what(), HasSubstr(reason));
   }
 }
@@ -367,6 +367,23 @@ TEST(SessionReaderBadHeader, SampleRateNotAPositiveNumber) {
   }
 }
 
+TEST(SessionReaderBadHeader, SampleRateOutsideTheRangeTheStepDetectorWorksAt) {
+  for (const std::string rate : {"1", "9.99", "10000.5", "1e300"}) {
+    const std::string text =
+        "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: " + rate +
+        "\n# sensors: 93\n" + columns();
+    expect_input_error(write_file("rate-range.csv", text), 3,
+                       "sample_rate_hz '" + rate + "' is outside [10, 10000] Hz");
+  }
+  for (const std::string rate : {"10", "10000"}) {
+    const std::string text =
+        "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: " + rate +
+        "\n# sensors: 93\n" + columns();
+    SessionReader reader(write_file("rate-edge.csv", text));
+    EXPECT_EQ(reader.header().sample_rate_hz, std::stod(rate));
+  }
+}
+
 TEST(SessionReaderBadHeader, BodyMassNotAPositiveNumber) {
   expect_input_error(write_file("mass.csv", meta() + "# body_mass_kg: -70\n" + columns()), 5,
                      "body_mass_kg '-70' is not a finite number > 0");
@@ -482,6 +499,13 @@ std::vector<BadLine> bad_lines() {
       {"ValueTrailingSpace", with_value(5, "1 "), "column s5: '1 ' is not an integer 0..255"},
       {"ValueLetters", with_value(6, "x"), "column s6: 'x' is not an integer 0..255"},
       {"ValueHex", with_value(6, "0x1"), "column s6: '0x1' is not an integer 0..255"},
+      {"ValueWithANul",
+       with_value(9, std::string("1\0"
+                                 "2",
+                                 3)),
+       "column s9: '1\\x002' is not an integer 0..255"},
+      {"ValueWithACarriageReturn", with_value(9, "1\r2"),
+       "column s9: '1\\x0d2' is not an integer 0..255"},
       {"ValueEmpty", with_value(7, ""), "column s7: empty value"},
       {"LastValueEmpty", with_value(93, ""), "column s93: empty value"},
       {"LastValueJunk", with_value(93, "12x"), "column s93: '12x' is not an integer 0..255"},
@@ -730,6 +754,8 @@ TEST(SessionWriter, RejectsAHeaderThatWouldNotReadBack) {
   rejects(h);
   h = {};
   h.sample_rate_hz = 0.0;
+  rejects(h);
+  h.sample_rate_hz = 9.0;
   rejects(h);
   h = {};
   h.body_mass_kg = -1.0;

@@ -8,7 +8,7 @@
 namespace gaitmon {
 
 /// Bad input data (a session file, a recording): names the file, the line (1-based, 0 if none)
-/// and the reason. what() is "FILE:LINE: REASON".
+/// and the reason. what() is "FILE:LINE: REASON", or "FILE: REASON" without a line.
 class InputError : public std::runtime_error {
  public:
   InputError(std::string file, std::uint64_t line, std::string reason);

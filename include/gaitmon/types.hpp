@@ -43,6 +43,12 @@ constexpr bool is_toe(Region region) {
   return region == Region::Toe1 || region == Region::Toe2 || region == Region::Toes3_5;
 }
 
+/// The frame rates per foot (Hz) that sessions and the config may give. The step detector's
+/// windows are whole frames: below 10 Hz a swing is a frame or two and its 5-frame windows
+/// cannot fit.
+inline constexpr double kMinSampleRateHz = 10.0;
+inline constexpr double kMaxSampleRateHz = 10000.0;
+
 /// The six Medilogic insole sizes (EU shoe sizes).
 enum class InsoleSize : std::uint8_t { S35_36, S37_38, S39_40, S41_42, S43_44, S45_46 };
 inline constexpr std::size_t kInsoleSizeCount = 6;

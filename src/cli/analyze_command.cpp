@@ -21,6 +21,7 @@
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/discrepancy.hpp"
+#include "gaitmon/error.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/json.hpp"
 #include "gaitmon/pooling.hpp"
@@ -429,8 +430,16 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
                        step.peak_force_n, step.status, std::nullopt});
       if (step.status == StepStatus::Ok) ok_steps.push_back(std::move(step));
     };
-    segment_session(args.session, config, on_step,
-                    [&](double fraction) { progress.update(0.1 * fraction); });
+    const SegmentedSessionInfo info = segment_session(
+        args.session, config, on_step, [&](double fraction) { progress.update(0.1 * fraction); });
+    // Outputs of nothing would read as a perfect fit: medians of 0 and an NRMSE of 0 %.
+    if (ok_steps.empty()) {
+      throw InputError(args.session.string(), 0,
+                       fmt::format("no complete step to fit in {} and {} frames of the left and "
+                                   "right foot ({} steps found, all cut by the recording's ends "
+                                   "or longer than 60 s)",
+                                   info.frames_per_foot[0], info.frames_per_foot[1], steps.size()));
+    }
     const auto start = std::chrono::steady_clock::now();
     analyses = analyse_steps(ok_steps, layout, config, settings,
                              [&](double fraction) { progress.update(0.1 + 0.85 * fraction); });

@@ -4,7 +4,9 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <charconv>
 #include <cmath>
+#include <system_error>
 
 namespace gaitmon::cli {
 
@@ -14,6 +16,36 @@ Config load_global_config(const GlobalOptions& global) {
   spdlog::set_level(
       spdlog::level::from_str(global.log_level.empty() ? config.log.level : global.log_level));
   return config;
+}
+
+CLI::Validator number_in(double min, double max, bool open_min) {
+  const std::string range = fmt::format("{}{}, {}]", open_min ? "(" : "[", min, max);
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        double value = 0.0;
+        const char* end = text.data() + text.size();
+        const auto [ptr, ec] = std::from_chars(text.data(), end, value);
+        if (ec != std::errc() || ptr != end) return "'" + text + "' is not a number";
+        const bool above_min = open_min ? value > min : value >= min;
+        if (!(above_min && value <= max)) return "'" + text + "' is not in " + range;
+        return {};
+      },
+      "NUMBER in " + range);
+}
+
+CLI::Validator whole_number_up_to(std::uint64_t max) {
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        std::uint64_t value = 0;
+        const char* end = text.data() + text.size();
+        const auto [ptr, ec] = std::from_chars(text.data(), end, value);
+        if (ec == std::errc::result_out_of_range || (ec == std::errc() && value > max)) {
+          return "'" + text + "' is larger than " + std::to_string(max);
+        }
+        if (ec != std::errc() || ptr != end) return "'" + text + "' is not a whole number >= 0";
+        return {};
+      },
+      fmt::format("UINT <= {}", max));
 }
 
 std::string estimate_text(double value, double se, std::string_view plus_minus) {

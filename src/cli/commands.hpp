@@ -2,6 +2,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <string_view>
@@ -24,6 +25,14 @@ Config load_global_config(const GlobalOptions& global);
 /// and "(no SE)" where the data do not determine it (a non-finite se), so that no report prints
 /// "nan".
 std::string estimate_text(double value, double se, std::string_view plus_minus);
+
+/// The range check of a floating-point option: [min, max], or (min, max] with `open_min`.
+/// CLI::Range lets nan through, as nan compares false with both bounds.
+CLI::Validator number_in(double min, double max, bool open_min = false);
+
+/// The check of an unsigned option: digits only, and within its type. CLI11 takes "-1" and a
+/// number too large for the type and wraps or clamps them.
+CLI::Validator whole_number_up_to(std::uint64_t max);
 
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);

@@ -13,6 +13,7 @@
 #include "discrepancy_report.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/discrepancy.hpp"
+#include "gaitmon/error.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/session.hpp"
 #include "output_file.hpp"
@@ -194,6 +195,11 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
           if (step.status == StepStatus::Ok) steps.push_back(std::move(step));
         },
         [&](double fraction) { progress.update(0.1 * fraction); });
+    if (static_cast<int>(steps.size()) < args.settings.folds) {
+      throw InputError(args.session.string(), 0,
+                       fmt::format("{} complete steps, need at least {} (one per fold of --folds)",
+                                   steps.size(), args.settings.folds));
+    }
     input = prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
     progress.update(0.6);
   }
@@ -278,15 +284,15 @@ void add_discrepancy_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   sub->add_option("--min-shrink", args->settings.min_shrink_pct,
                   "Held-out NRMSE fall needed to name an effect, %")
-      ->check(CLI::Range(0.0, 100.0))
+      ->check(number_in(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--min-zero-shrink", args->settings.min_zero_shrink_pct,
                   "Held-out NRMSE fall of the zero changes needed to name an effect, %")
-      ->check(CLI::Range(0.0, 100.0))
+      ->check(number_in(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--min-delta-bic", args->settings.min_delta_bic,
                   "BIC fall needed to name an effect")
-      ->check(CLI::Range(0.0, 1e6))
+      ->check(number_in(0.0, 1e6))
       ->capture_default_str();
   sub->callback([&global, args] { run_discrepancy(global, *args); });
 }

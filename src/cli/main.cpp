@@ -1,4 +1,7 @@
 // gaitmon command line: one subcommand per job; errors at the edges become one clear line.
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
@@ -8,6 +11,9 @@
 
 int main(int argc, char** argv) {
   using namespace gaitmon::cli;
+  // spdlog logs on stdout by default; stdout carries the commands' results (the step lines of the
+  // live commands, the tables, fake-insole's pty path), so that a pipe gets results only.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("gaitmon"));
   CLI::App app{
       "gaitmon: step segmentation and plantar-tissue models from Medilogic pressure insoles"};
   // At most one, checked after parsing: CLI11 checks a required one before it reports a word it

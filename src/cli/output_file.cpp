@@ -28,12 +28,18 @@ OutputFile::~OutputFile() {
 }
 
 void OutputFile::write(std::string_view text) {
+  if (file_ == nullptr) throw std::logic_error(partial_.string() + ": written after hand_over()");
   if (std::fwrite(text.data(), 1, text.size(), file_) != text.size()) fail(partial_, "write");
 }
 
 void OutputFile::close() {
   std::FILE* file = std::exchange(file_, nullptr);
-  if (std::fclose(file) != 0) fail(partial_, "close");
+  if (file != nullptr && std::fclose(file) != 0) fail(partial_, "close");
+}
+
+const std::filesystem::path& OutputFile::hand_over() {
+  close();
+  return partial_;
 }
 
 void OutputFile::rename() {

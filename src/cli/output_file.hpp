@@ -23,6 +23,10 @@ class OutputFile {
   void write(std::string_view text);
   const std::filesystem::path& path() const { return path_; }
 
+  /// For a writer that opens its files by path: closes this one's stream and returns the partial
+  /// path to write to instead. commit_all() and the destructor treat that file as their own.
+  const std::filesystem::path& hand_over();
+
   /// Commits several files as one: all are flushed and closed first (where a full disk shows),
   /// then renamed; if a rename fails, the files already renamed are removed again, so a run
   /// leaves either every output or none. Throws std::runtime_error naming the file.

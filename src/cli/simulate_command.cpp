@@ -3,12 +3,14 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
 #include "gaitmon/simulator.hpp"
+#include "output_file.hpp"
 
 namespace gaitmon::cli {
 namespace {
@@ -135,7 +137,12 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
     args.truth.replace_extension(".truth.json");
   }
   if (args.out.has_parent_path()) std::filesystem::create_directories(args.out.parent_path());
-  const SimulationTruth truth = simulate_session(config, options, args.out, args.truth);
+  OutputFile csv(args.out);
+  OutputFile truth_json(args.truth);
+  const SimulationTruth truth =
+      simulate_session(config, options, csv.hand_over(), truth_json.hand_over());
+  OutputFile* const outputs[] = {&csv, &truth_json};
+  OutputFile::commit_all(outputs);
 
   int partial = 0;
   for (const auto& step : truth.steps) partial += step.partial ? 1 : 0;
@@ -167,24 +174,25 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember(names_of_sizes()))
       ->capture_default_str();
   sub->add_option("--duration", args->options.duration_s, "Length of the recording, s")
-      ->check(CLI::Range(0.1, 86400.0))
+      ->check(number_in(0.1, 86400.0))
       ->capture_default_str();
   sub->add_option("--seed", args->options.seed, "Random seed (same seed, same file)")
+      ->check(whole_number_up_to(std::numeric_limits<std::uint64_t>::max()))
       ->capture_default_str();
   sub->add_option("--body-mass", args->options.body_mass_kg, "Body mass, kg")
-      ->check(CLI::Range(1.0, 300.0))
+      ->check(number_in(1.0, 300.0))
       ->capture_default_str();
   sub->add_option("--stride", args->options.timing.stride_s,
                   "Stride time (heel strike to the same foot's next), s")
-      ->check(CLI::Range(0.5, 3.0))
+      ->check(number_in(0.5, 3.0, true))
       ->capture_default_str();
   sub->add_option("--stance-fraction", args->options.timing.stance_fraction,
                   "Loaded time / stride time (the 40 N events cover about 85 % of it)")
-      ->check(CLI::Range(0.3, 0.8))
+      ->check(number_in(0.3, 0.8))
       ->capture_default_str();
   sub->add_option("--jitter", args->options.timing.jitter_pct,
                   "Step-to-step SD of stride and stance time, % of nominal")
-      ->check(CLI::Range(0.0, 10.0))
+      ->check(number_in(0.0, 10.0))
       ->capture_default_str();
   sub->add_option("--model", args->model,
                   "Damping sign: correct (the integral of eq 22) or seed_eq25 (the seed's sign)")
@@ -196,12 +204,12 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"centre", "coverage"}))
       ->capture_default_str();
   sub->add_option("--noise", args->options.noise_sd_bits, "Sensor noise SD, bits")
-      ->check(CLI::Range(0.0, 50.0))
+      ->check(number_in(0.0, 50.0))
       ->capture_default_str();
   sub->add_option("--tissue-step-sd", args->options.tissue_step_sd_pct,
                   "Step-to-step SD of kbar and cbar (log-normal, % of the value); 0 keeps every "
                   "step at the region's parameters")
-      ->check(CLI::Range(0.0, 100.0))
+      ->check(number_in(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--max-bias", args->options.max_bias_bits,
                   "Per-sensor dc bias, uniform integer 0..MAX bits")

@@ -109,6 +109,38 @@ TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
   EXPECT_NE(out.find("surprise"), std::string::npos) << out;
 }
 
+// Nobody steps on the insoles: there is nothing to fit, and an output of nothing would read as
+// a perfect fit (medians of 0, an NRMSE of 0 %).
+TEST(Cli, ASessionWithoutACompleteStepIsRefusedByAnalyzeAndDiscrepancy) {
+  const auto dir = test::scratch_dir("cli-no-steps");
+  std::string text =
+      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
+  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
+  text += "\n";
+  for (int k = 0; k < 300; ++k) {
+    for (const char* foot : {",L", ",R"}) {
+      text += std::to_string(0.01 * k) + foot;
+      for (int i = 1; i <= 93; ++i) text += ",3";
+      text += "\n";
+    }
+  }
+  const std::string session = test::write_text(dir / "standing.csv", text).string();
+  int status = -1;
+  std::string out = run("analyze " + session + " --out " + (dir / "a").string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find(session + ": no complete step to fit in 300 and 300 frames"),
+            std::string::npos)
+      << out;
+  EXPECT_TRUE(!std::filesystem::exists(dir / "a") || std::filesystem::is_empty(dir / "a"));
+
+  out = run("discrepancy " + session + " --out " + (dir / "d").string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find(session + ": 0 complete steps, need at least 5 (one per fold of --folds)"),
+            std::string::npos)
+      << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "d"));
+}
+
 // A wrong command line is exit code 2, as a bad file is, and its message names what is wrong;
 // asking for help is success.
 TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
@@ -134,6 +166,60 @@ TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
   out = run("analyze --help", &status);
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find("--report"), std::string::npos) << out;
+}
+
+// nan passes a plain range check (it compares false with both bounds), and CLI11 wraps "-1" and
+// clamps a number too large into an unsigned option: each is a usage error naming the option.
+TEST(Cli, ANumberOutsideItsRangeNanOrANegativeSeedIsAUsageError) {
+  const auto dir = test::scratch_dir("cli-numbers");
+  const std::string demo = test::demo_session().string();
+  const std::string simulate = "simulate --duration 2 --out " + (dir / "s.csv").string() + " ";
+  const std::string discrepancy = "discrepancy " + demo + " --out " + (dir / "d").string() + " ";
+  const struct {
+    std::string args;
+    const char* says;
+  } cases[] = {
+      {discrepancy + "--min-shrink nan", "--min-shrink: 'nan' is not in [0, 100]"},
+      {discrepancy + "--min-zero-shrink -nan", "--min-zero-shrink: '-nan' is not in [0, 100]"},
+      {discrepancy + "--min-delta-bic inf", "--min-delta-bic: 'inf' is not in [0, 1000000]"},
+      {discrepancy + "--min-shrink 5x", "--min-shrink: '5x' is not a number"},
+      {simulate + "--duration nan", "--duration: 'nan' is not in [0.1, 86400]"},
+      {simulate + "--body-mass nan", "--body-mass: 'nan' is not in [1, 300]"},
+      {simulate + "--stride 0.5", "--stride: '0.5' is not in (0.5, 3]"},
+      {simulate + "--noise nan", "--noise: 'nan' is not in [0, 50]"},
+      {simulate + "--seed -1", "--seed: '-1' is not a whole number >= 0"},
+      {simulate + "--seed 99999999999999999999",
+       "--seed: '99999999999999999999' is larger than 18446744073709551615"},
+  };
+  for (const auto& c : cases) {
+    int status = -1;
+    const std::string out = run(c.args, &status);
+    EXPECT_EQ(status, 2) << c.args << "\n" << out;
+    EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "s.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "d"));
+  int status = -1;
+  const std::string out = run(simulate + "--stride 3 --seed 18446744073709551615", &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("seed 18446744073709551615"), std::string::npos) << out;
+}
+
+// stdout carries results only: the log goes to stderr, so a pipe gets the table alone.
+TEST(Cli, LogLinesGoToStandardErrorAndResultsToStandardOutput) {
+  const auto dir = test::scratch_dir("cli-streams");
+  // In a subshell: run_command sends the outer stderr to the pipe too.
+  const std::string analyze = "(" + test::gaitmon_binary().string() +
+                              " --log-level debug analyze " + test::demo_session().string() +
+                              " --out ";
+  std::string out;
+  ASSERT_EQ(test::run_command(analyze + (dir / "a").string() + " 2>/dev/null)", &out), 0) << out;
+  EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
+  EXPECT_NE(out.find("kbar"), std::string::npos) << out;
+  ASSERT_EQ(test::run_command(analyze + (dir / "b").string() + " 2>&1 >/dev/null)", &out), 0)
+      << out;
+  EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
+  EXPECT_EQ(out.find("kbar"), std::string::npos) << out;
 }
 
 // analyze logs its timings at debug level: they show exactly when the level allows them.

@@ -75,6 +75,26 @@ TEST(OutputFile, AFailedRenameTakesBackTheFilesAlreadyPublished) {
   EXPECT_EQ(names_in(dir), std::vector<std::string>{"session.json"});
 }
 
+TEST(OutputFile, AFileHandedOverToAnotherWriterIsCommittedOrRemovedAsItsOwn) {
+  const fs::path dir = test::scratch_dir("output_handed_over");
+  {
+    OutputFile abandoned(dir / "a.csv");
+    test::write_text(abandoned.hand_over(), "written by path\n");
+    EXPECT_EQ(names_in(dir), std::vector<std::string>{"a.csv.partial"});
+    EXPECT_THROW(abandoned.write("x"), std::logic_error);
+  }
+  EXPECT_TRUE(names_in(dir).empty());
+
+  OutputFile handed(dir / "b.csv");
+  OutputFile own(dir / "b.json");
+  test::write_text(handed.hand_over(), "written by path\n");
+  own.write("{}\n");
+  OutputFile* const files[] = {&handed, &own};
+  OutputFile::commit_all(files);
+  EXPECT_EQ(names_in(dir), (std::vector<std::string>{"b.csv", "b.json"}));
+  EXPECT_EQ(read(dir / "b.csv"), "written by path\n");
+}
+
 TEST(OutputFile, AFolderThatCannotBeWrittenIsNamedInTheError) {
   const fs::path dir = test::scratch_dir("output_missing") / "not_there";
   OutputSet set(dir);

@@ -75,6 +75,30 @@ TEST(SimulateCommand, AMalformedParamIsAUsageErrorThatNamesItAndWritesNothing) {
   }
 }
 
+TEST(SimulateCommand, AFailedRunLeavesNeitherFileUnderItsFinalName) {
+  const auto dir = test::scratch_dir("simulate-fails");
+  // A folder that is not empty cannot be replaced by the truth file, so publication fails after
+  // the session was written in full.
+  test::write_text(dir / "truth" / "keep", "x");
+  int status = -1;
+  const std::string out = simulate(dir / "s.csv", "--truth " + (dir / "truth").string(), &status);
+  EXPECT_EQ(status, 1) << out;
+  EXPECT_NE(out.find((dir / "truth").string() + ": cannot rename"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "s.csv"));
+  EXPECT_FALSE(fs::exists(dir / "s.csv.partial"));
+  EXPECT_FALSE(fs::exists(dir / "truth.partial"));
+  EXPECT_TRUE(fs::is_directory(dir / "truth"));
+
+  // Cut short by the file size limit (SIGXFSZ ignored, so the write fails instead).
+  const std::string limited = "(trap '' XFSZ; ulimit -f 64; " + test::gaitmon_binary().string() +
+                              " simulate --duration 10 --out " + (dir / "big.csv").string() + ")";
+  std::string output;
+  EXPECT_NE(test::run_command(limited, &output), 0) << output;
+  EXPECT_FALSE(fs::exists(dir / "big.csv"));
+  EXPECT_FALSE(fs::exists(dir / "big.truth.json"));
+  EXPECT_FALSE(fs::exists(dir / "big.csv.partial"));
+}
+
 TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
   const auto dir = test::scratch_dir("simulate-effects");
   const struct {
