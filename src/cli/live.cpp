@@ -50,14 +50,15 @@ void LinkStatus::on_state(drivers::LinkState state, std::string_view detail) {
     connections_.fetch_add(1);
     spdlog::info("link connected: {}", detail);
   } else if (state == drivers::LinkState::Disconnected) {
+    decoder_.reset();
     spdlog::warn("link disconnected: {}", detail);
   } else {
     spdlog::info("link connecting: {}", detail);
   }
 }
 
-void LinkStatus::fill(StatusReport& status, const drivers::FrameDecoder& decoder) const {
-  const drivers::DecoderCounters c = decoder.counters();
+void LinkStatus::fill(StatusReport& status) const {
+  const drivers::DecoderCounters c = decoder_.counters();
   status.connection = std::string(drivers::link_state_name(state_.load()));
   status.bytes_received = c.bytes;
   status.frames_decoded = c.frames;

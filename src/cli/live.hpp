@@ -28,17 +28,21 @@ std::unique_ptr<drivers::ByteSource> make_insole_source(const Config& config, bo
 std::string insole_source_name(const Config& config, bool usb);
 
 /// The link's state and reconnections, written by the driver thread's state handler and read by
-/// the status (any thread).
+/// the status (any thread), and the link's decoder.
 class LinkStatus {
  public:
-  /// The ByteSource's state handler: logs every change and counts reconnections (a Connected
-  /// after the first).
+  explicit LinkStatus(drivers::FrameDecoder& decoder) : decoder_(decoder) {}
+
+  /// The ByteSource's state handler, so on the driver thread: logs every change, counts
+  /// reconnections (a Connected after the first) and resets the decoder on a Disconnected, as
+  /// a partial frame of the old connection must not be joined to the new one's bytes.
   void on_state(drivers::LinkState state, std::string_view detail);
   /// Fills the driver's fields of a status report from this and the decoder's counters.
-  void fill(StatusReport& status, const drivers::FrameDecoder& decoder) const;
+  void fill(StatusReport& status) const;
   drivers::LinkState state() const { return state_.load(); }
 
  private:
+  drivers::FrameDecoder& decoder_;
   std::atomic<drivers::LinkState> state_{drivers::LinkState::Connecting};
   std::atomic<std::uint64_t> connections_{0};
 };

@@ -123,7 +123,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
   // a full ring drops (and counts) them as in `gaitmon run`.
   FrameRing ring(config.ring.capacity_frames);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
-  LinkStatus link;
+  LinkStatus link(decoder);
   SessionRecorder recorder(partial, config.sample_rate_hz, source_name);
   std::atomic<bool> driver_done{false};
   std::exception_ptr writer_error;

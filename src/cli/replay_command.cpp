@@ -42,13 +42,13 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   LcmPublisher lcm(config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder(format);
-  LinkStatus link;
+  LinkStatus link(decoder);
   MonitorOptions options;
   options.sample_rate_hz = source.header().sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
   // A replay never skips: a full ring or backlog makes the fake driver wait.
   options.backlog_overflow = BacklogOverflow::Wait;
-  options.driver_status = [&](StatusReport& status) { link.fill(status, decoder); };
+  options.driver_status = [&](StatusReport& status) { link.fill(status); };
   Monitor monitor(config, options, printer);
   running.store(&monitor);
   spdlog::info("replay: {} at {} -> LCM {}", args.session.string(),

@@ -41,12 +41,12 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   LcmPublisher lcm(config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
-  LinkStatus link;
+  LinkStatus link(decoder);
   MonitorOptions options;
   options.sample_rate_hz = config.sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
   options.backlog_overflow = BacklogOverflow::DropOldest;
-  options.driver_status = [&](StatusReport& status) { link.fill(status, decoder); };
+  options.driver_status = [&](StatusReport& status) { link.fill(status); };
   Monitor monitor(config, options, printer);
   running.store(&monitor);
   spdlog::info("run: {} -> LCM {}", insole_source_name(config, args.usb), config.lcm.url);
