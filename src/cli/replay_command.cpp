@@ -34,9 +34,10 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   replay::SessionByteSource source(args.session, format, speed);
   // Signals first: every thread started below inherits the blocked mask.
   std::atomic<Monitor*> running{nullptr};
+  // The driver first, then the monitor, to release the driver from a wait for room in the ring.
   StopOnSignal on_signal([&](int) {
-    if (Monitor* m = running.load()) m->close();
     source.stop();
+    if (Monitor* m = running.load()) m->close();
   });
 
   LcmPublisher lcm(config.lcm);
@@ -73,9 +74,10 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
       static_cast<double>(c.frames_processed) / 2.0 / source.header().sample_rate_hz;
   fmt::print(
       "replayed {} frames (about {:.1f} s of two feet) in {:.2f} s ({:.0f} x real time); steps {}, "
-      "fits {} published ({} with failures); ring drops {}, step drops {}\n",
+      "fits {} published ({} with failures); ring drops {}, refused {}, step drops {}\n",
       c.frames_processed, session_s, wall_s, wall_s > 0.0 ? session_s / wall_s : 0.0,
-      c.steps_detected, c.fits_published, c.fits_failed, c.ring_drops, c.step_drops);
+      c.steps_detected, c.fits_published, c.fits_failed, c.ring_drops, c.frames_refused,
+      c.step_drops);
 }
 
 }  // namespace
