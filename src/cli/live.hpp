@@ -93,4 +93,18 @@ class StopOnSignal {
   std::thread watcher_;
 };
 
+/// Calls finish() of a StopOnSignal at its end. The watcher is constructed first, so it would
+/// otherwise outlive what its callback touches; declared after those, this stops it before they
+/// are destroyed on every path out of the command, an exception's included.
+class FinishOnExit {
+ public:
+  explicit FinishOnExit(StopOnSignal& watcher) : watcher_(watcher) {}
+  ~FinishOnExit() { watcher_.finish(); }
+  FinishOnExit(const FinishOnExit&) = delete;
+  FinishOnExit& operator=(const FinishOnExit&) = delete;
+
+ private:
+  StopOnSignal& watcher_;
+};
+
 }  // namespace gaitmon::cli

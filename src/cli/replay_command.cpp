@@ -51,6 +51,7 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   options.backlog_overflow = BacklogOverflow::Wait;
   options.driver_status = [&](StatusReport& status) { link.fill(status); };
   Monitor monitor(config, options, printer);
+  const FinishOnExit watching(on_signal);
   running.store(&monitor);
   spdlog::info("replay: {} at {} -> LCM {}", args.session.string(),
                std::isinf(speed) ? std::string("max speed") : fmt::format("x{}", speed),

@@ -248,5 +248,22 @@ TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   EXPECT_TRUE(take_pending().empty());
 }
 
+// A command that throws unwinds what the callback touches before the watcher it declared first:
+// the guard, declared after those, stops the watcher before they go.
+TEST(Live, TheGuardStopsTheWatcherWhenTheCommandThrows) {
+  std::atomic<int> calls{0};
+  StopOnSignal stop([&](int) { ++calls; });
+  try {
+    const FinishOnExit watching(stop);
+    throw std::runtime_error("the driver failed");
+  } catch (const std::runtime_error&) {
+  }
+  ASSERT_EQ(kill(getpid(), SIGINT), 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(calls.load(), 0);
+  EXPECT_EQ(stop.received(), 0);
+  EXPECT_EQ(take_pending(), std::vector<int>{SIGINT});
+}
+
 }  // namespace
 }  // namespace gaitmon::cli

@@ -169,6 +169,31 @@ TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
   }
 }
 
+// The session is read while it is replayed: a bad line halfway is an input error (exit 2, the
+// file and line named) raised on the driver thread, which unwinds the monitor and the signal
+// watcher without a crash.
+TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
+  const fs::path dir = test::scratch_dir("replay-bad-line");
+  const fs::path good = test::cut_session(test::demo_session(), dir / "good.csv", 10.0);
+  std::ifstream in(good);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  const std::size_t bad = lines.size() / 2;
+  lines[bad] = "1.0,L,not-a-number";
+  std::string text;
+  for (const std::string& line : lines) text += line + "\n";
+  const fs::path session = test::write_text(dir / "bad.csv", text);
+
+  std::string out;
+  EXPECT_EQ(
+      test::run_command(test::gaitmon_binary().string() + " replay " + session.string() +
+                            " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
+                        &out),
+      2)
+      << out;
+  EXPECT_NE(out.find("bad.csv:" + std::to_string(bad + 1)), std::string::npos) << out;
+}
+
 TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {
   const fs::path dir = test::scratch_dir("replay-sigint");
   const fs::path log = dir / "replay.lcmlog";
