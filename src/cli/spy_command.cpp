@@ -163,14 +163,16 @@ void run_spy(const GlobalOptions& global, const SpyArgs& args) {
   LcmSettings settings = load_global_config(global).lcm;
   if (!args.lcm_url.empty()) settings.url = args.lcm_url;
   std::uint64_t received = 0;
-  LcmSubscriber subscriber(settings, resolve_channels(settings.channels, args.channels),
-                           [&received](const std::string& channel, const LcmMessage& message) {
-                             json line =
-                                 std::visit([](const auto& m) { return to_json(m); }, message);
-                             line["channel"] = channel;
-                             std::cout << line.dump() << '\n' << std::flush;
-                             ++received;
-                           });
+  LcmSubscriber subscriber(
+      settings, resolve_channels(settings.channels, args.channels),
+      [&received](const std::string& channel, const LcmMessage& message) {
+        json line = std::visit([](const auto& m) { return to_json(m); }, message);
+        line["channel"] = channel;
+        // A string off the bus need not be UTF-8.
+        std::cout << line.dump(-1, ' ', false, json::error_handler_t::replace) << '\n'
+                  << std::flush;
+        ++received;
+      });
   // On stderr, so stdout holds only messages: a script may start publishing once it sees this.
   fmt::print(stderr, "gaitmon spy: listening on {}\n", settings.url);
   std::fflush(stderr);
