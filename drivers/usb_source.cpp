@@ -51,6 +51,9 @@ struct UsbSource::Impl {
   bool arrived = false;  ///< set by the hotplug callback on the driver thread
   bool lost = false;
   bool received = false;  ///< the current connection has delivered bytes
+  /// A transfer stalled: the device keeps the endpoint halted, across a reopen too, until a
+  /// clear.
+  bool halted = false;
   std::string lost_reason;
   const BytesHandler* on_bytes = nullptr;
   std::vector<Slot> slots;
@@ -60,6 +63,7 @@ struct UsbSource::Impl {
     Impl& d = *slot->owner;
     slot->in_flight = false;
     if (transfer->actual_length > 0) d.received = true;
+    if (transfer->status == LIBUSB_TRANSFER_STALL) d.halted = true;
     const std::span<const std::uint8_t> data(transfer->buffer,
                                              static_cast<std::size_t>(transfer->actual_length));
     const TransferAction action =
@@ -178,6 +182,8 @@ void UsbSource::run(const BytesHandler& on_bytes, const StateHandler& on_state) 
     if (handle != nullptr) {
       libusb_set_auto_detach_kernel_driver(handle, 1);
       if (libusb_claim_interface(handle, d.settings.interface) == 0) {
+        // A clear that fails leaves the endpoint stalling: the link is lost again and retried.
+        if (d.halted && libusb_clear_halt(handle, d.settings.endpoint) == 0) d.halted = false;
         state = LinkState::Connected;
         on_state(state, name);
         d.stream(handle);

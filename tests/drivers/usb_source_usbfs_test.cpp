@@ -242,6 +242,9 @@ TEST(UsbSourceOnUsbfs, AFailedTransferLosesTheLinkAndTheDriverReconnects) {
     ASSERT_TRUE(driver.wait_for_bytes(3));
     driver.stop();
     EXPECT_EQ(driver.bytes(), (std::vector<std::uint8_t>{7, 8, 9}));
+    // A stall halts the endpoint until cleared: data flows again only because the driver
+    // cleared it when it reconnected.
+    EXPECT_EQ(insole.counts().clear_halts, c.status == -EPIPE ? 1 : 0);
     EXPECT_EQ(driver.states(),
               (std::vector<LinkState>{LinkState::Connecting, LinkState::Connected,
                                       LinkState::Disconnected, LinkState::Connecting,
