@@ -161,7 +161,7 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("session", args->session, "Session CSV v1 to play")
       ->required()
       ->check(CLI::ExistingFile);
-  sub->add_option("--speed", args->speed, "Playback speed: x real time, or max")
+  sub->add_option("--speed", args->speed, "Playback speed: x real time (at least 0.001), or max")
       ->capture_default_str();
   sub->add_flag("--pty", args->pty, "Create a pseudo-terminal and print its path");
   sub->add_option("--link", args->link,

@@ -28,8 +28,10 @@ double parse_speed(const std::string& text) {
   } catch (const std::exception&) {
     used = 0;
   }
-  if (used != text.size() || !(speed > 0.0) || !std::isfinite(speed)) {
-    throw CLI::ValidationError("--speed", "must be a number > 0 or max, got " + text);
+  if (used != text.size() || !(speed >= kMinSpeed) || !std::isfinite(speed)) {
+    throw CLI::ValidationError(
+        "--speed",
+        fmt::format("must be a number >= {:g} (x real time) or max, got {}", kMinSpeed, text));
   }
   return speed;
 }

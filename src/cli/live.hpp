@@ -18,7 +18,12 @@
 
 namespace gaitmon::cli {
 
-/// "max" (replay::kMaxSpeed) or a number > 0. Throws CLI::ValidationError otherwise.
+/// The slowest playback: slower would stretch a session beyond what the pacer's clock can hold
+/// (x 1e-300 is undefined behaviour) and is no use anyway.
+inline constexpr double kMinSpeed = 0.001;
+
+/// "max" (replay::kMaxSpeed) or a finite number >= kMinSpeed. Throws CLI::ValidationError
+/// otherwise.
 double parse_speed(const std::string& text);
 
 /// The insole link of `run` and `record`: the USB driver of [usb] with `usb`, else the serial

@@ -20,16 +20,19 @@
 namespace gaitmon::cli {
 namespace {
 
-TEST(Live, SpeedIsMaxOrAPositiveNumber) {
+TEST(Live, SpeedIsMaxOrANumberFromTheSlowest) {
   EXPECT_EQ(parse_speed("max"), replay::kMaxSpeed);
   EXPECT_EQ(parse_speed("2.5"), 2.5);
   EXPECT_EQ(parse_speed("1"), 1.0);
-  for (const char* bad : {"0", "-1", "", "fast", "2x", "inf", "nan", "1e400", "MAX"}) {
+  EXPECT_EQ(parse_speed("0.001"), 0.001);
+  for (const char* bad :
+       {"0", "-1", "", "fast", "2x", "inf", "nan", "1e400", "MAX", "0.0009", "1e-12", "1e-300"}) {
     try {
       parse_speed(bad);
       ADD_FAILURE() << "accepted '" << bad << "'";
     } catch (const CLI::ValidationError& e) {
-      EXPECT_NE(std::string(e.what()).find(std::string("must be a number > 0 or max, got ") + bad),
+      EXPECT_NE(std::string(e.what()).find(
+                    std::string("must be a number >= 0.001 (x real time) or max, got ") + bad),
                 std::string::npos)
           << e.what();
     }
