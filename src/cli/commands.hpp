@@ -2,11 +2,17 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <string_view>
 
 #include "gaitmon/config.hpp"
+
+namespace lcm {
+class LCM;
+}
 
 namespace gaitmon::cli {
 
@@ -24,6 +30,17 @@ Config load_global_config(const GlobalOptions& global);
 /// and "(no SE)" where the data do not determine it (a non-finite se), so that no report prints
 /// "nan".
 std::string estimate_text(double value, double se, std::string_view plus_minus);
+
+/// Opens the LCM connection of --lcm-url (from_command_line) or of [lcm] url: a URL LCM cannot
+/// open is a command-line error (CLI::ValidationError) or a config error (ConfigError), exit 2.
+std::shared_ptr<lcm::LCM> open_lcm_url(const GlobalOptions& global, const std::string& url,
+                                       bool from_command_line);
+
+/// A check of an option: a finite number from min to max, else "must be a number from MIN to MAX,
+/// got TEXT" (NaN and trailing text refused, which CLI::Range lets through or mis-states).
+CLI::Validator number_range(double min, double max);
+/// A check of an option: a whole number >= min, else "must be a whole number >= MIN, got TEXT".
+CLI::Validator whole_number_from(std::uint64_t min);
 
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);

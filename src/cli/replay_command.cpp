@@ -40,7 +40,7 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
     if (Monitor* m = running.load()) m->close();
   });
 
-  LcmPublisher lcm(config.lcm);
+  LcmPublisher lcm(open_lcm_url(global, config.lcm.url, !args.lcm_url.empty()), config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder(format);
   LinkStatus link(decoder);

@@ -38,7 +38,7 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   source = make_insole_source(config, args.usb);
   live_source.store(source.get());
 
-  LcmPublisher lcm(config.lcm);
+  LcmPublisher lcm(open_lcm_url(global, config.lcm.url, !args.lcm_url.empty()), config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
   LinkStatus link(decoder);

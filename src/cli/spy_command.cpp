@@ -164,7 +164,8 @@ void run_spy(const GlobalOptions& global, const SpyArgs& args) {
   if (!args.lcm_url.empty()) settings.url = args.lcm_url;
   std::uint64_t received = 0;
   LcmSubscriber subscriber(
-      settings, resolve_channels(settings.channels, args.channels),
+      open_lcm_url(global, settings.url, !args.lcm_url.empty()), settings,
+      resolve_channels(settings.channels, args.channels),
       [&received](const std::string& channel, const LcmMessage& message) {
         json line = std::visit([](const auto& m) { return to_json(m); }, message);
         line["channel"] = channel;
@@ -210,9 +211,10 @@ void add_spy_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->add_option("--count", args->count,
                   "Exit after this many messages (exit code 1 if --timeout-s comes first)")
-      ->check(CLI::PositiveNumber);
+      ->check(whole_number_from(1));
   sub->add_option("--timeout-s", args->timeout_s, "Exit after this many seconds")
-      ->check(CLI::PositiveNumber);
+      // From 1 ms, the wait's resolution, to a deadline within the clock's range.
+      ->check(number_range(0.001, 1e9));
   sub->callback([&global, args] { run_spy(global, *args); });
 }
 

@@ -169,6 +169,27 @@ TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
   }
 }
 
+// A URL LCM cannot open and a speed too slow for the pacer are command-line errors (exit 2).
+TEST(ReplayCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : {
+           Case{"--lcm-url bogus://", "--lcm-url: LCM cannot open \"bogus://\""},
+           Case{"--lcm-url memq", "--lcm-url: LCM cannot open \"memq\""},
+           Case{"--speed 1e-300", "--speed: must be a number >= 0.001 (x real time) or max"},
+       }) {
+    SCOPED_TRACE(c.args);
+    std::string out;
+    EXPECT_EQ(test::run_command(
+                  "timeout 60 " + test::gaitmon_binary().string() + " replay " + c.args, &out),
+              2)
+        << out;
+    EXPECT_NE(out.find(c.message), std::string::npos) << out;
+  }
+}
+
 // The session is read while it is replayed: a bad line halfway is an input error (exit 2, the
 // file and line named) raised on the driver thread, which unwinds the monitor and the signal
 // watcher without a crash.

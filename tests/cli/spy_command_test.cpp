@@ -1,5 +1,5 @@
-// `gaitmon spy` run as a program: messages it must survive (malformed bytes, strings that are
-// not UTF-8), read back from an LCM log through LCM's file:// provider.
+// `gaitmon spy` run as a program: its option errors, and messages it must survive (malformed
+// bytes, strings that are not UTF-8), read back from an LCM log through LCM's file:// provider.
 #include <gtest/gtest.h>
 
 #include <gaitmon/raw_t.hpp>
@@ -21,6 +21,27 @@ std::string spy(const std::string& args, int* status) {
   *status =
       test::run_command("timeout 30 " + test::gaitmon_binary().string() + " spy " + args, &output);
   return output;
+}
+
+TEST(SpyCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : {
+           Case{"--count 0", "--count: must be a whole number >= 1, got 0"},
+           Case{"--count -1", "--count: must be a whole number >= 1, got -1"},
+           Case{"--timeout-s nan", "--timeout-s: must be a number from 0.001 to 1e+09, got nan"},
+           Case{"--timeout-s 0", "--timeout-s: must be a number from 0.001 to 1e+09, got 0"},
+           Case{"--lcm-url bogus:// --timeout-s 1", "--lcm-url: LCM cannot open \"bogus://\""},
+           Case{"--lcm-url memq --timeout-s 1", "--lcm-url: LCM cannot open \"memq\""},
+       }) {
+    SCOPED_TRACE(c.args);
+    int status = -1;
+    const std::string out = spy(c.args, &status);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find(c.message), std::string::npos) << out;
+  }
 }
 
 // A message the decoder throws on (a negative array length) is skipped, and a string that is not
