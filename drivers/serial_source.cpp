@@ -81,7 +81,6 @@ struct SerialSource::Impl {
       schedule_retry();
       return;
     }
-    backoff = std::chrono::milliseconds(settings.reconnect_initial_ms);
     report(LinkState::Connected, settings.device);
     read();
   }
@@ -96,7 +95,12 @@ struct SerialSource::Impl {
 
   void read() {
     port.async_read_some(asio::buffer(buffer), [this](const error_code& ec, std::size_t n) {
-      if (n > 0) (*on_bytes)(std::span<const std::uint8_t>(buffer.data(), n));
+      if (n > 0) {
+        // Data, not an open alone, shows the device works: one that fails its first read
+        // keeps backing off.
+        backoff = std::chrono::milliseconds(settings.reconnect_initial_ms);
+        (*on_bytes)(std::span<const std::uint8_t>(buffer.data(), n));
+      }
       if (stopping.load()) return;
       if (!ec) {
         read();
@@ -107,7 +111,6 @@ struct SerialSource::Impl {
       error_code ignored;
       port.close(ignored);
       report(LinkState::Disconnected, settings.device + ": " + ec.message());
-      backoff = std::chrono::milliseconds(settings.reconnect_initial_ms);
       schedule_retry();
     });
   }

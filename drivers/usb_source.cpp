@@ -50,6 +50,10 @@ struct UsbSource::Impl {
   std::atomic<bool> stopping{false};
   bool arrived = false;  ///< set by the hotplug callback on the driver thread
   bool lost = false;
+  bool received = false;  ///< the current connection has delivered bytes
+  /// A transfer stalled: the device keeps the endpoint halted, across a reopen too, until a
+  /// clear.
+  bool halted = false;
   std::string lost_reason;
   const BytesHandler* on_bytes = nullptr;
   std::vector<Slot> slots;
@@ -58,6 +62,8 @@ struct UsbSource::Impl {
     auto* slot = static_cast<Slot*>(transfer->user_data);
     Impl& d = *slot->owner;
     slot->in_flight = false;
+    if (transfer->actual_length > 0) d.received = true;
+    if (transfer->status == LIBUSB_TRANSFER_STALL) d.halted = true;
     const std::span<const std::uint8_t> data(transfer->buffer,
                                              static_cast<std::size_t>(transfer->actual_length));
     const TransferAction action =
@@ -108,6 +114,7 @@ struct UsbSource::Impl {
   // allocated until free_slots(), after the handle is closed.
   void stream(libusb_device_handle* handle) {
     lost = false;
+    received = false;
     slots.assign(static_cast<std::size_t>(settings.transfers), Slot{});
     for (Slot& slot : slots) {
       slot.owner = this;
@@ -175,10 +182,14 @@ void UsbSource::run(const BytesHandler& on_bytes, const StateHandler& on_state) 
     if (handle != nullptr) {
       libusb_set_auto_detach_kernel_driver(handle, 1);
       if (libusb_claim_interface(handle, d.settings.interface) == 0) {
-        backoff = std::chrono::milliseconds(d.settings.reconnect_initial_ms);
+        // A clear that fails leaves the endpoint stalling: the link is lost again and retried.
+        if (d.halted && libusb_clear_halt(handle, d.settings.endpoint) == 0) d.halted = false;
         state = LinkState::Connected;
         on_state(state, name);
         d.stream(handle);
+        // Data, not a claim alone, shows the device works: one that fails its first transfer
+        // keeps backing off.
+        if (d.received) backoff = std::chrono::milliseconds(d.settings.reconnect_initial_ms);
         libusb_release_interface(handle, d.settings.interface);
         if (!d.stopping.load()) {
           state = LinkState::Disconnected;

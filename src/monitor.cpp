@@ -649,6 +649,7 @@ struct Monitor::Impl {
     MonitorCounters c;
     c.ring_drops = ring.drops();
     c.frames_offered = ring.pushed() + c.ring_drops;
+    c.frames_refused = refused.load(std::memory_order_relaxed);
     c.ring_depth = ring.depth();
     c.frames_processed = processed.load(std::memory_order_relaxed);
     c.frames_rejected = rejected.load(std::memory_order_relaxed);
@@ -712,8 +713,9 @@ struct Monitor::Impl {
   FrameRing ring;
   const Clock::duration status_period;
   std::atomic<bool> closed{false};
-  std::atomic<bool> interrupted{false};  ///< close() was called: a signal, not the end of input
-  std::stop_source effects_stop;         ///< requested with `interrupted`
+  std::atomic<std::uint64_t> refused{0};  ///< offers after close(), by the driver thread
+  std::atomic<bool> interrupted{false};   ///< close() was called: a signal, not the end of input
+  std::stop_source effects_stop;          ///< requested with `interrupted`
   std::atomic<bool> input_done{false};
   std::mutex stop_mutex;
   bool stopped = false;
@@ -775,13 +777,20 @@ Monitor::~Monitor() {
 }
 
 bool Monitor::offer(const SensorFrame& frame) {
-  if (impl_->closed.load(std::memory_order_relaxed)) return false;
+  if (impl_->closed.load(std::memory_order_relaxed)) {
+    impl_->refused.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
   return impl_->ring.try_push(frame);
 }
 
 bool Monitor::offer_wait(const SensorFrame& frame) {
-  if (impl_->closed.load(std::memory_order_relaxed)) return false;
-  return impl_->ring.push_wait(frame, impl_->closed);
+  if (impl_->closed.load(std::memory_order_relaxed) ||
+      !impl_->ring.push_wait(frame, impl_->closed)) {
+    impl_->refused.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  return true;
 }
 
 void Monitor::close() {

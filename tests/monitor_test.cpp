@@ -386,6 +386,26 @@ TEST(Monitor, StopDrainsTheRingFinishesTheFitsAndPublishesAFinalStatus) {
             1);
 }
 
+// A driver still delivering after a SIGINT closed the monitor must not lose frames silently.
+TEST(Monitor, OffersAfterCloseAreRefusedAndCounted) {
+  const Config config = shipped_config();
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  RecordingPublisher publisher;
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  Monitor monitor(config, options, publisher);
+  ASSERT_TRUE(monitor.offer(frames[0]));
+  monitor.close();
+  EXPECT_FALSE(monitor.offer(frames[1]));
+  EXPECT_FALSE(monitor.offer_wait(frames[2]));
+  monitor.stop();
+  EXPECT_FALSE(monitor.offer(frames[3]));
+  const MonitorCounters c = monitor.counters();
+  EXPECT_EQ(c.frames_offered, 1u);
+  EXPECT_EQ(c.frames_refused, 3u);
+  EXPECT_EQ(c.frames_processed, 1u);
+}
+
 // [model] effects in the config: the monitor fits the extended model to its latest complete
 // steps as `gaitmon analyze --effects` fits it to a session (make_discrepancy_input and
 // fit_extended_model over the same analyses), now and then and once more at shutdown.

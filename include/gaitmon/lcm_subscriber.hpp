@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "gaitmon/config.hpp"
+#include "gaitmon/log_throttle.hpp"
 #include "gaitmon/publisher.hpp"
 
 namespace lcm {
@@ -48,8 +49,8 @@ class LcmSubscriber {
   /// @throw LcmError if LCM reports an error while waiting.
   bool handle(int timeout_ms);
 
-  /// Messages on a subscribed channel that were not the expected type or held impossible values
-  /// (a foot other than 0 or 1, ...); they are skipped.
+  /// Messages on a subscribed channel that were not the expected type, were malformed or held
+  /// impossible values (a foot other than 0 or 1, ...); they are skipped.
   std::uint64_t decode_errors() const noexcept { return decode_errors_; }
 
  private:
@@ -60,6 +61,7 @@ class LcmSubscriber {
   Handler handler_;
   std::vector<std::unique_ptr<Route>> routes_;
   std::uint64_t decode_errors_ = 0;
+  LogThrottle decode_log_;
   std::exception_ptr pending_;
 };
 

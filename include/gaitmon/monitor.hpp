@@ -101,6 +101,7 @@ struct MonitorOptions {
 /// Totals since start; readable from any thread.
 struct MonitorCounters {
   std::uint64_t frames_offered = 0;  ///< offers accepted into the ring or dropped
+  std::uint64_t frames_refused = 0;  ///< offers refused because the monitor was closed
   std::uint64_t ring_drops = 0;
   std::uint64_t ring_depth = 0;
   std::uint64_t frames_processed = 0;
@@ -125,11 +126,11 @@ class Monitor {
   Monitor& operator=(const Monitor&) = delete;
 
   /// Driver thread only. Queues the frame, or drops and counts it when the ring is full. Never
-  /// waits. False if dropped or the monitor is closed.
+  /// waits. False if dropped or the monitor is closed (counted as refused).
   [[nodiscard]] bool offer(const SensorFrame& frame);
 
   /// Driver thread only. Queues the frame, waiting while the ring is full. False once the
-  /// monitor is closed (the frame is then not queued).
+  /// monitor is closed (the frame is then not queued, and counted as refused).
   [[nodiscard]] bool offer_wait(const SensorFrame& frame);
 
   /// Stop accepting frames, as an interrupted run (see above). Any thread; idempotent.

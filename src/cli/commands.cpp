@@ -6,7 +6,12 @@
 
 #include <charconv>
 #include <cmath>
+#include <memory>
+#include <string>
 #include <system_error>
+
+#include "gaitmon/error.hpp"
+#include "gaitmon/lcm_connection.hpp"
 
 namespace gaitmon::cli {
 
@@ -33,7 +38,7 @@ CLI::Validator number_in(double min, double max, bool open_min) {
       "NUMBER in " + range);
 }
 
-CLI::Validator whole_number_up_to(std::uint64_t max) {
+CLI::Validator whole_number_in(std::uint64_t min, std::uint64_t max) {
   return CLI::Validator(
       [=](std::string& text) -> std::string {
         std::uint64_t value = 0;
@@ -42,15 +47,28 @@ CLI::Validator whole_number_up_to(std::uint64_t max) {
         if (ec == std::errc::result_out_of_range || (ec == std::errc() && value > max)) {
           return "'" + text + "' is larger than " + std::to_string(max);
         }
-        if (ec != std::errc() || ptr != end) return "'" + text + "' is not a whole number >= 0";
+        if (ec != std::errc() || ptr != end) return "'" + text + "' is not a whole number";
+        if (value < min) return "'" + text + "' is less than " + std::to_string(min);
         return {};
       },
-      fmt::format("UINT <= {}", max));
+      fmt::format("UINT in [{}, {}]", min, max));
 }
 
 std::string estimate_text(double value, double se, std::string_view plus_minus) {
   return std::isfinite(se) ? fmt::format("{:.4g}{}{:.2g}", value, plus_minus, se)
                            : fmt::format("{:.4g} (no SE)", value);
+}
+
+std::shared_ptr<lcm::LCM> open_lcm_url(const GlobalOptions& global, const std::string& url,
+                                       bool from_command_line) {
+  try {
+    return open_lcm(url);
+  } catch (const LcmError& e) {
+    if (from_command_line) throw CLI::ValidationError("--lcm-url", e.what());
+    throw ConfigError(
+        (global.config_path.empty() ? default_config_path() : global.config_path).string(),
+        "lcm.url", e.what());
+  }
 }
 
 }  // namespace gaitmon::cli

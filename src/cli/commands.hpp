@@ -4,10 +4,15 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <string_view>
 
 #include "gaitmon/config.hpp"
+
+namespace lcm {
+class LCM;
+}
 
 namespace gaitmon::cli {
 
@@ -26,13 +31,18 @@ Config load_global_config(const GlobalOptions& global);
 /// "nan".
 std::string estimate_text(double value, double se, std::string_view plus_minus);
 
+/// Opens the LCM connection of --lcm-url (from_command_line) or of [lcm] url: a URL LCM cannot
+/// open is a command-line error (CLI::ValidationError) or a config error (ConfigError), exit 2.
+std::shared_ptr<lcm::LCM> open_lcm_url(const GlobalOptions& global, const std::string& url,
+                                       bool from_command_line);
+
 /// The range check of a floating-point option: [min, max], or (min, max] with `open_min`.
 /// CLI::Range lets nan through, as nan compares false with both bounds.
 CLI::Validator number_in(double min, double max, bool open_min = false);
 
-/// The check of an unsigned option: digits only, and within its type. CLI11 takes "-1" and a
-/// number too large for the type and wraps or clamps them.
-CLI::Validator whole_number_up_to(std::uint64_t max);
+/// The check of an unsigned option: digits only, from min to max. CLI11 takes "-1" and a
+/// number too large for the type, and wraps or clamps them.
+CLI::Validator whole_number_in(std::uint64_t min, std::uint64_t max);
 
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);

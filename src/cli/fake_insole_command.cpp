@@ -59,11 +59,11 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
   const Config config = load_global_config(global);
   const double speed = parse_speed(args.speed);
   if (args.reopen_after_s > 0.0 && (!args.pty || args.link.empty())) {
-    throw std::invalid_argument(
-        "--reopen-after needs --pty and --link (the new pty's path differs)");
+    throw CLI::ValidationError("--reopen-after",
+                               "needs --pty and --link (the new pty's path differs)");
   }
   if ((!args.link.empty() || args.hold) && !args.pty) {
-    throw std::invalid_argument("--link and --hold need --pty");
+    throw CLI::ValidationError("--link and --hold", "need --pty");
   }
   const drivers::WireFormat format(config.wire);
   SessionReader reader(args.session);
@@ -161,7 +161,7 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("session", args->session, "Session CSV v1 to play")
       ->required()
       ->check(CLI::ExistingFile);
-  sub->add_option("--speed", args->speed, "Playback speed: x real time, or max")
+  sub->add_option("--speed", args->speed, "Playback speed: x real time (at least 0.001), or max")
       ->capture_default_str();
   sub->add_flag("--pty", args->pty, "Create a pseudo-terminal and print its path");
   sub->add_option("--link", args->link,
@@ -191,7 +191,7 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--reopen-after", args->reopen_after_s,
                   "Close the pty this many seconds after the start and open a new one (needs "
                   "--link); bytes not yet read are lost, as with a real unplug")
-      ->check(CLI::Range(0.0, 86400.0));
+      ->check(number_in(0.0, 86400.0));
   sub->add_option("--reopen-gap-ms", args->reopen_gap_ms, "Time without a pty when reopening, ms")
       ->check(CLI::Range(0, 60000))
       ->capture_default_str();

@@ -28,8 +28,10 @@ double parse_speed(const std::string& text) {
   } catch (const std::exception&) {
     used = 0;
   }
-  if (used != text.size() || !(speed > 0.0) || !std::isfinite(speed)) {
-    throw CLI::ValidationError("--speed", "must be a number > 0 or max, got " + text);
+  if (used != text.size() || !(speed >= kMinSpeed) || !std::isfinite(speed)) {
+    throw CLI::ValidationError(
+        "--speed",
+        fmt::format("must be a number >= {:g} (x real time) or max, got {}", kMinSpeed, text));
   }
   return speed;
 }
@@ -50,14 +52,15 @@ void LinkStatus::on_state(drivers::LinkState state, std::string_view detail) {
     connections_.fetch_add(1);
     spdlog::info("link connected: {}", detail);
   } else if (state == drivers::LinkState::Disconnected) {
+    decoder_.reset();
     spdlog::warn("link disconnected: {}", detail);
   } else {
     spdlog::info("link connecting: {}", detail);
   }
 }
 
-void LinkStatus::fill(StatusReport& status, const drivers::FrameDecoder& decoder) const {
-  const drivers::DecoderCounters c = decoder.counters();
+void LinkStatus::fill(StatusReport& status) const {
+  const drivers::DecoderCounters c = decoder_.counters();
   status.connection = std::string(drivers::link_state_name(state_.load()));
   status.bytes_received = c.bytes;
   status.frames_decoded = c.frames;

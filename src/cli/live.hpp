@@ -18,7 +18,12 @@
 
 namespace gaitmon::cli {
 
-/// "max" (replay::kMaxSpeed) or a number > 0. Throws CLI::ValidationError otherwise.
+/// The slowest playback: slower would stretch a session beyond what the pacer's clock can hold
+/// (x 1e-300 is undefined behaviour) and is no use anyway.
+inline constexpr double kMinSpeed = 0.001;
+
+/// "max" (replay::kMaxSpeed) or a finite number >= kMinSpeed. Throws CLI::ValidationError
+/// otherwise.
 double parse_speed(const std::string& text);
 
 /// The insole link of `run` and `record`: the USB driver of [usb] with `usb`, else the serial
@@ -28,17 +33,21 @@ std::unique_ptr<drivers::ByteSource> make_insole_source(const Config& config, bo
 std::string insole_source_name(const Config& config, bool usb);
 
 /// The link's state and reconnections, written by the driver thread's state handler and read by
-/// the status (any thread).
+/// the status (any thread), and the link's decoder.
 class LinkStatus {
  public:
-  /// The ByteSource's state handler: logs every change and counts reconnections (a Connected
-  /// after the first).
+  explicit LinkStatus(drivers::FrameDecoder& decoder) : decoder_(decoder) {}
+
+  /// The ByteSource's state handler, so on the driver thread: logs every change, counts
+  /// reconnections (a Connected after the first) and resets the decoder on a Disconnected, as
+  /// a partial frame of the old connection must not be joined to the new one's bytes.
   void on_state(drivers::LinkState state, std::string_view detail);
   /// Fills the driver's fields of a status report from this and the decoder's counters.
-  void fill(StatusReport& status, const drivers::FrameDecoder& decoder) const;
+  void fill(StatusReport& status) const;
   drivers::LinkState state() const { return state_.load(); }
 
  private:
+  drivers::FrameDecoder& decoder_;
   std::atomic<drivers::LinkState> state_{drivers::LinkState::Connecting};
   std::atomic<std::uint64_t> connections_{0};
 };
@@ -87,6 +96,20 @@ class StopOnSignal {
   std::atomic<int> received_{0};
   std::atomic<bool> done_{false};
   std::thread watcher_;
+};
+
+/// Calls finish() of a StopOnSignal at its end. The watcher is constructed first, so it would
+/// otherwise outlive what its callback touches; declared after those, this stops it before they
+/// are destroyed on every path out of the command, an exception's included.
+class FinishOnExit {
+ public:
+  explicit FinishOnExit(StopOnSignal& watcher) : watcher_(watcher) {}
+  ~FinishOnExit() { watcher_.finish(); }
+  FinishOnExit(const FinishOnExit&) = delete;
+  FinishOnExit& operator=(const FinishOnExit&) = delete;
+
+ private:
+  StopOnSignal& watcher_;
 };
 
 }  // namespace gaitmon::cli

@@ -104,6 +104,27 @@ class SessionRecorder {
   LogThrottle skip_log_;
 };
 
+/// The writer thread, told that the driver is done and joined at its end too, so that a driver
+/// that throws does not leave a joinable thread behind (std::terminate).
+class WriterThread {
+ public:
+  template <typename Body>
+  WriterThread(std::atomic<bool>& driver_done, Body body)
+      : driver_done_(driver_done), thread_(std::move(body)) {}
+  ~WriterThread() { join(); }
+  WriterThread(const WriterThread&) = delete;
+  WriterThread& operator=(const WriterThread&) = delete;
+
+  void join() {
+    driver_done_.store(true, std::memory_order_release);
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  std::atomic<bool>& driver_done_;
+  std::thread thread_;
+};
+
 void run_record(const GlobalOptions& global, const RecordArgs& args) {
   Config config = load_global_config(global);
   if (!args.serial.empty()) config.serial.device = args.serial;
@@ -116,6 +137,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
     if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
   const std::unique_ptr<drivers::ByteSource> source = make_insole_source(config, args.usb);
+  const FinishOnExit watching(on_signal);
   live_source.store(source.get());
   const std::string source_name = insole_source_name(config, args.usb);
 
@@ -123,11 +145,11 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
   // a full ring drops (and counts) them as in `gaitmon run`.
   FrameRing ring(config.ring.capacity_frames);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
-  LinkStatus link;
+  LinkStatus link(decoder);
   SessionRecorder recorder(partial, config.sample_rate_hz, source_name);
   std::atomic<bool> driver_done{false};
   std::exception_ptr writer_error;
-  std::thread writer([&] {
+  WriterThread writer(driver_done, [&] {
     try {
       SensorFrame frame;
       for (;;) {
@@ -154,7 +176,6 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
         },
         [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
   }
-  driver_done.store(true, std::memory_order_release);
   writer.join();
   if (writer_error) {
     std::error_code ignored;

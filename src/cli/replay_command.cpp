@@ -34,22 +34,24 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   replay::SessionByteSource source(args.session, format, speed);
   // Signals first: every thread started below inherits the blocked mask.
   std::atomic<Monitor*> running{nullptr};
+  // The driver first, then the monitor, to release the driver from a wait for room in the ring.
   StopOnSignal on_signal([&](int) {
-    if (Monitor* m = running.load()) m->close();
     source.stop();
+    if (Monitor* m = running.load()) m->close();
   });
 
-  LcmPublisher lcm(config.lcm);
+  LcmPublisher lcm(open_lcm_url(global, config.lcm.url, !args.lcm_url.empty()), config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder(format);
-  LinkStatus link;
+  LinkStatus link(decoder);
   MonitorOptions options;
   options.sample_rate_hz = source.header().sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
   // A replay never skips: a full ring or backlog makes the fake driver wait.
   options.backlog_overflow = BacklogOverflow::Wait;
-  options.driver_status = [&](StatusReport& status) { link.fill(status, decoder); };
+  options.driver_status = [&](StatusReport& status) { link.fill(status); };
   Monitor monitor(config, options, printer);
+  const FinishOnExit watching(on_signal);
   running.store(&monitor);
   spdlog::info("replay: {} at {} -> LCM {}", args.session.string(),
                std::isinf(speed) ? std::string("max speed") : fmt::format("x{}", speed),
@@ -73,9 +75,10 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
       static_cast<double>(c.frames_processed) / 2.0 / source.header().sample_rate_hz;
   fmt::print(
       "replayed {} frames (about {:.1f} s of two feet) in {:.2f} s ({:.0f} x real time); steps {}, "
-      "fits {} published ({} with failures); ring drops {}, step drops {}\n",
+      "fits {} published ({} with failures); ring drops {}, refused {}, step drops {}\n",
       c.frames_processed, session_s, wall_s, wall_s > 0.0 ? session_s / wall_s : 0.0,
-      c.steps_detected, c.fits_published, c.fits_failed, c.ring_drops, c.step_drops);
+      c.steps_detected, c.fits_published, c.fits_failed, c.ring_drops, c.frames_refused,
+      c.step_drops);
 }
 
 }  // namespace
@@ -88,7 +91,7 @@ void add_replay_command(CLI::App& app, const GlobalOptions& global) {
       "monitor, LCM); one line per fitted step. No argument: the bundled demo session");
   sub->add_option("session", args->session, "Session CSV v1 (default: the bundled demo)")
       ->check(CLI::ExistingFile);
-  sub->add_option("--speed", args->speed, "x real time (default 1), or max");
+  sub->add_option("--speed", args->speed, "x real time (default 1, at least 0.001), or max");
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->callback([&global, args] { run_replay(global, *args); });
 }

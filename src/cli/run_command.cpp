@@ -30,25 +30,24 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   // inside UsbSource's constructor included.
   std::unique_ptr<drivers::ByteSource> source;
   std::atomic<drivers::ByteSource*> live_source{nullptr};
-  std::atomic<Monitor*> running{nullptr};
+  // Only the driver: offer() never waits, so the monitor is closed once the driver has
+  // returned, and the frames it decodes until then are not refused.
   StopOnSignal on_signal([&](int) {
-    if (Monitor* m = running.load()) m->close();
     if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
   source = make_insole_source(config, args.usb);
   live_source.store(source.get());
 
-  LcmPublisher lcm(config.lcm);
+  LcmPublisher lcm(open_lcm_url(global, config.lcm.url, !args.lcm_url.empty()), config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
-  LinkStatus link;
+  LinkStatus link(decoder);
   MonitorOptions options;
   options.sample_rate_hz = config.sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
   options.backlog_overflow = BacklogOverflow::DropOldest;
-  options.driver_status = [&](StatusReport& status) { link.fill(status, decoder); };
+  options.driver_status = [&](StatusReport& status) { link.fill(status); };
   Monitor monitor(config, options, printer);
-  running.store(&monitor);
   spdlog::info("run: {} -> LCM {}", insole_source_name(config, args.usb), config.lcm.url);
 
   // The driver thread is this one: bytes -> decoder -> ring. offer() never waits; a full ring
@@ -61,15 +60,16 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
         },
         [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
   }
-  // A signal handled just now may still be closing the monitor: it has to return first.
   on_signal.finish();
+  // An interrupted run: the effects' running fit stops and the latest estimate is the final one.
+  if (on_signal.received() != 0) monitor.close();
   monitor.stop();
   const MonitorCounters c = monitor.counters();
   fmt::print(
-      "frames {} processed, {} dropped (ring full); steps {} ({} dropped from the backlog); "
-      "fits {} published, {} with failures\n",
-      c.frames_processed, c.ring_drops, c.steps_detected, c.step_drops, c.fits_published,
-      c.fits_failed);
+      "frames {} processed, {} dropped (ring full), {} refused (monitor closed); steps {} ({} "
+      "dropped from the backlog); fits {} published, {} with failures\n",
+      c.frames_processed, c.ring_drops, c.frames_refused, c.steps_detected, c.step_drops,
+      c.fits_published, c.fits_failed);
 }
 
 }  // namespace

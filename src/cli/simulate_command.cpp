@@ -177,7 +177,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
       ->check(number_in(0.1, 86400.0))
       ->capture_default_str();
   sub->add_option("--seed", args->options.seed, "Random seed (same seed, same file)")
-      ->check(whole_number_up_to(std::numeric_limits<std::uint64_t>::max()))
+      ->check(whole_number_in(0, std::numeric_limits<std::uint64_t>::max()))
       ->capture_default_str();
   sub->add_option("--body-mass", args->options.body_mass_kg, "Body mass, kg")
       ->check(number_in(1.0, 300.0))

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -163,14 +164,17 @@ void run_spy(const GlobalOptions& global, const SpyArgs& args) {
   LcmSettings settings = load_global_config(global).lcm;
   if (!args.lcm_url.empty()) settings.url = args.lcm_url;
   std::uint64_t received = 0;
-  LcmSubscriber subscriber(settings, resolve_channels(settings.channels, args.channels),
-                           [&received](const std::string& channel, const LcmMessage& message) {
-                             json line =
-                                 std::visit([](const auto& m) { return to_json(m); }, message);
-                             line["channel"] = channel;
-                             std::cout << line.dump() << '\n' << std::flush;
-                             ++received;
-                           });
+  LcmSubscriber subscriber(
+      open_lcm_url(global, settings.url, !args.lcm_url.empty()), settings,
+      resolve_channels(settings.channels, args.channels),
+      [&received](const std::string& channel, const LcmMessage& message) {
+        json line = std::visit([](const auto& m) { return to_json(m); }, message);
+        line["channel"] = channel;
+        // A string off the bus need not be UTF-8.
+        std::cout << line.dump(-1, ' ', false, json::error_handler_t::replace) << '\n'
+                  << std::flush;
+        ++received;
+      });
   // On stderr, so stdout holds only messages: a script may start publishing once it sees this.
   fmt::print(stderr, "gaitmon spy: listening on {}\n", settings.url);
   std::fflush(stderr);
@@ -208,9 +212,10 @@ void add_spy_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->add_option("--count", args->count,
                   "Exit after this many messages (exit code 1 if --timeout-s comes first)")
-      ->check(CLI::PositiveNumber);
+      ->check(whole_number_in(1, std::numeric_limits<std::uint64_t>::max()));
   sub->add_option("--timeout-s", args->timeout_s, "Exit after this many seconds")
-      ->check(CLI::PositiveNumber);
+      // From 1 ms, the wait's resolution, to a deadline within the clock's range.
+      ->check(number_in(0.001, 1e9));
   sub->callback([&global, args] { run_spy(global, *args); });
 }
 

@@ -2,6 +2,8 @@
 // decoding errors to stderr and hide them from the caller).
 #include "gaitmon/lcm_subscriber.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <cctype>
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
@@ -31,6 +33,24 @@ bool decode_into(const void* data, std::uint32_t size, LcmMessage& out) {
   if (!report) return false;
   out = std::move(*report);
   return true;
+}
+
+bool decode(MessageKind kind, const void* data, std::uint32_t size, LcmMessage& out) {
+  switch (kind) {
+    case MessageKind::Frame:
+      return decode_into<frame_t>(data, size, out);
+    case MessageKind::Step:
+      return decode_into<step_t>(data, size, out);
+    case MessageKind::Fit:
+      return decode_into<fit_t>(data, size, out);
+    case MessageKind::Status:
+      return decode_into<status_t>(data, size, out);
+    case MessageKind::Raw:
+      return decode_into<raw_t>(data, size, out);
+    case MessageKind::Effects:
+      return decode_into<effects_t>(data, size, out);
+  }
+  return false;
 }
 
 // LCM takes channel names as regular expressions (anchored at both ends); gaitmon's are plain
@@ -101,25 +121,15 @@ void LcmSubscriber::dispatch(const Route& route, const void* data, std::uint32_t
   if (pending_) return;
   LcmMessage message;
   bool ok = false;
-  switch (route.kind) {
-    case MessageKind::Frame:
-      ok = decode_into<frame_t>(data, size, message);
-      break;
-    case MessageKind::Step:
-      ok = decode_into<step_t>(data, size, message);
-      break;
-    case MessageKind::Fit:
-      ok = decode_into<fit_t>(data, size, message);
-      break;
-    case MessageKind::Status:
-      ok = decode_into<status_t>(data, size, message);
-      break;
-    case MessageKind::Raw:
-      ok = decode_into<raw_t>(data, size, message);
-      break;
-    case MessageKind::Effects:
-      ok = decode_into<effects_t>(data, size, message);
-      break;
+  // The generated decoders throw for some malformed messages (a negative array length makes
+  // resize throw); an exception must not cross LCM's C callback.
+  try {
+    ok = decode(route.kind, data, size, message);
+  } catch (const std::exception& e) {
+    if (auto held = decode_log_.allow()) {
+      spdlog::warn("LCM: a malformed message on {} skipped: {} ({} similar suppressed)",
+                   route.channel, e.what(), *held);
+    }
   }
   if (!ok) {
     ++decode_errors_;

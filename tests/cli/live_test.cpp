@@ -20,16 +20,19 @@
 namespace gaitmon::cli {
 namespace {
 
-TEST(Live, SpeedIsMaxOrAPositiveNumber) {
+TEST(Live, SpeedIsMaxOrANumberFromTheSlowest) {
   EXPECT_EQ(parse_speed("max"), replay::kMaxSpeed);
   EXPECT_EQ(parse_speed("2.5"), 2.5);
   EXPECT_EQ(parse_speed("1"), 1.0);
-  for (const char* bad : {"0", "-1", "", "fast", "2x", "inf", "nan", "1e400", "MAX"}) {
+  EXPECT_EQ(parse_speed("0.001"), 0.001);
+  for (const char* bad :
+       {"0", "-1", "", "fast", "2x", "inf", "nan", "1e400", "MAX", "0.0009", "1e-12", "1e-300"}) {
     try {
       parse_speed(bad);
       ADD_FAILURE() << "accepted '" << bad << "'";
     } catch (const CLI::ValidationError& e) {
-      EXPECT_NE(std::string(e.what()).find(std::string("must be a number > 0 or max, got ") + bad),
+      EXPECT_NE(std::string(e.what()).find(
+                    std::string("must be a number >= 0.001 (x real time) or max, got ") + bad),
                 std::string::npos)
           << e.what();
     }
@@ -37,26 +40,26 @@ TEST(Live, SpeedIsMaxOrAPositiveNumber) {
 }
 
 TEST(Live, StatusCountsEveryConnectionAfterTheFirstAsAReconnect) {
-  LinkStatus link;
   drivers::FrameDecoder decoder;
+  LinkStatus link(decoder);
   StatusReport status;
-  link.fill(status, decoder);
+  link.fill(status);
   EXPECT_EQ(status.connection, "connecting");
   EXPECT_EQ(status.reconnects, 0u);
 
   link.on_state(drivers::LinkState::Connected, "/dev/pts/1");
-  link.fill(status, decoder);
+  link.fill(status);
   EXPECT_EQ(status.connection, "connected");
   EXPECT_EQ(status.reconnects, 0u);
 
   for (int i = 0; i < 2; ++i) {
     link.on_state(drivers::LinkState::Disconnected, "read: EIO");
-    link.fill(status, decoder);
+    link.fill(status);
     EXPECT_EQ(status.connection, "disconnected");
     link.on_state(drivers::LinkState::Connecting, "/dev/pts/1");
     link.on_state(drivers::LinkState::Connected, "/dev/pts/1");
   }
-  link.fill(status, decoder);
+  link.fill(status);
   EXPECT_EQ(status.connection, "connected");
   EXPECT_EQ(status.reconnects, 2u);
   EXPECT_EQ(link.state(), drivers::LinkState::Connected);
@@ -81,11 +84,48 @@ TEST(Live, StatusTakesTheDecodersCounters) {
   ASSERT_EQ(frames, 3);
 
   StatusReport status;
-  LinkStatus().fill(status, decoder);
+  LinkStatus(decoder).fill(status);
   EXPECT_EQ(status.bytes_received, stream.size());
   EXPECT_EQ(status.frames_decoded, 3u);
   EXPECT_EQ(status.frames_lost_sequence, 2u);
   EXPECT_EQ(status.crc_errors, 0u);
+}
+
+// Without a CRC nothing tells a partial frame joined to the next connection's bytes from a real
+// frame: only the reset on Disconnected keeps the two connections apart.
+TEST(Live, ADroppedLinkDiscardsThePartialFrameOfTheOldConnection) {
+  WireSettings settings;
+  settings.crc = CrcKind::None;
+  const drivers::WireFormat format(settings);
+  SensorFrame frame;
+  frame.foot = Foot::Left;
+  frame.size = InsoleSize::S37_38;
+  frame.sensor_count = 107;
+  const auto encoded = [&](std::uint32_t sequence) {
+    frame.sequence = sequence;
+    std::vector<std::uint8_t> bytes(4096);
+    bytes.resize(drivers::encode_frame(format, frame, bytes));
+    return bytes;
+  };
+  drivers::FrameDecoder decoder(format);
+  LinkStatus link(decoder);
+  std::vector<std::uint32_t> sequences;
+  const auto feed = [&](std::span<const std::uint8_t> bytes) {
+    decoder.feed(bytes, [&](const SensorFrame& f) { sequences.push_back(f.sequence); });
+  };
+
+  link.on_state(drivers::LinkState::Connected, "/dev/pts/1");
+  const std::vector<std::uint8_t> first = encoded(1);
+  feed(std::span(first).first(first.size() / 2));
+  link.on_state(drivers::LinkState::Disconnected, "read: EIO");
+  link.on_state(drivers::LinkState::Connecting, "/dev/pts/1");
+  link.on_state(drivers::LinkState::Connected, "/dev/pts/1");
+  for (const std::uint32_t sequence : {2u, 3u, 4u}) feed(encoded(sequence));
+
+  EXPECT_EQ(sequences, (std::vector<std::uint32_t>{2, 3, 4}));
+  const drivers::DecoderCounters c = decoder.counters();
+  EXPECT_EQ(c.frames, 3u);
+  EXPECT_EQ(c.truncated_frames, 1u);
 }
 
 FitReport sample_fit() {
@@ -209,6 +249,23 @@ TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   }  // the destructor joins the watcher
   EXPECT_EQ(calls.load(), 1);
   EXPECT_TRUE(take_pending().empty());
+}
+
+// A command that throws unwinds what the callback touches before the watcher it declared first:
+// the guard, declared after those, stops the watcher before they go.
+TEST(Live, TheGuardStopsTheWatcherWhenTheCommandThrows) {
+  std::atomic<int> calls{0};
+  StopOnSignal stop([&](int) { ++calls; });
+  try {
+    const FinishOnExit watching(stop);
+    throw std::runtime_error("the driver failed");
+  } catch (const std::runtime_error&) {
+  }
+  ASSERT_EQ(kill(getpid(), SIGINT), 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(calls.load(), 0);
+  EXPECT_EQ(stop.received(), 0);
+  EXPECT_EQ(take_pending(), std::vector<int>{SIGINT});
 }
 
 }  // namespace

@@ -187,7 +187,7 @@ TEST(Cli, ANumberOutsideItsRangeNanOrANegativeSeedIsAUsageError) {
       {simulate + "--body-mass nan", "--body-mass: 'nan' is not in [1, 300]"},
       {simulate + "--stride 0.5", "--stride: '0.5' is not in (0.5, 3]"},
       {simulate + "--noise nan", "--noise: 'nan' is not in [0, 50]"},
-      {simulate + "--seed -1", "--seed: '-1' is not a whole number >= 0"},
+      {simulate + "--seed -1", "--seed: '-1' is not a whole number"},
       {simulate + "--seed 99999999999999999999",
        "--seed: '99999999999999999999' is larger than 18446744073709551615"},
   };

@@ -46,16 +46,16 @@ TEST(RecordUsb, RecordsAnEmulatedUsbInsoleUnpluggedHalfwayFrameForFrame) {
   ChildProcess record({test::gaitmon_binary().string(), "--config", config.string(), "--log-level",
                        "info", "record", "--usb", "--out", out.string()});
   const auto soon = [] { return Clock::now() + std::chrono::seconds(30); };
-  ASSERT_FALSE(record.read_until(ChildProcess::Stdout, "link connected", soon()).empty())
+  ASSERT_FALSE(record.read_until(ChildProcess::Stderr, "link connected", soon()).empty())
       << "gaitmon record --usb did not connect";
   for (std::size_t i = 0; i < half; ++i) insole.send(transfers[i]);
   ASSERT_TRUE(all_taken(insole));
   insole.unplug();
-  const auto lost = record.read_until(ChildProcess::Stdout, "link disconnected", soon());
+  const auto lost = record.read_until(ChildProcess::Stderr, "link disconnected", soon());
   ASSERT_FALSE(lost.empty()) << "the unplug was not reported";
   EXPECT_NE(lost.back().find("LIBUSB_ERROR_NO_DEVICE"), std::string::npos) << lost.back();
   insole.plug();
-  ASSERT_FALSE(record.read_until(ChildProcess::Stdout, "link connected", soon()).empty())
+  ASSERT_FALSE(record.read_until(ChildProcess::Stderr, "link connected", soon()).empty())
       << "the device's return was not picked up";
   for (std::size_t i = half; i < transfers.size(); ++i) insole.send(transfers[i]);
   ASSERT_TRUE(all_taken(insole));

@@ -169,6 +169,52 @@ TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
   }
 }
 
+// A URL LCM cannot open and a speed too slow for the pacer are command-line errors (exit 2).
+TEST(ReplayCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : {
+           Case{"--lcm-url bogus://", "--lcm-url: LCM cannot open \"bogus://\""},
+           Case{"--lcm-url memq", "--lcm-url: LCM cannot open \"memq\""},
+           Case{"--speed 1e-300", "--speed: must be a number >= 0.001 (x real time) or max"},
+       }) {
+    SCOPED_TRACE(c.args);
+    std::string out;
+    EXPECT_EQ(test::run_command(
+                  "timeout 60 " + test::gaitmon_binary().string() + " replay " + c.args, &out),
+              2)
+        << out;
+    EXPECT_NE(out.find(c.message), std::string::npos) << out;
+  }
+}
+
+// The session is read while it is replayed: a bad line halfway is an input error (exit 2, the
+// file and line named) raised on the driver thread, which unwinds the monitor and the signal
+// watcher without a crash.
+TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
+  const fs::path dir = test::scratch_dir("replay-bad-line");
+  const fs::path good = test::cut_session(test::demo_session(), dir / "good.csv", 10.0);
+  std::ifstream in(good);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  const std::size_t bad = lines.size() / 2;
+  lines[bad] = "1.0,L,not-a-number";
+  std::string text;
+  for (const std::string& line : lines) text += line + "\n";
+  const fs::path session = test::write_text(dir / "bad.csv", text);
+
+  std::string out;
+  EXPECT_EQ(
+      test::run_command(test::gaitmon_binary().string() + " replay " + session.string() +
+                            " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
+                        &out),
+      2)
+      << out;
+  EXPECT_NE(out.find("bad.csv:" + std::to_string(bad + 1)), std::string::npos) << out;
+}
+
 TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {
   const fs::path dir = test::scratch_dir("replay-sigint");
   const fs::path log = dir / "replay.lcmlog";
@@ -198,7 +244,7 @@ TEST(RunCommand, UsbWithoutADeviceWaitsAndStopsOnSigint) {
   const fs::path log = dir / "run.lcmlog";
   test::ChildProcess run({test::gaitmon_binary().string(), "run", "--usb", "--lcm-url",
                           "file://" + log.string() + "?mode=w"});
-  const auto started = run.read_until(test::ChildProcess::Stdout, "USB 0000:0000",
+  const auto started = run.read_until(test::ChildProcess::Stderr, "USB 0000:0000",
                                       Clock::now() + std::chrono::seconds(30));
   ASSERT_FALSE(started.empty()) << "gaitmon run --usb did not start";
   run.signal(SIGINT);

@@ -242,6 +242,9 @@ TEST(UsbSourceOnUsbfs, AFailedTransferLosesTheLinkAndTheDriverReconnects) {
     ASSERT_TRUE(driver.wait_for_bytes(3));
     driver.stop();
     EXPECT_EQ(driver.bytes(), (std::vector<std::uint8_t>{7, 8, 9}));
+    // A stall halts the endpoint until cleared: data flows again only because the driver
+    // cleared it when it reconnected.
+    EXPECT_EQ(insole.counts().clear_halts, c.status == -EPIPE ? 1 : 0);
     EXPECT_EQ(driver.states(),
               (std::vector<LinkState>{LinkState::Connecting, LinkState::Connected,
                                       LinkState::Disconnected, LinkState::Connecting,
@@ -253,9 +256,17 @@ TEST(UsbSourceOnUsbfs, ARefusedSubmissionLosesTheLinkAndIsRetriedWithBackoff) {
   test::UsbfsInsole insole;
   insole.plug();
   insole.refuse_submits(true);
-  Driver driver(insole_settings());
+  UsbSettings settings = insole_settings();
+  settings.reconnect_initial_ms = 10;
+  settings.reconnect_max_ms = 10000;
+  Driver driver(settings);
   ASSERT_TRUE(driver.wait_for_state_count(LinkState::Disconnected, 3));
   EXPECT_EQ(driver.details()[2], "usb 1209:0001 interface 0 endpoint 0x81: LIBUSB_ERROR_IO");
+  ASSERT_TRUE(eventually([&] { return insole.counts().claim_times.size() >= 6; }, 10s));
+  const std::vector<std::chrono::steady_clock::time_point> tries = insole.counts().claim_times;
+  // A claim without data does not reset the backoff: waits of 10, 20, 40, 80, 160 ms between
+  // the first six connections (a reset per claim would wait 10 ms each, 50 ms in all).
+  EXPECT_GE(tries[5] - tries[0], 300ms);  // 310 ms, less the clocks' granularity
   EXPECT_GE(insole.counts().refused_submits, 3);
   EXPECT_EQ(insole.counts().submits, 0);
   insole.refuse_submits(false);
@@ -276,7 +287,7 @@ TEST(UsbSourceOnUsbfs, ARefusedSubmissionLosesTheLinkAndIsRetriedWithBackoff) {
   EXPECT_EQ(driver.details()[lost], "usb 1209:0001 interface 0 endpoint 0x81: LIBUSB_ERROR_IO");
 }
 
-TEST(UsbSourceOnUsbfs, AnInterfaceInUseIsRetriedWithABackoffThatAConnectionResets) {
+TEST(UsbSourceOnUsbfs, AnInterfaceInUseIsRetriedWithABackoffThatDataResets) {
   test::UsbfsInsole insole;
   insole.plug();
   insole.refuse_claims(true);
@@ -293,8 +304,10 @@ TEST(UsbSourceOnUsbfs, AnInterfaceInUseIsRetriedWithABackoffThatAConnectionReset
 
   insole.refuse_claims(false);
   ASSERT_TRUE(driver.wait_for_state_count(LinkState::Connected, 1, 10s));
-  // The connection reset the backoff: after a loss the driver retries within 10 ms, where the
-  // backoff it had reached would wait 2.56 s.
+  // Data reset the backoff: after a loss the driver retries within 10 ms, where the backoff it
+  // had reached would wait 2.56 s.
+  insole.send({1});
+  ASSERT_TRUE(driver.wait_for_bytes(1));
   insole.fail_urbs(1, -EPIPE);
   ASSERT_TRUE(driver.wait_for_state_count(LinkState::Disconnected, 1));
   const auto lost = std::chrono::steady_clock::now();

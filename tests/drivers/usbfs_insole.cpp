@@ -158,6 +158,10 @@ gboolean UsbfsInsole::handle(UMockdevIoctlClient* client) {
       counts_.claimed_interfaces.push_back(interface);
       return complete(client, 0, 0);
     }
+    case USBDEVFS_CLEAR_HALT:
+      ++counts_.clear_halts;
+      halted_ = false;
+      return complete(client, 0, 0);
     case USBDEVFS_RELEASEINTERFACE:
       ++counts_.releases;
       return complete(client, 0, 0);
@@ -211,12 +215,17 @@ gboolean UsbfsInsole::reap(UMockdevIoctlClient* client, UMockdevIoctlData* arg) 
     auto* urb = reinterpret_cast<usbdevfs_urb*>(done->data);
     urb->status = -ENOENT;
     urb->actual_length = 0;
-  } else if (!flying_.empty() && fail_next_urbs_ > 0) {
+  } else if (!flying_.empty() && (fail_next_urbs_ > 0 || halted_)) {
     done = flying_.front();
     flying_.pop_front();
-    --fail_next_urbs_;
     auto* urb = reinterpret_cast<usbdevfs_urb*>(done->data);
-    urb->status = urb_status_;
+    if (fail_next_urbs_ > 0) {
+      --fail_next_urbs_;
+      urb->status = urb_status_;
+      if (urb_status_ == -EPIPE) halted_ = true;
+    } else {
+      urb->status = -EPIPE;
+    }
     urb->actual_length = 0;
   } else if (!flying_.empty() && !chunks_.empty() && plugged_) {
     done = flying_.front();

@@ -37,7 +37,9 @@ class UsbfsInsole {
   void unplug();
 
   void send(std::vector<std::uint8_t> chunk);
-  /// The next `count` URBs to complete end with `status` (a negative errno) and no data.
+  /// The next `count` URBs to complete end with `status` (a negative errno) and no data. -EPIPE
+  /// (a stall) also halts the endpoint, as a device does: every later URB stalls too, across a
+  /// reopen, until USBDEVFS_CLEAR_HALT.
   void fail_urbs(int count, int status);
   void refuse_submits(bool refuse);
   void refuse_claims(bool refuse);
@@ -51,6 +53,7 @@ class UsbfsInsole {
     std::vector<std::chrono::steady_clock::time_point> claim_times;  ///< refused or not
     int releases = 0;
     int discards = 0;
+    int clear_halts = 0;
     int max_in_flight = 0;
     int in_flight = 0;
     std::size_t chunks_waiting = 0;  ///< sent but not yet in a completed URB
@@ -74,6 +77,7 @@ class UsbfsInsole {
   bool refuse_submits_ = false;
   bool refuse_claims_ = false;
   bool keep_cancelled_ = false;
+  bool halted_ = false;
   int fail_next_urbs_ = 0;
   int urb_status_ = 0;
   std::deque<UMockdevIoctlData*> flying_;

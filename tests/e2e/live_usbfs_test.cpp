@@ -68,7 +68,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   ChildProcess run({binary, "--config", config.string(), "--log-level", "info", "run", "--usb",
                     "--lcm-url", bus.url});
   const auto soon = [] { return Clock::now() + std::chrono::seconds(30); };
-  ASSERT_FALSE(run.read_until(ChildProcess::Stdout, "link connected", soon()).empty())
+  ASSERT_FALSE(run.read_until(ChildProcess::Stderr, "link connected", soon()).empty())
       << "gaitmon run --usb did not connect";
 
   std::vector<json> fits;
@@ -82,13 +82,13 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
       << "the first half never arrived";
 
   insole.unplug();
-  const auto lost = run.read_until(ChildProcess::Stdout, "link disconnected", soon());
+  const auto lost = run.read_until(ChildProcess::Stderr, "link disconnected", soon());
   ASSERT_FALSE(lost.empty()) << "the unplug was not reported";
   EXPECT_NE(lost.back().find("usb 1209:0001 interface 0 endpoint 0x81: LIBUSB_ERROR_NO_DEVICE"),
             std::string::npos)
       << lost.back();
   insole.plug();
-  ASSERT_FALSE(run.read_until(ChildProcess::Stdout, "link connected", soon()).empty())
+  ASSERT_FALSE(run.read_until(ChildProcess::Stderr, "link connected", soon()).empty())
       << "the device's return was not picked up";
   for (std::size_t i = half; i < transfers.size(); ++i) insole.send(transfers[i]);
   ASSERT_FALSE(

@@ -5,6 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <gaitmon/raw_t.hpp>
 #include <gaitmon/step_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
@@ -213,6 +214,28 @@ TEST_F(LcmSubscriberMemq, ForeignAndImpossibleMessagesAreCountedNotDelivered) {
   drain(subscriber);
   EXPECT_TRUE(deliveries.empty());
   EXPECT_EQ(subscriber.decode_errors(), 3U);
+}
+
+// The generated decoder throws for a negative array length; the exception must not cross LCM's
+// C callback, and the next message still arrives.
+TEST_F(LcmSubscriberMemq, AMessageTheDecoderThrowsOnIsCountedAndSkipped) {
+  LcmSubscriber subscriber(bus, settings, {}, record());
+  raw_t raw;
+  raw.foot = 0;
+  raw.num_bits = 0;
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(raw.getEncodedSize()));
+  ASSERT_EQ(raw.encode(bytes.data(), 0, static_cast<int>(bytes.size())),
+            static_cast<int>(bytes.size()));
+  // num_bits (big-endian int32) follows the hash, utime, foot, sequence and device_time_us.
+  const std::size_t num_bits_at = 8 + 8 + 1 + 8 + 8;
+  ASSERT_EQ(bytes.size(), num_bits_at + 4);
+  for (std::size_t i = 0; i < 4; ++i) bytes[num_bits_at + i] = 0xFF;
+  bus->publish(settings.channels.raw, bytes.data(), static_cast<unsigned>(bytes.size()));
+  LcmPublisher(bus, settings).publish(test::sample_step());
+  drain(subscriber);
+  EXPECT_EQ(subscriber.decode_errors(), 1U);
+  ASSERT_EQ(deliveries.size(), 1U);
+  expect_delivered(deliveries[0], settings.channels.step, test::sample_step());
 }
 
 TEST_F(LcmSubscriberMemq, AHandlersExceptionIsRethrownByHandle) {

@@ -133,6 +133,32 @@ void expect_frames_match(const std::vector<SensorFrame>& got, const std::vector<
   }
 }
 
+// Options that cannot work together or out of range are a command-line error (exit 2) naming the
+// option, before anything is streamed.
+TEST(FakeInsole, BadOptionsAreExitCodeTwoAndSayWhy) {
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : {
+           Case{"--reopen-after 1", "--reopen-after: needs --pty and --link"},
+           Case{"--pty --reopen-after 1", "--reopen-after: needs --pty and --link"},
+           Case{"--hold", "--link and --hold: need --pty"},
+           Case{"--pty --reopen-after nan", "--reopen-after: 'nan' is not in [0, 86400]"},
+           Case{"--speed 1e-12",
+                "--speed: must be a number >= 0.001 (x real time) or max, got 1e-12"},
+       }) {
+    SCOPED_TRACE(c.args);
+    std::string out;
+    EXPECT_EQ(test::run_command("timeout 30 " + test::gaitmon_binary().string() + " fake-insole " +
+                                    test::demo_session().string() + " " + c.args,
+                                &out),
+              2)
+        << out;
+    EXPECT_NE(out.find(c.message), std::string::npos) << out;
+  }
+}
+
 TEST(FakeInsole, StreamsTheSessionThroughAPty) {
   const fs::path summary = test::scratch_dir("fake-plain") / "summary.json";
   FakeInsole fake("--speed max --summary " + summary.string());
