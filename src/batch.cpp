@@ -53,7 +53,11 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
       on_progress(std::min(1.0, static_cast<double>(reader.bytes_read()) / file_bytes));
     }
   }
-  for (auto& segmenter : segmenters) segmenter->finish(finalised);
+  for (Foot foot : kFeet) {
+    StepSegmenter& segmenter = *segmenters[static_cast<std::size_t>(foot)];
+    segmenter.finish(finalised);
+    info.gaps_per_foot[static_cast<std::size_t>(foot)] = segmenter.gaps();
+  }
   deliver();
   if (on_progress) on_progress(1.0);
   return info;

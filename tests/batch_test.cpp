@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 
 #include "gaitmon/error.hpp"
+#include "gaitmon/session.hpp"
 #include "gaitmon/simulator.hpp"
 #include "test_support.hpp"
 
@@ -122,6 +124,39 @@ TEST(SegmentSession, ReportsTheFileAndLineOfABadFrame) {
   } catch (const InputError& e) {
     EXPECT_EQ(e.line(), 8u);
     EXPECT_NE(std::string(e.what()).find("bad.csv"), std::string::npos) << e.what();
+  }
+}
+
+TEST(SegmentSession, AGapRestartsEachFootsSegmentationAndIsCounted) {
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const auto dir = test::scratch_dir("batch-gap");
+  SimulationOptions options;
+  options.seed = 3;
+  options.duration_s = 10.0;
+  const SimulationTruth truth =
+      simulate_session(config, options, dir / "session.csv", dir / "truth.json");
+  // The probe's session: 100 s pass in both feet's streams at 5 s.
+  {
+    SessionReader reader(dir / "session.csv");
+    SessionWriter writer(dir / "gap.csv", reader.header());
+    Frame frame;
+    while (reader.next(frame)) {
+      if (frame.t_s >= 5.0) frame.t_s = std::round((frame.t_s + 100.0) * 1e6) / 1e6;
+      writer.write(frame);
+    }
+    writer.close();
+  }
+  std::vector<Step> found;
+  const SegmentedSessionInfo info = segment_session(
+      dir / "gap.csv", config, [&](Step&& step) { found.push_back(std::move(step)); });
+  EXPECT_EQ(info.frames_per_foot[0], truth.frames_per_foot);
+  EXPECT_EQ(info.gaps_per_foot[0], 1);
+  EXPECT_EQ(info.gaps_per_foot[1], 1);
+  ASSERT_FALSE(found.empty());
+  for (const Step& s : found) {
+    // Stances last about 0.7 s in the simulated walk; none may reach across the gap.
+    EXPECT_LT(s.t_toe_off_s - s.t_heel_strike_s, 2.0)
+        << foot_name(s.foot) << " step " << s.index << " " << step_status_name(s.status);
   }
 }
 
