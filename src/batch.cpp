@@ -17,6 +17,7 @@ SegmenterLimits segmenter_limits(double sample_rate_hz) {
   limits.max_stance_frames = static_cast<std::int64_t>(60.0 * sample_rate_hz);
   limits.max_swing_half_frames = static_cast<std::int64_t>(1.5 * sample_rate_hz);
   limits.min_first_swing_frames = static_cast<std::int64_t>(0.2 * sample_rate_hz);
+  limits.sample_period_s = 1.0 / sample_rate_hz;
   return limits;
 }
 
@@ -62,7 +63,11 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
       on_progress(std::min(1.0, static_cast<double>(reader.bytes_read()) / file_bytes));
     }
   }
-  for (auto& segmenter : segmenters) segmenter->finish(finalised);
+  for (Foot foot : kFeet) {
+    StepSegmenter& segmenter = *segmenters[static_cast<std::size_t>(foot)];
+    segmenter.finish(finalised);
+    info.gaps_per_foot[static_cast<std::size_t>(foot)] = segmenter.gaps();
+  }
   deliver();
   if (on_progress) on_progress(1.0);
   return info;

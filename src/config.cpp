@@ -275,12 +275,16 @@ void read_calibration(TableReader table, Calibration& calibration) {
   table.finish();
 }
 
-void read_segmentation(TableReader table, SegmentationSettings& segmentation) {
+void read_segmentation(TableReader table, double sample_rate_hz,
+                       SegmentationSettings& segmentation) {
   // The largest summed reading the biggest insole can give: 255 bits on each of 161 sensors.
   constexpr int kMaxSummedBits = 255 * 161;
   segmentation.event_threshold_bits = integer_in(table, "event_threshold_bits", 1, kMaxSummedBits);
   segmentation.debounce_frames = integer_in(table, "debounce_frames", 1, 100);
   segmentation.swing_window_frames = integer_in(table, "swing_window_frames", 1, 100);
+  // Frame intervals jitter around one sample period (0.0099-0.0100 s in the real recordings at
+  // 100 Hz): a limit within half a period of it would cut a steady stream.
+  segmentation.max_gap_s = number_above(table, "max_gap_s", 1.5 / sample_rate_hz);
   table.finish();
 }
 
@@ -725,7 +729,7 @@ Config load_config(const fs::path& main_file) {
   const fs::path tissue_file = named_file(root, "tissue_file", main_file);
   read_sensor(root.table("sensor"), config.sensor);
   read_calibration(root.table("calibration"), config.calibration);
-  read_segmentation(root.table("segmentation"), config.segmentation);
+  read_segmentation(root.table("segmentation"), config.sample_rate_hz, config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
   read_model(root.table("model"), file, config.model);
   read_wire(root.table("wire"), config.wire);

@@ -173,10 +173,8 @@ struct Monitor::Impl {
     std::optional<StepSegmenter> segmenter;
     Frame frame;  ///< reused: its bits keep their capacity
     std::optional<DeviceClock> clock;
-    std::uint32_t last_device_us = 0;  ///< for the log of a clock reset
-    std::int64_t frame_base = 0;       ///< frames of the segmenters before a clock reset
-    int step_base = 0;                 ///< steps of the segmenters before a clock reset
-    int steps_emitted = 0;             ///< by the current segmenter
+    std::uint32_t last_device_us = 0;  ///< for the logs of a clock reset and of a gap
+    std::int64_t gaps = 0;             ///< the segmenter's gaps already counted and logged
     std::uint64_t next_seq = 0;
     std::vector<double> zero;     ///< latest known per-sensor bias
     double threshold_bits = 0.0;  ///< latest known adaptive threshold
@@ -251,6 +249,8 @@ struct Monitor::Impl {
                            foot.layout->sensor_count()));
         return;
       }
+      const double previous_t_s = foot.frame.t_s;
+      const std::uint32_t previous_us = foot.last_device_us;
       if (!advance_time(foot, in)) return;
       foot.frame.t_s = foot.clock->t_s();
       foot.frame.foot = in.foot;
@@ -258,7 +258,11 @@ struct Monitor::Impl {
       finalised.clear();
       foot.segmenter->push(foot.frame, finalised);
       processed.fetch_add(1, std::memory_order_relaxed);
-      const std::int64_t index = foot.frame_base + foot.segmenter->frames() - 1;
+      if (foot.segmenter->gaps() != foot.gaps) {
+        foot.gaps = foot.segmenter->gaps();
+        note_gap(in, foot.frame.t_s - previous_t_s, previous_us);
+      }
+      const std::int64_t index = foot.segmenter->frames() - 1;
       if (config.monitor.publish_frames) publish_frame(foot, index);
       if (options.publish_raw) publish_raw(in);
       deliver(foot);
@@ -313,12 +317,20 @@ struct Monitor::Impl {
     spdlog::warn("monitor: foot {}: device clock went back from {} to {} us; segmentation restarts",
                  foot_name(in.foot), previous_us, in.device_time_us);
     finalised.clear();
-    foot.segmenter->finish(finalised);
+    foot.segmenter->restart(finalised);
     deliver(foot);
-    foot.frame_base += foot.segmenter->frames();
-    foot.step_base += foot.steps_emitted;
-    foot.steps_emitted = 0;
-    new_segmenter(foot, in.foot);
+  }
+
+  /// The segmenter restarted after a gap; a flaky link can make many, hence the throttle.
+  void note_gap(const SensorFrame& in, double gap_s, std::uint32_t previous_us) {
+    segmentation_gaps.fetch_add(1, std::memory_order_relaxed);
+    if (auto held = gap_log.allow()) {
+      spdlog::warn(
+          "monitor: foot {}: {:.3f} s without frames (device time {} -> {} us), over "
+          "[segmentation] "
+          "max_gap_s; segmentation restarts ({} similar suppressed)",
+          foot_name(in.foot), gap_s, previous_us, in.device_time_us, *held);
+    }
   }
 
   void reject(const std::string& why) {
@@ -363,10 +375,6 @@ struct Monitor::Impl {
   /// Publishes the steps in `finalised` (from foot's segmenter) and queues the Ok ones.
   void deliver(FootState& foot) {
     for (Step& step : finalised) {
-      foot.steps_emitted = std::max(foot.steps_emitted, step.index + 1);
-      step.index += foot.step_base;
-      step.heel_strike_frame += foot.frame_base;
-      step.toe_off_frame += foot.frame_base;
       steps_detected.fetch_add(1, std::memory_order_relaxed);
       StepEvent event;
       event.utime = now_utime();
@@ -659,6 +667,7 @@ struct Monitor::Impl {
     c.step_drops = step_drops.load(std::memory_order_relaxed);
     c.fits_published = fits_published.load(std::memory_order_relaxed);
     c.fits_failed = fits_failed.load(std::memory_order_relaxed);
+    c.segmentation_gaps = segmentation_gaps.load(std::memory_order_relaxed);
     return c;
   }
 
@@ -731,7 +740,7 @@ struct Monitor::Impl {
   std::uint64_t ring_drops_logged = 0;
 
   std::atomic<std::uint64_t> processed{0}, rejected{0}, steps_detected{0}, steps_queued{0},
-      backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0};
+      backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0}, segmentation_gaps{0};
 
   // The backlog, shared by the detector and the workers.
   std::mutex jobs_mutex;
@@ -745,7 +754,7 @@ struct Monitor::Impl {
   std::vector<double> latencies;
   std::size_t latency_next = 0;
 
-  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log;
+  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log, gap_log;
 
   // The extended model's window, shared by the workers.
   std::mutex effects_mutex;

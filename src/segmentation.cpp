@@ -1,6 +1,8 @@
 // Step segmentation per foot and per-sensor zeroing with the adaptive threshold (seed 3.3.1-3.3.2).
 #include "gaitmon/segmentation.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <numeric>
 #include <stdexcept>
@@ -58,6 +60,13 @@ StepSegmenter::StepSegmenter(Foot foot, std::size_t sensors, const SegmentationS
     throw std::invalid_argument("StepSegmenter: swing_window_frames must be at least 1");
   if (settings.event_threshold_bits < 0)
     throw std::invalid_argument("StepSegmenter: event_threshold_bits must not be negative");
+  // Frame intervals jitter around one period: a limit within half a period of it would cut a
+  // steady stream at every frame.
+  if (!(settings.max_gap_s >= 1.5 * limits.sample_period_s)) {
+    throw std::invalid_argument(
+        fmt::format("StepSegmenter: max_gap_s {:g} s is under 1.5 sample periods ({:g} s)",
+                    settings.max_gap_s, 1.5 * limits.sample_period_s));
+  }
   if (!(adaptive_threshold_pct >= 0.0 && adaptive_threshold_pct <= 100.0))
     throw std::invalid_argument("StepSegmenter: adaptive threshold must be 0..100 %");
   if (!(newtons_per_bit > 0.0))
@@ -93,9 +102,13 @@ void StepSegmenter::push(const Frame& frame, std::vector<Step>& finalised) {
     throw std::invalid_argument("StepSegmenter: frame has " + std::to_string(frame.bits.size()) +
                                 " sensors, expected " + std::to_string(sensors_));
   }
-  if (next_ > 0 && !(frame.t_s > last_t_s_)) {
+  if (frames() > 0 && !(frame.t_s > last_t_s_)) {
     throw std::invalid_argument("StepSegmenter: frame time " + std::to_string(frame.t_s) +
                                 " s does not increase after " + std::to_string(last_t_s_) + " s");
+  }
+  if (next_ > 0 && frame.t_s - last_t_s_ > settings_.max_gap_s) {
+    restart(finalised);
+    ++gaps_;
   }
   last_t_s_ = frame.t_s;
   const std::int64_t sum = std::accumulate(frame.bits.begin(), frame.bits.end(), std::int64_t{0});
@@ -395,8 +408,8 @@ Step StepSegmenter::make_step(const Pending& pending, std::int64_t toe_off,
     }
   }
 
-  step.heel_strike_frame = heel_strike;
-  step.toe_off_frame = toe_off;
+  step.heel_strike_frame = frame_base_ + heel_strike;
+  step.toe_off_frame = frame_base_ + toe_off;
   step.t_heel_strike_s = at(heel_strike).frame.t_s;
   step.t_toe_off_s = at(toe_off).frame.t_s;
   step.stance.reserve(static_cast<std::size_t>(toe_off - heel_strike + 1));
@@ -433,9 +446,26 @@ void StepSegmenter::trim() {
   }
 }
 
+void StepSegmenter::restart(std::vector<Step>& finalised) {
+  if (finished_) throw std::logic_error("StepSegmenter::restart after finish()");
+  end_frames(finalised);
+  // A fresh segmenter is the start of a recording by construction; only the numbering and the
+  // time order carry over.
+  StepSegmenter fresh(foot_, sensors_, settings_, pct_, newtons_per_bit_, limits_);
+  fresh.frame_base_ = frames();
+  fresh.gaps_ = gaps_;
+  fresh.next_index_ = next_index_;
+  fresh.last_t_s_ = last_t_s_;
+  *this = std::move(fresh);
+}
+
 void StepSegmenter::finish(std::vector<Step>& finalised) {
   if (finished_) throw std::logic_error("StepSegmenter::finish called twice");
   finished_ = true;
+  end_frames(finalised);
+}
+
+void StepSegmenter::end_frames(std::vector<Step>& finalised) {
   if (next_ == 0) return;
   if (starting_up_) end_start_up(finalised);
   if (detector_.in_contact) {

@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 
 #include "gaitmon/error.hpp"
+#include "gaitmon/session.hpp"
 #include "gaitmon/simulator.hpp"
 #include "test_support.hpp"
 
@@ -129,6 +131,7 @@ TEST(SegmentSession, ARateTooLowForTheConfigsWindowsNamesBoth) {
   Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
   // At 10 Hz a swing midpoint lies at most 15 frames from its step: a 20-frame window cannot fit.
   config.segmentation.swing_window_frames = 20;
+  config.segmentation.max_gap_s = 0.2;
   const auto dir = test::scratch_dir("batch-rate");
   std::string text =
       "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 10\n# sensors: 93\nt_s,foot";
@@ -148,12 +151,56 @@ TEST(SegmentSession, ARateTooLowForTheConfigsWindowsNamesBoth) {
         << e.what();
     EXPECT_NE(std::string(e.what()).find("swing_window_frames"), std::string::npos) << e.what();
   }
+  // The default max_gap_s, 0.055 s, would take every 0.1 s interval for a gap.
   config.segmentation.swing_window_frames = 15;
+  config.segmentation.max_gap_s = 0.055;
+  try {
+    segment_session(path, config, [](Step&&) {});
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("max_gap_s 0.055 s is under 1.5 sample periods (0.15"),
+              std::string::npos)
+        << e.what();
+  }
+  config.segmentation.max_gap_s = 0.2;
   std::vector<Step> steps;
   const SegmentedSessionInfo info =
       segment_session(path, config, [&](Step&& step) { steps.push_back(std::move(step)); });
   EXPECT_EQ(info.frames_per_foot[0], 1);
   EXPECT_TRUE(steps.empty());
+}
+
+TEST(SegmentSession, AGapRestartsEachFootsSegmentationAndIsCounted) {
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const auto dir = test::scratch_dir("batch-gap");
+  SimulationOptions options;
+  options.seed = 3;
+  options.duration_s = 10.0;
+  const SimulationTruth truth =
+      simulate_session(config, options, dir / "session.csv", dir / "truth.json");
+  // The probe's session: 100 s pass in both feet's streams at 5 s.
+  {
+    SessionReader reader(dir / "session.csv");
+    SessionWriter writer(dir / "gap.csv", reader.header());
+    Frame frame;
+    while (reader.next(frame)) {
+      if (frame.t_s >= 5.0) frame.t_s = std::round((frame.t_s + 100.0) * 1e6) / 1e6;
+      writer.write(frame);
+    }
+    writer.close();
+  }
+  std::vector<Step> found;
+  const SegmentedSessionInfo info = segment_session(
+      dir / "gap.csv", config, [&](Step&& step) { found.push_back(std::move(step)); });
+  EXPECT_EQ(info.frames_per_foot[0], truth.frames_per_foot);
+  EXPECT_EQ(info.gaps_per_foot[0], 1);
+  EXPECT_EQ(info.gaps_per_foot[1], 1);
+  ASSERT_FALSE(found.empty());
+  for (const Step& s : found) {
+    // Stances last about 0.7 s in the simulated walk; none may reach across the gap.
+    EXPECT_LT(s.t_toe_off_s - s.t_heel_strike_s, 2.0)
+        << foot_name(s.foot) << " step " << s.index << " " << step_status_name(s.status);
+  }
 }
 
 }  // namespace

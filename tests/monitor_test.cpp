@@ -572,6 +572,7 @@ TEST(Monitor, AFailedAnalysisIsPublishedWithItsStatus) {
 TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {
   Config config = shipped_config();
   config.segmentation.swing_window_frames = 20;
+  config.segmentation.max_gap_s = 0.2;
   RecordingPublisher publisher;
   MonitorOptions options;
   options.sample_rate_hz = 10.0;  // a swing midpoint at most 15 frames from its step
@@ -641,6 +642,113 @@ TEST(Monitor, RejectsBadFramesAndRestartsWhenTheDeviceClockGoesBack) {
             2 * static_cast<std::size_t>(std::count_if(steps.begin(), steps.end(), [](auto& s) {
               return s.status == StepStatus::Ok;
             })));
+}
+
+// The demo's first 30 s with a gap in each foot's stream: 100 s in the left foot's from 15 s on,
+// 0.3 s in the right foot's from 20 s on.
+fs::path demo_with_gaps() {
+  static const fs::path path = [] {
+    const fs::path to = test::scratch_dir("monitor-gap") / "gaps.csv";
+    SessionReader reader(demo_30s());
+    SessionWriter writer(to, reader.header());
+    Frame frame;
+    while (reader.next(frame)) {
+      const double cut_s = frame.foot == Foot::Left ? 15.0 : 20.0;
+      const double gap_s = frame.foot == Foot::Left ? 100.0 : 0.3;
+      // Whole microseconds, as a device clock gives them.
+      if (frame.t_s >= cut_s) frame.t_s = std::round((frame.t_s + gap_s) * 1e6) / 1e6;
+      writer.write(frame);
+    }
+    writer.close();
+    return to;
+  }();
+  return path;
+}
+
+TEST(Monitor, StepsEqualTheBatchPipelinesAcrossAGap) {
+  const Config config = shipped_config();
+  std::vector<Step> steps;
+  const SegmentedSessionInfo info = segment_session(
+      demo_with_gaps(), config, [&](Step&& step) { steps.push_back(std::move(step)); });
+  EXPECT_EQ(info.gaps_per_foot[0], 1);
+  EXPECT_EQ(info.gaps_per_foot[1], 1);
+  for (const Step& step : steps) {
+    EXPECT_LT(step.t_toe_off_s - step.t_heel_strike_s, 5.0)
+        << foot_name(step.foot) << " step " << step.index << " spans a gap";
+  }
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_with_gaps(), &header);
+
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  Config quiet = config;
+  quiet.monitor.publish_frames = false;
+  MonitorCounters counters;
+  {
+    Monitor monitor(quiet, options, publisher);
+    offer_all(monitor, frames);
+    monitor.stop();
+    counters = monitor.counters();
+  }
+  EXPECT_EQ(counters.segmentation_gaps, 2u);
+  EXPECT_EQ(counters.frames_processed, frames.size());
+  std::map<StepKey, std::pair<StepEvent, StepEvent>> by_step;
+  const auto events = publisher.events();
+  for (std::size_t i = 0; i + 1 < events.size(); i += 2) {
+    by_step[{events[i].foot, events[i].step}] = {events[i], events[i + 1]};
+  }
+  ASSERT_EQ(events.size(), 2 * steps.size());
+  ASSERT_EQ(by_step.size(), steps.size());
+  std::size_t ok_steps = 0;
+  for (const Step& step : steps) {
+    const auto it = by_step.find({step.foot, step.index});
+    ASSERT_NE(it, by_step.end()) << foot_name(step.foot) << step.index;
+    const auto& [hs, to] = it->second;
+    EXPECT_EQ(hs.frame, step.heel_strike_frame);
+    EXPECT_EQ(to.frame, step.toe_off_frame);
+    EXPECT_EQ(hs.t_s, step.t_heel_strike_s);
+    EXPECT_EQ(to.t_s, step.t_toe_off_s);
+    if (step.status == StepStatus::Ok) ++ok_steps;
+  }
+  EXPECT_EQ(publisher.fits().size(), ok_steps);
+}
+
+TEST(Monitor, ADeviceRestartThatReadsAsAJumpForwardRestartsTheSegmentation) {
+  // A device that restarts after 2^31 us (36 min) of uptime: modulo 2^32 its counter moves
+  // forward by less than 2^31, so DeviceClock sees time jump ahead rather than go back.
+  const Config config = shipped_config();
+  const std::vector<Step> steps = batch_steps(demo_30s(), config);
+  const std::vector<SensorFrame> once = test::session_frames(demo_30s());
+  std::map<Foot, std::int64_t> frames_per_foot;
+  std::map<Foot, int> steps_per_foot;
+  for (const SensorFrame& f : once) ++frames_per_foot[f.foot];
+  for (const Step& s : steps) ++steps_per_foot[s.foot];
+  std::vector<SensorFrame> feed = once;
+  for (SensorFrame& f : feed) f.device_time_us += 2'200'000'000u;
+  feed.insert(feed.end(), once.begin(), once.end());
+
+  RecordingPublisher publisher;
+  Config quiet = config;
+  quiet.monitor.publish_frames = false;
+  MonitorCounters counters;
+  {
+    Monitor monitor(quiet, quick_replay(), publisher);
+    offer_all(monitor, feed);
+    monitor.stop();
+    counters = monitor.counters();
+  }
+  EXPECT_EQ(counters.segmentation_gaps, 2u);
+  std::map<StepKey, StepEvent> heel_strikes;
+  for (const StepEvent& e : publisher.events()) {
+    if (e.kind == StepEvent::Kind::HeelStrike) heel_strikes[{e.foot, e.step}] = e;
+  }
+  // Both passes give the session's steps, the second numbered on after the first.
+  ASSERT_EQ(heel_strikes.size(), 2 * steps.size());
+  for (const Step& s : steps) {
+    const StepEvent& second = heel_strikes.at({s.foot, s.index + steps_per_foot[s.foot]});
+    EXPECT_EQ(second.frame, s.heel_strike_frame + frames_per_foot[s.foot]);
+  }
 }
 
 }  // namespace

@@ -551,6 +551,99 @@ TEST(StepSegmenter, AMidStanceValleyAboveAQuarterOfThePeakIsNotASwing) {
   }
 }
 
+/// The frames from `from` on, `seconds` later: a gap before frame `from`.
+std::vector<Frame> with_gap(std::vector<Frame> frames, std::size_t from, double seconds) {
+  for (std::size_t k = from; k < frames.size(); ++k) frames[k].t_s += seconds;
+  return frames;
+}
+
+TEST(StepSegmenter, AGapInsideAContactEndsItAsIncompleteAndNumbersOn) {
+  // Bump 2's contact is frames 252..308; 100 s pass between frames 280 and 281.
+  const std::vector<Bump> bumps = walking(50, 5);
+  const std::vector<Frame> frames = with_gap(make_frames(560, bumps, noise), 281, 100.0);
+  StepSegmenter segmenter(Foot::Left, kSensors, seed_settings(), 0.2, kNewtonsPerBit);
+  std::vector<Step> steps;
+  for (const Frame& f : frames) segmenter.push(f, steps);
+  EXPECT_EQ(segmenter.gaps(), 1);
+  segmenter.finish(steps);
+  EXPECT_EQ(segmenter.frames(), 560);
+
+  ASSERT_EQ(steps.size(), 6U);
+  for (std::size_t i = 0; i < steps.size(); ++i) EXPECT_EQ(steps[i].index, static_cast<int>(i));
+  // Before the gap: the steps of bumps 0 and 1, then bump 2's contact open at the gap.
+  for (std::size_t i = 0; i < 2; ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    EXPECT_EQ(steps[i].heel_strike_frame, analytic_heel_strike(bumps[i]));
+    EXPECT_EQ(steps[i].toe_off_frame, analytic_toe_off(bumps[i]));
+    EXPECT_NEAR(steps[i].bias_bits, 54.0, 3.3);
+  }
+  EXPECT_EQ(steps[2].status, StepStatus::Incomplete);
+  EXPECT_EQ(steps[2].heel_strike_frame, 252);
+  EXPECT_EQ(steps[2].toe_off_frame, 280);
+  EXPECT_DOUBLE_EQ(steps[2].t_toe_off_s, 2.80);
+  // After it: the rest of that contact, as at the start of a recording, then bumps 3 and 4.
+  EXPECT_EQ(steps[3].status, StepStatus::Incomplete);
+  EXPECT_EQ(steps[3].heel_strike_frame, 281);
+  EXPECT_EQ(steps[3].toe_off_frame, 308);
+  EXPECT_DOUBLE_EQ(steps[3].t_heel_strike_s, 102.81);
+  for (std::size_t i = 4; i < 6; ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    const Bump& bump = bumps[i - 1];
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    EXPECT_EQ(steps[i].heel_strike_frame, analytic_heel_strike(bump));
+    EXPECT_EQ(steps[i].toe_off_frame, analytic_toe_off(bump));
+    EXPECT_DOUBLE_EQ(steps[i].t_heel_strike_s,
+                     100.0 + 0.01 * static_cast<double>(analytic_heel_strike(bump)));
+    EXPECT_NEAR(steps[i].bias_bits, 54.0, 3.3);
+  }
+}
+
+TEST(StepSegmenter, AGapInsideASwingLosesNoStep) {
+  // The swing between bumps 1 and 2 is frames 209..251; 30 s pass between frames 230 and 231.
+  const std::vector<Bump> bumps = walking(50, 5);
+  const std::vector<Frame> frames = with_gap(make_frames(560, bumps, noise), 231, 30.0);
+  StepSegmenter segmenter(Foot::Left, kSensors, seed_settings(), 0.2, kNewtonsPerBit);
+  std::vector<Step> steps;
+  for (const Frame& f : frames) segmenter.push(f, steps);
+  segmenter.finish(steps);
+  EXPECT_EQ(segmenter.gaps(), 1);
+
+  ASSERT_EQ(steps.size(), bumps.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    EXPECT_EQ(steps[i].index, static_cast<int>(i));
+    EXPECT_EQ(steps[i].status, StepStatus::Ok);
+    EXPECT_EQ(steps[i].heel_strike_frame, analytic_heel_strike(bumps[i]));
+    EXPECT_EQ(steps[i].toe_off_frame, analytic_toe_off(bumps[i]));
+    EXPECT_NEAR(steps[i].bias_bits, 54.0, 3.3);
+  }
+  // Step 1's post-swing window and step 2's pre-swing one lie each on its own side of the gap.
+  EXPECT_LT(steps[1].post_zero_t_s, 2.31);
+  EXPECT_GT(steps[2].pre_zero_t_s, 32.30);
+}
+
+TEST(StepSegmenter, FourLostFramesAreBridgedAndFiveAreAGap) {
+  // Frames lost inside bump 2's contact (frames 252..308), with the default max_gap_s.
+  const std::vector<Bump> bumps = walking(50, 5);
+  const std::vector<Frame> all = make_frames(560, bumps, noise);
+  for (const std::ptrdiff_t lost : {4, 5}) {
+    SCOPED_TRACE(std::to_string(lost) + " frames lost");
+    std::vector<Frame> frames = all;
+    frames.erase(frames.begin() + 281, frames.begin() + 281 + lost);
+    StepSegmenter segmenter(Foot::Left, kSensors, seed_settings(), 0.2, kNewtonsPerBit);
+    std::vector<Step> steps;
+    for (const Frame& f : frames) segmenter.push(f, steps);
+    segmenter.finish(steps);
+    EXPECT_EQ(segmenter.gaps(), lost == 4 ? 0 : 1);
+    EXPECT_EQ(steps.size(), lost == 4 ? 5U : 6U);
+    const auto ok = std::count_if(steps.begin(), steps.end(),
+                                  [](const Step& s) { return s.status == StepStatus::Ok; });
+    // Cut, bump 2 gives two incomplete steps.
+    EXPECT_EQ(ok, lost == 4 ? 5 : 4);
+  }
+}
+
 TEST(StepSegmenter, NoContactsNoSteps) {
   EXPECT_TRUE(segment(make_frames(300, {}, noise)).empty());
   EXPECT_TRUE(segment({}).empty());
@@ -563,6 +656,15 @@ TEST(StepSegmenter, RejectsMisuse) {
                std::invalid_argument);
   EXPECT_THROW(StepSegmenter(Foot::Left, kSensors, seed_settings(), 120.0, kNewtonsPerBit),
                std::invalid_argument);
+  EXPECT_THROW(StepSegmenter(Foot::Left, kSensors, {142, 5, 5, 0.0}, 0.2, kNewtonsPerBit),
+               std::invalid_argument);
+  // Under 1.5 sample periods a steady stream would be cut at every frame: at 10 Hz, 0.15 s.
+  SegmenterLimits slow;
+  slow.sample_period_s = 0.1;
+  EXPECT_THROW(StepSegmenter(Foot::Left, kSensors, {142, 5, 5, 0.149}, 0.2, kNewtonsPerBit, slow),
+               std::invalid_argument);
+  EXPECT_NO_THROW(
+      StepSegmenter(Foot::Left, kSensors, {142, 5, 5, 0.151}, 0.2, kNewtonsPerBit, slow));
   StepSegmenter segmenter(Foot::Left, kSensors, seed_settings(), 0.2, kNewtonsPerBit);
   std::vector<Step> steps;
   Frame frame{0.0, Foot::Right, std::vector<std::uint8_t>(kSensors, 0)};
@@ -573,9 +675,12 @@ TEST(StepSegmenter, RejectsMisuse) {
   frame.bits.resize(kSensors);
   segmenter.push(frame, steps);
   EXPECT_THROW(segmenter.push(frame, steps), std::invalid_argument);  // same time again
+  segmenter.restart(steps);
+  EXPECT_THROW(segmenter.push(frame, steps), std::invalid_argument);  // time still ordered
   segmenter.finish(steps);
   frame.t_s = 1.0;
   EXPECT_THROW(segmenter.push(frame, steps), std::logic_error);
+  EXPECT_THROW(segmenter.restart(steps), std::logic_error);
 }
 
 // ---- Real walking (PhysioNet gaitpdb converted to session CSV, ground truth in the sidecar) ----
@@ -613,6 +718,7 @@ void check_recording(const std::string& name) {
   for (Foot foot : kFeet) {
     const auto f = static_cast<std::size_t>(foot);
     segmenters[f]->finish(found[f]);
+    EXPECT_EQ(segmenters[f]->gaps(), 0) << "the default max_gap_s found a gap";
   }
 
   for (Foot foot : kFeet) {

@@ -16,6 +16,8 @@ namespace gaitmon {
 struct SegmentedSessionInfo {
   SessionHeader header;
   std::array<std::int64_t, 2> frames_per_foot{};  ///< indexed by Foot
+  /// Per foot, the gaps over [segmentation] max_gap_s after which its segmentation restarted.
+  std::array<std::int64_t, 2> gaps_per_foot{};
 };
 
 /// Segmenter memory bounds for a sample rate: contacts longer than 60 s are cut as incomplete,

@@ -48,6 +48,11 @@ struct SegmentationSettings {
   int event_threshold_bits = 142;  ///< summed bits above the dc bias that mean contact (40 N)
   int debounce_frames = 5;         ///< a contact starts/ends only after this many frames agree
   int swing_window_frames = 5;     ///< frames averaged around each swing midpoint for the bias
+  /// Consecutive frames of a foot further apart than this end its segmentation as a recording's
+  /// end would, and it starts afresh after them. At 100 Hz up to 4 lost frames are bridged,
+  /// fewer than a debounce, so no contact or swing the segmenter could find fits in them; the
+  /// half period to spare keeps jitter and the rounding of t_s from deciding.
+  double max_gap_s = 0.055;
 };
 
 /// Bounds on row and sensor numbers, far above any real insole (18 rows, 11 per row): they keep

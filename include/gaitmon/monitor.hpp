@@ -32,7 +32,10 @@
 // round(t_s x 1e6)). A frame whose device time does not advance is rejected; a device clock that
 // jumps back (the device restarted) ends that foot's segmentation as at the end of a recording
 // and starts a new one, with frame and step numbers continuing and session time continuing one
-// sample period after the last frame.
+// sample period after the last frame. A jump forward by more than [segmentation] max_gap_s (a
+// link drop-out, lost frames, or a restart of a device whose counter had passed 2^31 us, which
+// reads as a jump forward) does the same in the segmenter, as `gaitmon segment` does at a gap in
+// a file; it is counted (segmentation_gaps) and logged at most once a second.
 //
 // Rejected frames (counted in frames_rejected, logged at most once a second): an insole size or
 // sensor count other than that foot's first frame's or the config's layout's, and a device time
@@ -112,6 +115,9 @@ struct MonitorCounters {
   std::uint64_t step_drops = 0;
   std::uint64_t fits_published = 0;
   std::uint64_t fits_failed = 0;  ///< published steps whose analysis threw or a region failed
+  /// Frames of a foot more than [segmentation] max_gap_s after its previous one (lost frames, a
+  /// link drop-out, a device restart seen as a jump forward): each restarted its segmentation.
+  std::uint64_t segmentation_gaps = 0;
 };
 
 class Monitor {

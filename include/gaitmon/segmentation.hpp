@@ -57,6 +57,10 @@
 //   and a contact that reaches max_stance_frames frames (standing). They are emitted with their
 //   frames, their first boundaries and a best-effort bias (the swing windows that exist, or else
 //   the frame of lowest S) so they can be reported, but they are not meant to be analysed.
+// - Gaps. Frames further apart than max_gap_s (lost frames, a link drop-out, a device restart)
+//   end the segmentation as the end of a recording would, and it starts afresh after them as at
+//   a recording's start, frame and step indices continuing: a contact open at a gap is
+//   Incomplete, and a stance and swings are never joined across time that was not seen.
 //
 // Latency: a step is final once its post-swing midpoint is known, i.e. when the next contact of
 // the same foot is confirmed, debounce_frames - 1 frames after that heel strike (one swing plus
@@ -115,28 +119,39 @@ struct SegmenterLimits {
   std::int64_t max_stance_frames = 6000;     ///< longer contacts become Incomplete steps
   std::int64_t max_swing_half_frames = 150;  ///< H: farthest a swing midpoint sits from its step
   std::int64_t min_first_swing_frames = 20;  ///< shortest swing that ends start-up (0.2 s)
+  double sample_period_s = 0.01;             ///< max_gap_s must be at least 1.5 of these
 };
 
 /// Segments the frames of one foot into steps. Not thread-safe; frames must come in time order.
 class StepSegmenter {
  public:
   /// Throws std::invalid_argument for a zero sensor count, a debounce or window below 1, a
-  /// negative event threshold, pct outside 0..100, newtons_per_bit <= 0, or limits that cannot
-  /// hold a contact (max_stance_frames <= debounce) or a window (H < swing_window_frames).
+  /// negative event threshold, max_gap_s under 1.5 sample periods, pct outside 0..100,
+  /// newtons_per_bit <= 0, or limits that cannot hold a contact (max_stance_frames <= debounce)
+  /// or a window (H < swing_window_frames).
   StepSegmenter(Foot foot, std::size_t sensors, const SegmentationSettings& settings,
                 double adaptive_threshold_pct, double newtons_per_bit,
                 const SegmenterLimits& limits = {});
 
   /// Consumes the next frame of this foot and appends the steps it finalises (0..n) to
-  /// `finalised`. Throws std::invalid_argument for another foot, a wrong sensor count or a time
-  /// that does not increase, std::logic_error after finish().
+  /// `finalised`, after a gap (see Gaps above) the steps its restart() finalises first. Throws
+  /// std::invalid_argument for another foot, a wrong sensor count or a time that does not
+  /// increase, std::logic_error after finish().
   void push(const Frame& frame, std::vector<Step>& finalised);
+
+  /// Ends the segmentation as finish() does, appending the remaining steps, and starts afresh as
+  /// at the start of a recording; frame and step indices continue. Throws std::logic_error after
+  /// finish().
+  void restart(std::vector<Step>& finalised);
 
   /// Marks the end of the recording and appends the remaining steps. Call once.
   void finish(std::vector<Step>& finalised);
 
   /// Frames consumed so far.
-  std::int64_t frames() const { return next_; }
+  std::int64_t frames() const { return frame_base_ + next_; }
+
+  /// Gaps longer than max_gap_s found so far, each followed by a restart.
+  std::int64_t gaps() const { return gaps_; }
 
   /// Frames held in memory now; bounded as described under Memory above.
   std::size_t buffered_frames() const { return buffer_.size(); }
@@ -223,6 +238,8 @@ class StepSegmenter {
   /// The lowest mean S of `width` consecutive frames in first..last (at least `width` frames).
   double quietest_mean(std::int64_t first, std::int64_t last, std::int64_t width) const;
   void add_floor(double floor_bits);
+  /// The end of the recording or of the frames before a gap: the open steps are finalised.
+  void end_frames(std::vector<Step>& out);
   /// Turns pending_ into a Step with its post-swing window and clears it.
   void finalise(const Window& post, std::vector<Step>& out);
   Step make_step(const Pending& pending, std::int64_t toe_off, const std::optional<Window>& post,
@@ -236,6 +253,8 @@ class StepSegmenter {
   double newtons_per_bit_;
   SegmenterLimits limits_;
 
+  std::int64_t frame_base_ = 0;  ///< frames before the latest restart; indices below are after it
+  std::int64_t gaps_ = 0;
   std::deque<Entry> buffer_;  ///< frames first_ .. next_ - 1
   std::int64_t first_ = 0;
   std::int64_t next_ = 0;

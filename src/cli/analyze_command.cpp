@@ -437,7 +437,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
       throw InputError(args.session.string(), 0,
                        fmt::format("no complete step to fit in {} and {} frames of the left and "
                                    "right foot ({} steps found, all cut by the recording's ends "
-                                   "or longer than 60 s)",
+                                   "or a gap, or longer than 60 s)",
                                    info.frames_per_foot[0], info.frames_per_foot[1], steps.size()));
     }
     const auto start = std::chrono::steady_clock::now();

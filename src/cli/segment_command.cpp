@@ -79,6 +79,12 @@ void print_summary(const SegmentArgs& args, const SegmentedSessionInfo& info,
                stance.size(), incomplete, fmt::format("{:.3f} ({:.3f})", st.mean, st.sd),
                fmt::format("{:.1f} ({:.1f})", pk.mean, pk.sd));
   }
+  if (info.gaps_per_foot[0] + info.gaps_per_foot[1] > 0) {
+    fmt::print(
+        "time gaps over max_gap_s: L {}, R {}; each ends the foot's segmentation as at the "
+        "end of a recording (a contact open at a gap is incomplete)\n",
+        info.gaps_per_foot[0], info.gaps_per_foot[1]);
+  }
   fmt::print("\ncontact-ellipse cases over all analysed frames (seed ch. 4):\n");
   fmt::print("{:<19}", "region");
   const std::array kCases{EllipseCase::None,       EllipseCase::Isolated, EllipseCase::Rectangle,

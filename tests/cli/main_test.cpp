@@ -1,4 +1,5 @@
 // The gaitmon program end to end: simulate, segment, help and its errors on bad input.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -50,6 +51,39 @@ TEST(Cli, SimulateThenSegmentWritesTheDocumentedFiles) {
   int ok = 0;
   while (std::getline(steps, line)) ok += line.ends_with(",ok") ? 1 : 0;
   EXPECT_GE(ok, 14) << "a 12 s walk at 1.1 s strides has at least 7 whole steps per foot";
+}
+
+TEST(Cli, SegmentEndsAStepAtAGapAndSaysSo) {
+  // The probe's session: a simulated walk whose times jump by 100 s at 5 s.
+  const auto dir = test::scratch_dir("cli-gap");
+  int status = -1;
+  std::string out =
+      run("simulate --duration 10 --seed 3 --out " + (dir / "s.csv").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  std::ifstream in(dir / "s.csv");
+  std::ofstream gap(dir / "gap.csv");
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto comma = line.find(',');
+    if (!line.empty() && line[0] >= '0' && line[0] <= '9' &&
+        std::stod(line.substr(0, comma)) >= 5.0) {
+      line = fmt::format("{:.6f}", std::stod(line.substr(0, comma)) + 100.0) + line.substr(comma);
+    }
+    gap << line << "\n";
+  }
+  gap.close();
+  out = run("segment " + (dir / "gap.csv").string() + " --out " + (dir / "seg").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("time gaps over max_gap_s: L 1, R 1"), std::string::npos) << out;
+  std::ifstream steps(dir / "seg" / "steps.csv");
+  std::getline(steps, line);
+  while (std::getline(steps, line)) {
+    // foot,step,t_heel_strike_s,t_toe_off_s,stance_s,...
+    std::istringstream fields(line);
+    std::string field;
+    for (int i = 0; i < 5; ++i) std::getline(fields, field, ',');
+    EXPECT_LT(std::stod(field), 2.0) << line;
+  }
 }
 
 std::string read_all(const std::filesystem::path& path) {
