@@ -104,6 +104,39 @@ void expect_close(double actual, double expected, const std::string& what) {
 
 using StepKey = std::pair<Foot, int>;
 
+// The monitor's step events against the batch pipeline's steps: a heel strike and a toe off per
+// step, per foot in step order, at the same frames and times. `ok_steps` counts the Ok steps.
+void expect_events_of(const std::vector<StepEvent>& events, const std::vector<Step>& steps,
+                      std::size_t& ok_steps) {
+  std::map<StepKey, std::pair<StepEvent, StepEvent>> by_step;
+  std::map<Foot, int> last_step{{Foot::Left, -1}, {Foot::Right, -1}};
+  for (std::size_t i = 0; i + 1 < events.size(); i += 2) {
+    const StepEvent& hs = events[i];
+    const StepEvent& to = events[i + 1];
+    ASSERT_EQ(hs.kind, StepEvent::Kind::HeelStrike);
+    ASSERT_EQ(to.kind, StepEvent::Kind::ToeOff);
+    ASSERT_EQ(hs.foot, to.foot);
+    ASSERT_EQ(hs.step, to.step);
+    EXPECT_EQ(hs.step, last_step[hs.foot] + 1);
+    last_step[hs.foot] = hs.step;
+    by_step[{hs.foot, hs.step}] = {hs, to};
+  }
+  ASSERT_EQ(events.size(), 2 * steps.size());
+  ASSERT_EQ(by_step.size(), steps.size());
+  ok_steps = 0;
+  for (const Step& step : steps) {
+    const auto it = by_step.find({step.foot, step.index});
+    ASSERT_NE(it, by_step.end()) << foot_name(step.foot) << step.index;
+    const auto& [hs, to] = it->second;
+    EXPECT_EQ(hs.frame, step.heel_strike_frame);
+    EXPECT_EQ(to.frame, step.toe_off_frame);
+    // round(t_s x 1e6) / 1e6 gives back the file's t_s exactly (times have at most 6 decimals).
+    EXPECT_EQ(hs.t_s, step.t_heel_strike_s);
+    EXPECT_EQ(to.t_s, step.t_toe_off_s);
+    if (step.status == StepStatus::Ok) ++ok_steps;
+  }
+}
+
 TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
   const Config config = shipped_config();
   const std::vector<Step> steps = batch_steps(demo_30s(), config);
@@ -123,35 +156,8 @@ TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
     EXPECT_FALSE(monitor.offer(frames.front())) << "a stopped monitor accepts nothing";
   }
 
-  // Steps: a heel strike and a toe off per step, per foot in step order.
-  const auto events = publisher.events();
-  std::map<StepKey, std::pair<StepEvent, StepEvent>> by_step;
-  std::map<Foot, int> last_step{{Foot::Left, -1}, {Foot::Right, -1}};
-  for (std::size_t i = 0; i + 1 < events.size(); i += 2) {
-    const StepEvent& hs = events[i];
-    const StepEvent& to = events[i + 1];
-    ASSERT_EQ(hs.kind, StepEvent::Kind::HeelStrike);
-    ASSERT_EQ(to.kind, StepEvent::Kind::ToeOff);
-    ASSERT_EQ(hs.foot, to.foot);
-    ASSERT_EQ(hs.step, to.step);
-    EXPECT_EQ(hs.step, last_step[hs.foot] + 1);
-    last_step[hs.foot] = hs.step;
-    by_step[{hs.foot, hs.step}] = {hs, to};
-  }
-  ASSERT_EQ(events.size(), 2 * steps.size());
-  ASSERT_EQ(by_step.size(), steps.size());
   std::size_t ok_steps = 0;
-  for (const Step& step : steps) {
-    const auto it = by_step.find({step.foot, step.index});
-    ASSERT_NE(it, by_step.end()) << foot_name(step.foot) << step.index;
-    const auto& [hs, to] = it->second;
-    EXPECT_EQ(hs.frame, step.heel_strike_frame);
-    EXPECT_EQ(to.frame, step.toe_off_frame);
-    // round(t_s x 1e6) / 1e6 gives back the file's t_s exactly (times have at most 6 decimals).
-    EXPECT_EQ(hs.t_s, step.t_heel_strike_s);
-    EXPECT_EQ(to.t_s, step.t_toe_off_s);
-    if (step.status == StepStatus::Ok) ++ok_steps;
-  }
+  ASSERT_NO_FATAL_FAILURE(expect_events_of(publisher.events(), steps, ok_steps));
   ASSERT_GT(ok_steps, 20u);
 
   // Fits: one per Ok step, per foot in step order, equal to analyse_step run directly.
@@ -693,24 +699,8 @@ TEST(Monitor, StepsEqualTheBatchPipelinesAcrossAGap) {
   }
   EXPECT_EQ(counters.segmentation_gaps, 2u);
   EXPECT_EQ(counters.frames_processed, frames.size());
-  std::map<StepKey, std::pair<StepEvent, StepEvent>> by_step;
-  const auto events = publisher.events();
-  for (std::size_t i = 0; i + 1 < events.size(); i += 2) {
-    by_step[{events[i].foot, events[i].step}] = {events[i], events[i + 1]};
-  }
-  ASSERT_EQ(events.size(), 2 * steps.size());
-  ASSERT_EQ(by_step.size(), steps.size());
   std::size_t ok_steps = 0;
-  for (const Step& step : steps) {
-    const auto it = by_step.find({step.foot, step.index});
-    ASSERT_NE(it, by_step.end()) << foot_name(step.foot) << step.index;
-    const auto& [hs, to] = it->second;
-    EXPECT_EQ(hs.frame, step.heel_strike_frame);
-    EXPECT_EQ(to.frame, step.toe_off_frame);
-    EXPECT_EQ(hs.t_s, step.t_heel_strike_s);
-    EXPECT_EQ(to.t_s, step.t_toe_off_s);
-    if (step.status == StepStatus::Ok) ++ok_steps;
-  }
+  ASSERT_NO_FATAL_FAILURE(expect_events_of(publisher.events(), steps, ok_steps));
   EXPECT_EQ(publisher.fits().size(), ok_steps);
 }
 

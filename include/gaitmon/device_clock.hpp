@@ -48,6 +48,8 @@ class DeviceClock {
   std::int64_t time_us() const { return time_us_; }
   /// The same in seconds: exactly t_s for a counter written as round(t_s x 1e6).
   double t_s() const { return static_cast<double>(time_us_) / 1e6; }
+  /// One sample period, the time a WentBack advances, microseconds.
+  std::int64_t period_us() const { return period_us_; }
 
  private:
   static double checked(double rate) {

@@ -2,9 +2,12 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cmath>
+#include <cstdint>
 #include <ctime>
 #include <filesystem>
 #include <memory>
@@ -42,8 +45,12 @@ std::string utc_now_iso8601() {
 /// the first frame (its insole size and sensor count fix the header).
 class SessionRecorder {
  public:
-  SessionRecorder(std::filesystem::path partial, double sample_rate_hz, std::string source)
-      : partial_(std::move(partial)), rate_hz_(sample_rate_hz), source_(std::move(source)) {}
+  SessionRecorder(std::filesystem::path partial, double sample_rate_hz, double max_gap_s,
+                  std::string source)
+      : partial_(std::move(partial)),
+        rate_hz_(sample_rate_hz),
+        max_gap_us_(std::llround(max_gap_s * 1e6)),
+        source_(std::move(source)) {}
 
   void write(const SensorFrame& in) {
     if (!writer_) open(in);
@@ -53,14 +60,25 @@ class SessionRecorder {
                        insole_size_name(header_.insole_size)));
       return;
     }
-    auto& clock = clocks_[static_cast<std::size_t>(in.foot)];
+    const auto foot = static_cast<std::size_t>(in.foot);
+    auto& clock = clocks_[foot];
     if (!clock) clock.emplace(rate_hz_);
-    if (clock->advance(in.device_time_us) == DeviceClock::Tick::Repeated) {
+    const DeviceClock::Tick tick = clock->advance(in.device_time_us);
+    if (tick == DeviceClock::Tick::Repeated) {
       skip(fmt::format("foot {}: device time {} us repeated", foot_name(in.foot),
                        in.device_time_us));
       return;
     }
-    frame_.t_s = clock->t_s();
+    if (tick == DeviceClock::Tick::WentBack) {
+      // The device restarted, and its counter says nothing of the time in between; the host's
+      // clock does. More than max_gap_s, so that segment and analyze restart the foot's
+      // segmentation there, as the live monitor does.
+      const std::int64_t host_us = (in.host_time_ns - last_host_ns_[foot]) / 1000;
+      restart_offsets_us_[foot] +=
+          std::max(host_us, max_gap_us_ + clock->period_us()) - clock->period_us();
+    }
+    last_host_ns_[foot] = in.host_time_ns;
+    frame_.t_s = static_cast<double>(clock->time_us() + restart_offsets_us_[foot]) / 1e6;
     frame_.foot = in.foot;
     frame_.bits.assign(in.bits.begin(), in.bits.begin() + in.sensor_count);
     writer_->write(frame_);
@@ -94,10 +112,13 @@ class SessionRecorder {
 
   std::filesystem::path partial_;
   double rate_hz_;
+  std::int64_t max_gap_us_;
   std::string source_;
   SessionHeader header_;
   std::unique_ptr<SessionWriter> writer_;
   std::array<std::optional<DeviceClock>, 2> clocks_;
+  std::array<std::int64_t, 2> last_host_ns_{};
+  std::array<std::int64_t, 2> restart_offsets_us_{};  ///< time added at device restarts
   Frame frame_;
   std::uint64_t written_ = 0;
   std::uint64_t skipped_ = 0;
@@ -146,7 +167,8 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
   FrameRing ring(config.ring.capacity_frames);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
   LinkStatus link(decoder);
-  SessionRecorder recorder(partial, config.sample_rate_hz, source_name);
+  SessionRecorder recorder(partial, config.sample_rate_hz, config.segmentation.max_gap_s,
+                           source_name);
   std::atomic<bool> driver_done{false};
   std::exception_ptr writer_error;
   WriterThread writer(driver_done, [&] {

@@ -67,17 +67,9 @@ struct RecordFromPty {
                             Clock::now() + std::chrono::seconds(20))
                 .empty();
   }
-};
 
-TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
-  RecordFromPty r("record-skips");
-  ASSERT_TRUE(r.connected());
-
-  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  const drivers::WireFormat format(config.wire);
-  std::vector<std::uint8_t> stream;
-  std::array<std::uint32_t, 2> sequence{};
-  const auto add = [&](Foot foot, InsoleSize size, std::uint16_t sensors, std::uint32_t time_us) {
+  /// Appends a frame in the shipped wire format to `stream`; its readings depend on the time.
+  void add(Foot foot, InsoleSize size, std::uint16_t sensors, std::uint32_t time_us) {
     SensorFrame f;
     f.foot = foot;
     f.size = size;
@@ -88,32 +80,48 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
     std::vector<std::uint8_t> bytes(4096);
     bytes.resize(drivers::encode_frame(format, f, bytes));
     stream.insert(stream.end(), bytes.begin(), bytes.end());
-  };
-  for (std::uint32_t t : {0u, 10000u, 20000u}) {
-    add(Foot::Left, InsoleSize::S37_38, 107, t);
-    add(Foot::Right, InsoleSize::S37_38, 107, t);
   }
-  add(Foot::Left, InsoleSize::S41_42, 129, 30000);  // another insole: skipped
-  add(Foot::Left, InsoleSize::S37_38, 107, 20000);  // the left foot's last time again: skipped
-  add(Foot::Left, InsoleSize::S37_38, 107, 30000);
-  replay::write_all(r.pty.fd(), stream);
 
-  // Stop once the recorder has read every byte.
-  ASSERT_EQ(r.pty.wait_drained(std::chrono::seconds(20)), 0);
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  r.record.signal(SIGINT);
-  const auto status = r.record.wait(Clock::now() + std::chrono::seconds(10));
-  ASSERT_TRUE(status.has_value());
+  /// Sends `stream`, waits until the recorder has read it all, stops it with SIGINT and returns
+  /// its exit status (nullopt if it did not end), its stdout and its log.
+  std::optional<int> send_and_stop(std::string& text, std::string& log) {
+    replay::write_all(pty.fd(), stream);
+    if (pty.wait_drained(std::chrono::seconds(20)) != 0) return std::nullopt;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    record.signal(SIGINT);
+    const auto status = record.wait(Clock::now() + std::chrono::seconds(10));
+    for (const auto& l :
+         record.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(5))) {
+      text += l + "\n";
+    }
+    for (const auto& l :
+         record.read_rest(ChildProcess::Stderr, Clock::now() + std::chrono::seconds(5))) {
+      log += l + "\n";
+    }
+    return status;
+  }
+
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const drivers::WireFormat format{config.wire};
+  std::vector<std::uint8_t> stream;
+  std::array<std::uint32_t, 2> sequence{};
+};
+
+TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
+  RecordFromPty r("record-skips");
+  ASSERT_TRUE(r.connected());
+
+  for (std::uint32_t t : {0u, 10000u, 20000u}) {
+    r.add(Foot::Left, InsoleSize::S37_38, 107, t);
+    r.add(Foot::Right, InsoleSize::S37_38, 107, t);
+  }
+  r.add(Foot::Left, InsoleSize::S41_42, 129, 30000);  // another insole: skipped
+  r.add(Foot::Left, InsoleSize::S37_38, 107, 20000);  // the left foot's last time again: skipped
+  r.add(Foot::Left, InsoleSize::S37_38, 107, 30000);
   std::string text;
-  for (const auto& l :
-       r.record.read_rest(ChildProcess::Stdout, Clock::now() + std::chrono::seconds(5))) {
-    text += l + "\n";
-  }
   std::string log;
-  for (const auto& l :
-       r.record.read_rest(ChildProcess::Stderr, Clock::now() + std::chrono::seconds(5))) {
-    log += l + "\n";
-  }
+  const std::optional<int> status = r.send_and_stop(text, log);
+  ASSERT_TRUE(status.has_value());
   ASSERT_EQ(*status, 0) << text << log;
   EXPECT_NE(log.find("frame skipped: foot L: a 41-42 insole with 129 sensors in a 37-38 "
                      "recording"),
@@ -133,6 +141,33 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
   EXPECT_EQ(recorded.back().foot, Foot::Left);
   EXPECT_DOUBLE_EQ(recorded.back().t_s, 0.03);
   EXPECT_EQ(recorded.back().bits[1], static_cast<std::uint8_t>(1 + 30000));
+}
+
+// A device that restarts starts its clock over. The live monitor restarts the foot's
+// segmentation there; the recording shows a gap, so that segment and analyze do too.
+TEST(RecordCommand, ADeviceRestartIsRecordedAsAGap) {
+  RecordFromPty r("record-restart");
+  ASSERT_TRUE(r.connected());
+  for (std::uint32_t t : {5000000u, 5010000u, 5020000u, 0u, 10000u}) {
+    r.add(Foot::Left, InsoleSize::S37_38, 107, t);
+  }
+  std::string text;
+  std::string log;
+  const std::optional<int> status = r.send_and_stop(text, log);
+  ASSERT_TRUE(status.has_value());
+  ASSERT_EQ(*status, 0) << text << log;
+
+  const std::vector<Frame> recorded = test::file_frames(r.out);
+  ASSERT_EQ(recorded.size(), 5u);
+  EXPECT_DOUBLE_EQ(recorded[2].t_s, 5.02);
+  // At least max_gap_s and a period after the last frame before it (more if the host saw more
+  // time pass), then on at the device's pace.
+  const double gap = recorded[3].t_s - recorded[2].t_s;
+  EXPECT_GT(gap, r.config.segmentation.max_gap_s) << log;
+  EXPECT_GE(gap, r.config.segmentation.max_gap_s + 0.01 - 1e-9);
+  EXPECT_LT(gap, 5.0) << "the host saw the restart's frames come within a second";
+  EXPECT_NEAR(recorded[4].t_s - recorded[3].t_s, 0.01, 1e-9);
+  EXPECT_EQ(recorded[4].bits[1], static_cast<std::uint8_t>(1 + 10000));
 }
 
 TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
