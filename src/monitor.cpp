@@ -202,10 +202,10 @@ struct Monitor::Impl {
         bool any = false;
         while (const std::size_t n = ring.try_pop_batch(batch)) {
           any = true;
-          for (std::size_t i = 0; i < n; ++i) {
-            handle(batch[i]);
-            maybe_status();
-          }
+          for (std::size_t i = 0; i < n; ++i) handle(batch[i]);
+          // Between batches only: within one, its frames are out of the ring but not yet
+          // counted as processed or rejected, and a status would miss them.
+          maybe_status();
         }
         if (input_done.load(std::memory_order_acquire)) {
           while (const std::size_t n = ring.try_pop_batch(batch)) {

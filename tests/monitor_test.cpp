@@ -552,6 +552,36 @@ TEST(Monitor, StatusIsPeriodicAndCarriesTheDriverCounters) {
   EXPECT_EQ(statuses.back().frames_processed, 0u);
 }
 
+// A status counts a frame as processed, rejected or still in the ring, never as none of these:
+// statuses every 0.1 ms, while a replay fills the ring and the detector takes frames in batches.
+TEST(Monitor, EveryStatusAccountsForEveryFrameOffered) {
+  Config config = shipped_config();
+  config.monitor.status_period_s = 1e-4;
+  config.monitor.publish_frames = false;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  std::atomic<std::uint64_t> offered{0};
+  // Read before the monitor's own counters: the frames offered by then.
+  options.driver_status = [&](StatusReport& s) { s.frames_decoded = offered.load(); };
+  {
+    Monitor monitor(config, options, publisher);
+    for (const SensorFrame& frame : frames) {
+      ASSERT_TRUE(monitor.offer_wait(frame));
+      offered.fetch_add(1);
+    }
+    monitor.stop();
+  }
+  const auto statuses = publisher.statuses();
+  ASSERT_GT(statuses.size(), 10u);
+  for (const StatusReport& s : statuses) {
+    EXPECT_GE(s.frames_processed + s.frames_rejected + s.ring_depth, s.frames_decoded)
+        << "processed " << s.frames_processed << ", rejected " << s.frames_rejected
+        << ", in the ring " << s.ring_depth;
+  }
+  EXPECT_EQ(statuses.back().frames_processed, frames.size());
+}
+
 TEST(Monitor, AFailedAnalysisIsPublishedWithItsStatus) {
   const Config config = shipped_config();
   MonitorOptions options;
