@@ -8,6 +8,7 @@
 #include <cmath>
 #include <exception>
 #include <functional>
+#include <iterator>
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -563,6 +564,11 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember(effect_names()));
   sub->callback([&global, args, sub] {
     args->effects_given = sub->count("--effects") > 0;
+    for (auto it = args->effects.begin(); it != args->effects.end(); ++it) {
+      if (std::find(std::next(it), args->effects.end(), *it) != args->effects.end()) {
+        throw CLI::ValidationError("--effects", "'" + *it + "' is given twice");
+      }
+    }
     run_analyze(global, *args);
   });
 }

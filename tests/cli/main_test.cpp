@@ -191,6 +191,13 @@ TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--folds"), std::string::npos) << out;
 
+  out = run("analyze " + demo + " --out " + (dir / "a").string() +
+                " --effects hysteresis,stress_relaxation,hysteresis",
+            &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--effects: 'hysteresis' is given twice"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "a"));
+
   out = run("segment", &status);
   EXPECT_EQ(status, 2) << out;
   out = run("frobnicate", &status);
