@@ -65,8 +65,8 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
         });
       },
       [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
-  // Still watching: a signal during the final fit of the effects stops it (close() and stop()
-  // may run at once), and `watching` stops the watcher at the end.
+  // A signal handled just now may still be closing the monitor: it has to return first.
+  on_signal.finish();
   monitor.stop();
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
