@@ -21,6 +21,20 @@ SegmenterLimits segmenter_limits(double sample_rate_hz) {
   return limits;
 }
 
+void check_session_rate(const std::filesystem::path& path, double sample_rate_hz,
+                        const Config& config) {
+  try {
+    (void)StepSegmenter(Foot::Left, 1, config.segmentation, 0.0,
+                        config.calibration.newtons_per_bit(config.sensor.area_mm2()),
+                        segmenter_limits(sample_rate_hz));
+  } catch (const std::invalid_argument& e) {
+    // The session's rate against the config's windows in frames: both are valid alone.
+    throw InputError(path.string(), 0,
+                     fmt::format("sample_rate_hz {} does not fit [segmentation] of {}: {}",
+                                 sample_rate_hz, config.source.string(), e.what()));
+  }
+}
+
 SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Config& config,
                                      const std::function<void(Step&&)>& on_step,
                                      const std::function<void(double)>& on_progress) {
@@ -30,18 +44,12 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
   const InsoleSpec& spec = config.insole(info.header.insole_size);
   const double newtons_per_bit = config.calibration.newtons_per_bit(config.sensor.area_mm2());
   const SegmenterLimits limits = segmenter_limits(info.header.sample_rate_hz);
+  check_session_rate(path, info.header.sample_rate_hz, config);
   std::array<std::optional<StepSegmenter>, 2> segmenters;
   for (Foot foot : kFeet) {
-    try {
-      segmenters[static_cast<std::size_t>(foot)].emplace(
-          foot, info.header.sensors, config.segmentation, spec.adaptive_threshold_pct,
-          newtons_per_bit, limits);
-    } catch (const std::invalid_argument& e) {
-      // The session's rate against the config's windows in frames: both are valid alone.
-      throw InputError(path.string(), reader.line(),
-                       fmt::format("sample_rate_hz {} does not fit [segmentation] of {}: {}",
-                                   info.header.sample_rate_hz, config.source.string(), e.what()));
-    }
+    segmenters[static_cast<std::size_t>(foot)].emplace(
+        foot, info.header.sensors, config.segmentation, spec.adaptive_threshold_pct,
+        newtons_per_bit, limits);
   }
   const auto file_bytes = static_cast<double>(std::filesystem::file_size(path));
   std::vector<Step> finalised;

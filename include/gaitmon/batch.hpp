@@ -25,6 +25,11 @@ struct SegmentedSessionInfo {
 /// least 0.2 s.
 SegmenterLimits segmenter_limits(double sample_rate_hz);
 
+/// Throws InputError naming `path` when a session recorded at `sample_rate_hz` cannot be
+/// segmented with the config's [segmentation] (its windows in seconds become too few frames).
+void check_session_rate(const std::filesystem::path& path, double sample_rate_hz,
+                        const Config& config);
+
 /// Streams the session at `path` through one StepSegmenter per foot and hands every step to
 /// `on_step` as soon as it is final (feet interleave as in the file; within a foot in time
 /// order). `on_progress`, if set, receives the fraction of the file read, now and then.

@@ -11,6 +11,7 @@
 
 #include "commands.hpp"
 #include "drivers/frame_decoder.hpp"
+#include "gaitmon/batch.hpp"
 #include "gaitmon/lcm_publisher.hpp"
 #include "gaitmon/monitor.hpp"
 #include "live.hpp"
@@ -32,6 +33,7 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
 
   const drivers::WireFormat format(config.wire);
   replay::SessionByteSource source(args.session, format, speed);
+  check_session_rate(args.session, source.header().sample_rate_hz, config);
   // Signals first: every thread started below inherits the blocked mask.
   std::atomic<Monitor*> running{nullptr};
   // The driver first, then the monitor, to release the driver from a wait for room in the ring.

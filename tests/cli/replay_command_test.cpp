@@ -215,6 +215,30 @@ TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
   EXPECT_NE(out.find("bad.csv:" + std::to_string(bad + 1)), std::string::npos) << out;
 }
 
+// The default config's max_gap_s (0.055 s) is under 1.5 periods at 20 Hz: the session cannot
+// be segmented, which is bad input named like `analyze` names it, not an internal error.
+TEST(ReplayCommand, ASessionRateTheConfigCannotSegmentIsAnInputError) {
+  const fs::path dir = test::scratch_dir("replay-slow");
+  std::string text =
+      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 20\n# sensors: 93\nt_s,foot";
+  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
+  text += "\n0,L";
+  for (int i = 1; i <= 93; ++i) text += ",0";
+  text += "\n";
+  const fs::path session = test::write_text(dir / "slow.csv", text);
+  std::string out;
+  EXPECT_EQ(
+      test::run_command(test::gaitmon_binary().string() + " replay " + session.string() +
+                            " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
+                        &out),
+      2)
+      << out;
+  EXPECT_NE(out.find(session.string() + ": sample_rate_hz 20 does not fit [segmentation] of "),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("max_gap_s 0.055 s is under 1.5 sample periods"), std::string::npos) << out;
+}
+
 TEST(ReplayCommand, SigintStopsWithinTwoSecondsAfterAFinalStatus) {
   const fs::path dir = test::scratch_dir("replay-sigint");
   const fs::path log = dir / "replay.lcmlog";
