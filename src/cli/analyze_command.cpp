@@ -490,6 +490,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     input.analyses = analyses;
     input.session = &session;
     outputs.add("report.html", render_report_html(input));
+  } else {
+    outputs.drop("report.html");
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
   print_summary(args, header, settings, steps, analyses, session, written);

@@ -211,6 +211,8 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   if (args.report) {
     outputs.add("discrepancy.html",
                 render_discrepancy_html(args.session.filename().string(), result));
+  } else {
+    outputs.drop("discrepancy.html");
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
 

@@ -1,6 +1,8 @@
 // Write-then-rename output files.
 #include "output_file.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
@@ -69,7 +71,21 @@ void OutputSet::add(std::string_view name, std::string_view text) {
   files_.back()->write(text);
 }
 
+void OutputSet::drop(std::string_view name) {
+  dropped_.push_back(dir_ / name);
+}
+
 std::vector<std::filesystem::path> OutputSet::commit() {
+  for (const std::filesystem::path& path : dropped_) {
+    std::error_code ec;
+    if (std::filesystem::remove(path, ec)) {
+      spdlog::info("removed {}: an earlier run's output, which this run does not write",
+                   path.string());
+    } else if (ec) {
+      throw std::runtime_error(path.string() +
+                               ": cannot remove an earlier run's output: " + ec.message());
+    }
+  }
   std::vector<OutputFile*> files;
   std::vector<std::filesystem::path> paths;
   for (const auto& file : files_) {

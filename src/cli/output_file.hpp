@@ -48,12 +48,17 @@ class OutputSet {
   explicit OutputSet(std::filesystem::path dir) : dir_(std::move(dir)) {}
   /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file.
   void add(std::string_view name, std::string_view text);
-  /// OutputFile::commit_all over the files added; returns their final paths.
+  /// This run does not write `name`, which an earlier run into the same folder may have left:
+  /// commit() removes it first, so that the folder never holds two runs' outputs side by side.
+  void drop(std::string_view name);
+  /// Removes the dropped files, then OutputFile::commit_all over the files added; returns their
+  /// final paths. Throws std::runtime_error naming a file that cannot be removed or committed.
   std::vector<std::filesystem::path> commit();
 
  private:
   std::filesystem::path dir_;
   std::vector<std::unique_ptr<OutputFile>> files_;
+  std::vector<std::filesystem::path> dropped_;
 };
 
 }  // namespace gaitmon::cli

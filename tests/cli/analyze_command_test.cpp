@@ -415,6 +415,21 @@ TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   }
 }
 
+// A report of an earlier run with --report would sit beside this run's CSVs and show other fits.
+TEST(AnalyzeCommand, WithoutReportAnEarlierRunsReportIsRemoved) {
+  const auto dir = test::scratch_dir("analyze-stale-report");
+  test::write_text(dir / "o" / "report.html", "<html>an earlier run</html>\n");
+  int status = -1;
+  const std::string out = run(
+      "analyze " + (analysed().dir / "s.csv").string() + " --out " + (dir / "o").string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_FALSE(fs::exists(dir / "o" / "report.html"));
+  EXPECT_TRUE(fs::exists(dir / "o" / "regions.csv"));
+  EXPECT_NE(out.find("report.html: an earlier run's output, which this run does not write"),
+            std::string::npos)
+      << out;
+}
+
 // The outputs appear together or not at all: when one cannot take its final name (here a
 // directory already sits there), the ones renamed before it are removed again.
 TEST(AnalyzeCommand, AFailedRenameLeavesNoOutputAtAll) {

@@ -95,6 +95,42 @@ TEST(OutputFile, AFileHandedOverToAnotherWriterIsCommittedOrRemovedAsItsOwn) {
   EXPECT_EQ(read(dir / "b.csv"), "written by path\n");
 }
 
+// analyze without --report into a folder of an earlier run with it: the old report.html beside
+// the new CSVs would show another run's fits.
+TEST(OutputFile, ADroppedFileOfAnEarlierRunIsRemovedAtCommitOnly) {
+  const fs::path dir = test::scratch_dir("output_dropped");
+  test::write_text(dir / "report.html", "old\n");
+  test::write_text(dir / "steps.csv", "old\n");
+  OutputSet set(dir);
+  set.add("steps.csv", "new\n");
+  set.drop("report.html");
+  set.drop("never_written.html");
+  EXPECT_TRUE(fs::exists(dir / "report.html"));
+  set.commit();
+  EXPECT_EQ(names_in(dir), std::vector<std::string>{"steps.csv"});
+  EXPECT_EQ(read(dir / "steps.csv"), "new\n");
+}
+
+TEST(OutputFile, ADroppedFileThatCannotBeRemovedStopsTheCommitBeforeAnyRename) {
+  const fs::path dir = test::scratch_dir("output_drop_fails");
+  test::write_text(dir / "report.html" / "keep", "x");
+  {
+    OutputSet set(dir);
+    set.add("steps.csv", "new\n");
+    set.drop("report.html");
+    try {
+      set.commit();
+      FAIL() << "commit removed a folder that is not empty";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find((dir / "report.html").string() +
+                                           ": cannot remove an earlier run's output"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  EXPECT_EQ(names_in(dir), std::vector<std::string>{"report.html"});
+}
+
 TEST(OutputFile, AFolderThatCannotBeWrittenIsNamedInTheError) {
   const fs::path dir = test::scratch_dir("output_missing") / "not_there";
   OutputSet set(dir);
