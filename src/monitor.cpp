@@ -688,6 +688,7 @@ struct Monitor::Impl {
     s.ring_drops = c.ring_drops;
     s.frames_processed = c.frames_processed;
     s.frames_rejected = c.frames_rejected;
+    s.segmentation_gaps = c.segmentation_gaps;
     s.steps_detected = c.steps_detected;
     s.step_backlog = c.step_backlog;
     s.step_drops = c.step_drops;

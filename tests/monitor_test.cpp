@@ -728,6 +728,8 @@ TEST(Monitor, StepsEqualTheBatchPipelinesAcrossAGap) {
     counters = monitor.counters();
   }
   EXPECT_EQ(counters.segmentation_gaps, 2u);
+  ASSERT_FALSE(publisher.statuses().empty());
+  EXPECT_EQ(publisher.statuses().back().segmentation_gaps, 2u);
   EXPECT_EQ(counters.frames_processed, frames.size());
   std::size_t ok_steps = 0;
   ASSERT_NO_FATAL_FAILURE(expect_events_of(publisher.events(), steps, ok_steps));

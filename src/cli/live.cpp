@@ -66,9 +66,22 @@ void LinkStatus::fill(StatusReport& status) const {
   status.frames_decoded = c.frames;
   status.crc_errors = c.crc_errors;
   status.resyncs = c.resyncs;
+  status.frames_truncated = c.truncated_frames;
+  status.header_errors = c.header_errors;
   status.frames_lost_sequence = c.lost_frames_total();
+  status.sequence_restarts = c.sequence_restarts;
   const std::uint64_t connections = connections_.load();
   status.reconnects = connections > 0 ? connections - 1 : 0;
+}
+
+std::string LinkStatus::summary() const {
+  StatusReport s;
+  fill(s);
+  return fmt::format(
+      "link: {} bytes, {} frames decoded; {} CRC errors, {} truncated, {} bad headers, {} resyncs; "
+      "{} frames lost (sequence gaps), {} device restarts, {} reconnects",
+      s.bytes_received, s.frames_decoded, s.crc_errors, s.frames_truncated, s.header_errors,
+      s.resyncs, s.frames_lost_sequence, s.sequence_restarts, s.reconnects);
 }
 
 void StepPrinter::publish(const FitReport& report) {

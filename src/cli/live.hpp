@@ -44,6 +44,9 @@ class LinkStatus {
   void on_state(drivers::LinkState state, std::string_view detail);
   /// Fills the driver's fields of a status report from this and the decoder's counters.
   void fill(StatusReport& status) const;
+  /// One line of the link's totals for a command's closing summary: what was decoded, every
+  /// kind of fault, the frames the sequence counters show lost, device restarts and reconnects.
+  std::string summary() const;
   drivers::LinkState state() const { return state_.load(); }
 
  private:

@@ -208,12 +208,8 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
     throw std::runtime_error("no frame was received from " + source_name + "; nothing written");
   }
   std::filesystem::rename(partial, args.out);
-  const drivers::DecoderCounters c = decoder.counters();
-  fmt::print(
-      "wrote {} ({} frames); {} skipped, {} dropped (ring full); decoder: {} bytes, {} CRC "
-      "errors, {} resyncs, {} frames lost to sequence gaps\n",
-      args.out.string(), recorder.written(), recorder.skipped(), ring.drops(), c.bytes,
-      c.crc_errors, c.resyncs, c.lost_frames_total());
+  fmt::print("wrote {} ({} frames); {} skipped, {} dropped (ring full)\n{}\n", args.out.string(),
+             recorder.written(), recorder.skipped(), ring.drops(), link.summary());
 }
 
 }  // namespace

@@ -77,10 +77,11 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
       static_cast<double>(c.frames_processed) / 2.0 / source.header().sample_rate_hz;
   fmt::print(
       "replayed {} frames (about {:.1f} s of two feet) in {:.2f} s ({:.0f} x real time); steps {}, "
-      "fits {} published ({} with failures); ring drops {}, refused {}, step drops {}\n",
+      "fits {} published ({} with failures); rejected {}, ring drops {}, refused {}, step drops "
+      "{}; segmentation restarted at {} time gaps\n{}\n",
       c.frames_processed, session_s, wall_s, wall_s > 0.0 ? session_s / wall_s : 0.0,
-      c.steps_detected, c.fits_published, c.fits_failed, c.ring_drops, c.frames_refused,
-      c.step_drops);
+      c.steps_detected, c.fits_published, c.fits_failed, c.frames_rejected, c.ring_drops,
+      c.frames_refused, c.step_drops, c.segmentation_gaps, link.summary());
 }
 
 }  // namespace

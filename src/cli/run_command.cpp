@@ -66,10 +66,11 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   monitor.stop();
   const MonitorCounters c = monitor.counters();
   fmt::print(
-      "frames {} processed, {} dropped (ring full), {} refused (monitor closed); steps {} ({} "
-      "dropped from the backlog); fits {} published, {} with failures\n",
-      c.frames_processed, c.ring_drops, c.frames_refused, c.steps_detected, c.step_drops,
-      c.fits_published, c.fits_failed);
+      "frames {} processed, {} rejected, {} dropped (ring full), {} refused (monitor closed); "
+      "segmentation restarted at {} time gaps; steps {} ({} dropped from the backlog); fits {} "
+      "published, {} with failures\n{}\n",
+      c.frames_processed, c.frames_rejected, c.ring_drops, c.frames_refused, c.segmentation_gaps,
+      c.steps_detected, c.step_drops, c.fits_published, c.fits_failed, link.summary());
 }
 
 }  // namespace

@@ -89,12 +89,16 @@ void for_each_counter(Visit&& visit) {
   visit(&StatusReport::frames_decoded, &status_t::frames_decoded);
   visit(&StatusReport::crc_errors, &status_t::crc_errors);
   visit(&StatusReport::resyncs, &status_t::resyncs);
+  visit(&StatusReport::frames_truncated, &status_t::frames_truncated);
+  visit(&StatusReport::header_errors, &status_t::header_errors);
   visit(&StatusReport::frames_lost_sequence, &status_t::frames_lost_sequence);
+  visit(&StatusReport::sequence_restarts, &status_t::sequence_restarts);
   visit(&StatusReport::reconnects, &status_t::reconnects);
   visit(&StatusReport::ring_depth, &status_t::ring_depth);
   visit(&StatusReport::ring_drops, &status_t::ring_drops);
   visit(&StatusReport::frames_processed, &status_t::frames_processed);
   visit(&StatusReport::frames_rejected, &status_t::frames_rejected);
+  visit(&StatusReport::segmentation_gaps, &status_t::segmentation_gaps);
   visit(&StatusReport::steps_detected, &status_t::steps_detected);
   visit(&StatusReport::step_backlog, &status_t::step_backlog);
   visit(&StatusReport::step_drops, &status_t::step_drops);

@@ -83,12 +83,27 @@ TEST(Live, StatusTakesTheDecodersCounters) {
   decoder.feed(stream, [&](const SensorFrame&) { ++frames; });
   ASSERT_EQ(frames, 3);
 
+  // Half a frame, then the link drops: a truncated frame. Then the device restarts at 1.
+  frame.sequence = 6;
+  std::vector<std::uint8_t> half(4096);
+  half.resize(drivers::encode_frame(format, frame, half) / 2);
+  decoder.feed(half, [&](const SensorFrame&) { ++frames; });
+  decoder.reset();
+  frame.sequence = 1;
+  std::vector<std::uint8_t> restarted(4096);
+  restarted.resize(drivers::encode_frame(format, frame, restarted));
+  decoder.feed(restarted, [&](const SensorFrame&) { ++frames; });
+  ASSERT_EQ(frames, 4);
+
   StatusReport status;
   LinkStatus(decoder).fill(status);
-  EXPECT_EQ(status.bytes_received, stream.size());
-  EXPECT_EQ(status.frames_decoded, 3u);
+  EXPECT_EQ(status.bytes_received, stream.size() + half.size() + restarted.size());
+  EXPECT_EQ(status.frames_decoded, 4u);
   EXPECT_EQ(status.frames_lost_sequence, 2u);
   EXPECT_EQ(status.crc_errors, 0u);
+  EXPECT_EQ(status.frames_truncated, 1u);
+  EXPECT_EQ(status.header_errors, 0u);
+  EXPECT_EQ(status.sequence_restarts, 1u);
 }
 
 // Without a CRC nothing tells a partial frame joined to the next connection's bytes from a real

@@ -128,8 +128,9 @@ TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
             std::string::npos)
       << log;
   // The second skip is counted; its warning is held back by the log's rate limit.
-  EXPECT_NE(text.find("(7 frames); 2 skipped, 0 dropped (ring full); decoder: 1129 bytes, 0 CRC "
-                      "errors, 0 resyncs, 0 frames lost to sequence gaps"),
+  EXPECT_NE(text.find("(7 frames); 2 skipped, 0 dropped (ring full)\nlink: 1129 bytes, 9 frames "
+                      "decoded; 0 CRC errors, 0 truncated, 0 bad headers, 0 resyncs; 0 frames lost "
+                      "(sequence gaps), 0 device restarts, 0 reconnects"),
             std::string::npos)
       << text;
 

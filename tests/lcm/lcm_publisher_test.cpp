@@ -168,6 +168,10 @@ TEST_F(LcmPublisherMemq, StatusReportArrivesAsStatusT) {
   EXPECT_EQ(m.frames_decoded, 98765);
   EXPECT_EQ(m.crc_errors, 3);
   EXPECT_EQ(m.resyncs, 5);
+  EXPECT_EQ(m.frames_truncated, 37);
+  EXPECT_EQ(m.header_errors, 41);
+  EXPECT_EQ(m.sequence_restarts, 43);
+  EXPECT_EQ(m.segmentation_gaps, 47);
   EXPECT_EQ(m.frames_lost_sequence, 7);
   EXPECT_EQ(m.reconnects, 2);
   EXPECT_EQ(m.ring_depth, 11);

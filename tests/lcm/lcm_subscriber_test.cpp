@@ -115,6 +115,10 @@ void expect_same(const StatusReport& a, const StatusReport& b) {
   EXPECT_EQ(a.frames_decoded, b.frames_decoded);
   EXPECT_EQ(a.crc_errors, b.crc_errors);
   EXPECT_EQ(a.resyncs, b.resyncs);
+  EXPECT_EQ(a.frames_truncated, b.frames_truncated);
+  EXPECT_EQ(a.header_errors, b.header_errors);
+  EXPECT_EQ(a.sequence_restarts, b.sequence_restarts);
+  EXPECT_EQ(a.segmentation_gaps, b.segmentation_gaps);
   EXPECT_EQ(a.frames_lost_sequence, b.frames_lost_sequence);
   EXPECT_EQ(a.reconnects, b.reconnects);
   EXPECT_EQ(a.ring_depth, b.ring_depth);

@@ -82,12 +82,16 @@ inline StatusReport sample_status() {
   s.frames_decoded = 98765;
   s.crc_errors = 3;
   s.resyncs = 5;
+  s.frames_truncated = 37;
+  s.header_errors = 41;
   s.frames_lost_sequence = 7;
+  s.sequence_restarts = 43;
   s.reconnects = 2;
   s.ring_depth = 11;
   s.ring_drops = 13;
   s.frames_processed = 98700;
   s.frames_rejected = 31;
+  s.segmentation_gaps = 47;
   s.steps_detected = 17;
   s.step_backlog = 19;
   s.step_drops = 23;
