@@ -19,6 +19,8 @@ int main(int argc, char** argv) {
   // At most one, checked after parsing: CLI11 checks a required one before it reports a word it
   // does not know, so `gaitmon frobnicate` would say only that a subcommand is required.
   app.require_subcommand(0, 1);
+  // Subcommands inherit it: --config and --log-level work after the command's name too.
+  app.fallthrough();
   GlobalOptions global;
   app.add_option("--config", global.config_path,
                  "Main config file (default: $GAITMON_CONFIG or the source tree's "

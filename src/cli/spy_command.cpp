@@ -140,7 +140,8 @@ json to_json(const EffectsReport& r) {
           {"params", std::move(params)}};
 }
 
-// Channel arguments may be the configured names or the message kinds.
+// Channel arguments may be the configured names or the message kinds; anything else is a usage
+// error, as a typo on the command line is.
 std::vector<std::string> resolve_channels(const LcmChannels& channels,
                                           const std::vector<std::string>& wanted) {
   std::vector<std::string> out;
@@ -157,8 +158,15 @@ std::vector<std::string> resolve_channels(const LcmChannels& channels,
       out.push_back(channels.raw);
     } else if (name == "effects") {
       out.push_back(channels.effects);
-    } else {
+    } else if (name == channels.frame || name == channels.step || name == channels.fit ||
+               name == channels.status || name == channels.raw || name == channels.effects) {
       out.push_back(name);
+    } else {
+      throw CLI::ValidationError(
+          "channels", fmt::format("\"{}\" is not a gaitmon channel: frame, step, fit, status, "
+                                  "raw, effects or the config's names {}, {}, {}, {}, {}, {}",
+                                  name, channels.frame, channels.step, channels.fit,
+                                  channels.status, channels.raw, channels.effects));
     }
   }
   return out;

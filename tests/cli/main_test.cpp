@@ -302,6 +302,15 @@ TEST(Cli, LogLevelComesFromTheConfigUnlessGivenOnTheCommandLine) {
             &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
+
+  // After the command's name, as users write them, the two options work the same.
+  out = run(analyze.substr(1) + (dir / "e").string() + " " + debug_config, &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
+  out = run(analyze.substr(1) + (dir / "f").string() + " " + debug_config + " --log-level info",
+            &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
 }
 
 }  // namespace

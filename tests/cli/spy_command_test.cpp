@@ -35,6 +35,9 @@ TEST(SpyCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
            Case{"--timeout-s 0", "--timeout-s: '0' is not in [0.001, 1000000000]"},
            Case{"--lcm-url bogus:// --timeout-s 1", "--lcm-url: LCM cannot open \"bogus://\""},
            Case{"--lcm-url memq --timeout-s 1", "--lcm-url: LCM cannot open \"memq\""},
+           Case{"fit bogus --timeout-s 1",
+                "channels: \"bogus\" is not a gaitmon channel: frame, step, fit, status, raw, "
+                "effects or the config's names GAITMON_FRAME,"},
        }) {
     SCOPED_TRACE(c.args);
     int status = -1;
