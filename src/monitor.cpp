@@ -381,6 +381,7 @@ struct Monitor::Impl {
       event.foot = step.foot;
       event.step = step.index;
       event.kind = StepEvent::Kind::HeelStrike;
+      event.complete = step.status == StepStatus::Ok;
       event.frame = step.heel_strike_frame;
       event.t_s = step.t_heel_strike_s;
       send(event);

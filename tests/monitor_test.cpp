@@ -133,6 +133,8 @@ void expect_events_of(const std::vector<StepEvent>& events, const std::vector<St
     // round(t_s x 1e6) / 1e6 gives back the file's t_s exactly (times have at most 6 decimals).
     EXPECT_EQ(hs.t_s, step.t_heel_strike_s);
     EXPECT_EQ(to.t_s, step.t_toe_off_s);
+    EXPECT_EQ(hs.complete, step.status == StepStatus::Ok);
+    EXPECT_EQ(to.complete, step.status == StepStatus::Ok);
     if (step.status == StepStatus::Ok) ++ok_steps;
   }
 }

@@ -41,6 +41,9 @@ struct StepEvent {
   Foot foot = Foot::Left;
   int step = 0;
   Kind kind = Kind::HeelStrike;
+  /// False for an incomplete step (StepStatus::Incomplete): one of its two events is where the
+  /// data begin or end, not a foot event, so cadence must not count it.
+  bool complete = true;
   std::int64_t frame = 0;
   double t_s = 0.0;
 };

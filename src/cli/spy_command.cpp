@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "gaitmon/contact_ellipse.hpp"
 #include "gaitmon/lcm_subscriber.hpp"
 
 namespace gaitmon::cli {
@@ -31,16 +32,17 @@ json to_json(const FrameReport& r) {
   json regions = json::array();
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     const RegionFrameReport& g = r.regions[i];
-    regions.push_back({{"region", region_name(kRegions[i])},
-                       {"force_n", g.force_n},
-                       {"active_area_mm2", g.active_area_mm2},
-                       {"ellipse_case", g.ellipse_case},
-                       {"centre_x_mm", g.centre_x_mm},
-                       {"centre_y_mm", g.centre_y_mm},
-                       {"ra_mm", g.ra_mm},
-                       {"rb_mm", g.rb_mm},
-                       {"angle_rad", g.angle_rad},
-                       {"ellipse_area_mm2", g.ellipse_area_mm2}});
+    regions.push_back(
+        {{"region", region_name(kRegions[i])},
+         {"force_n", g.force_n},
+         {"active_area_mm2", g.active_area_mm2},
+         {"ellipse_case", ellipse_case_name(static_cast<EllipseCase>(g.ellipse_case))},
+         {"centre_x_mm", g.centre_x_mm},
+         {"centre_y_mm", g.centre_y_mm},
+         {"ra_mm", g.ra_mm},
+         {"rb_mm", g.rb_mm},
+         {"angle_rad", g.angle_rad},
+         {"ellipse_area_mm2", g.ellipse_area_mm2}});
   }
   return {{"type", "frame_t"}, {"utime", r.utime}, {"foot", foot_name(r.foot)},
           {"frame", r.frame},  {"t_s", r.t_s},     {"regions", std::move(regions)}};
@@ -52,6 +54,7 @@ json to_json(const StepEvent& e) {
           {"foot", foot_name(e.foot)},
           {"step", e.step},
           {"kind", e.kind == StepEvent::Kind::HeelStrike ? "heel_strike" : "toe_off"},
+          {"complete", e.complete},
           {"frame", e.frame},
           {"t_s", e.t_s}};
 }

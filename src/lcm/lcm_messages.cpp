@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <limits>
 
+#include "gaitmon/contact_ellipse.hpp"
+
 namespace gaitmon::lcm_messages {
 namespace {
 
@@ -126,6 +128,7 @@ void to_lcm(const StepEvent& event, step_t& message) {
   message.foot = foot_code(event.foot);
   message.step = event.step;
   message.kind = event.kind == StepEvent::Kind::HeelStrike ? step_t::HEEL_STRIKE : step_t::TOE_OFF;
+  message.complete = event.complete;
   message.frame = event.frame;
   message.t_s = event.t_s;
 }
@@ -184,7 +187,9 @@ std::optional<FrameReport> from_lcm(const frame_t& message) {
   report.t_s = message.t_s;
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     const region_frame_t& in = message.regions[i];
-    if (in.ellipse_case < 0) return std::nullopt;
+    if (in.ellipse_case < 0 || in.ellipse_case > static_cast<int>(EllipseCase::Long)) {
+      return std::nullopt;
+    }
     RegionFrameReport& out = report.regions[i];
     copy_region_frame_fields(in, out);
     out.ellipse_case = static_cast<std::uint8_t>(in.ellipse_case);
@@ -206,6 +211,7 @@ std::optional<StepEvent> from_lcm(const step_t& message) {
   event.utime = message.utime;
   event.foot = *foot;
   event.step = message.step;
+  event.complete = message.complete;
   event.frame = message.frame;
   event.t_s = message.t_s;
   return event;

@@ -110,8 +110,8 @@ void read_messages(Listener& listener, std::size_t count) {
 // 1-based arrays as JSON arrays. Expected values are the samples', written out here.
 json lua_expected_step() {
   const StepEvent e = test::sample_step();
-  return {{"utime", e.utime}, {"foot", 0},        {"step", e.step},
-          {"kind", 1},        {"frame", e.frame}, {"t_s", e.t_s}};
+  return {{"utime", e.utime},  {"foot", 0},        {"step", e.step}, {"kind", 1},
+          {"complete", false}, {"frame", e.frame}, {"t_s", e.t_s}};
 }
 
 json lua_expected_fit() {
@@ -326,7 +326,7 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
   EXPECT_EQ((*frame)["regions"][0]["region"], "heel");
   EXPECT_EQ((*frame)["regions"][7]["region"], "toes3_5");
   EXPECT_EQ((*frame)["regions"][7]["force_n"], 107.25);
-  EXPECT_EQ((*frame)["regions"][5]["ellipse_case"], 5);
+  EXPECT_EQ((*frame)["regions"][5]["ellipse_case"], "long");
   EXPECT_EQ((*frame)["regions"][2]["centre_x_mm"], -12.125);
   EXPECT_EQ((*frame)["regions"][2]["angle_rad"], 0.3 + 0.01 * 2);
 
@@ -336,6 +336,7 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
                          {"foot", "L"},
                          {"step", 17},
                          {"kind", "toe_off"},
+                         {"complete", false},
                          {"frame", 1234},
                          {"t_s", 12.34}}));
 

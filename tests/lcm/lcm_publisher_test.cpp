@@ -102,6 +102,7 @@ TEST_F(LcmPublisherMemq, StepEventArrivesAsStepT) {
   publisher.publish(test::sample_step());
   StepEvent heel = test::sample_step();
   heel.kind = StepEvent::Kind::HeelStrike;
+  heel.complete = true;
   heel.foot = Foot::Right;
   drain(*bus);
   const auto m = only_message<step_t>(received, "GAITMON_STEP");
@@ -109,6 +110,7 @@ TEST_F(LcmPublisherMemq, StepEventArrivesAsStepT) {
   EXPECT_EQ(m.foot, 0);
   EXPECT_EQ(m.step, 17);
   EXPECT_EQ(m.kind, 1);  // toe off
+  EXPECT_FALSE(m.complete);
   EXPECT_EQ(m.frame, 1234);
   EXPECT_EQ(m.t_s, 12.34);
 
@@ -117,6 +119,7 @@ TEST_F(LcmPublisherMemq, StepEventArrivesAsStepT) {
   drain(*bus);
   const auto h = only_message<step_t>(received, "GAITMON_STEP");
   EXPECT_EQ(h.kind, 0);  // heel strike
+  EXPECT_TRUE(h.complete);
   EXPECT_EQ(h.foot, 1);
 }
 

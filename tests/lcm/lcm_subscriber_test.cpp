@@ -5,6 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
 #include <gaitmon/step_t.hpp>
 #include <lcm/lcm-cpp.hpp>
@@ -74,6 +75,7 @@ void expect_same(const StepEvent& a, const StepEvent& b) {
   EXPECT_EQ(a.foot, b.foot);
   EXPECT_EQ(a.step, b.step);
   EXPECT_EQ(a.kind, b.kind);
+  EXPECT_EQ(a.complete, b.complete);
   EXPECT_EQ(a.frame, b.frame);
   EXPECT_EQ(a.t_s, b.t_s);
 }
@@ -215,9 +217,14 @@ TEST_F(LcmSubscriberMemq, ForeignAndImpossibleMessagesAreCountedNotDelivered) {
   // Bytes that are no message at all.
   const char junk[] = "junk";
   bus->publish("GAITMON_STATUS", junk, sizeof junk);
+  // A frame_t with an ellipse case past the last one (long, 5).
+  frame_t frame;
+  frame.foot = 0;
+  frame.regions[3].ellipse_case = 6;
+  bus->publish("GAITMON_FRAME", &frame);
   drain(subscriber);
   EXPECT_TRUE(deliveries.empty());
-  EXPECT_EQ(subscriber.decode_errors(), 3U);
+  EXPECT_EQ(subscriber.decode_errors(), 4U);
 }
 
 // The generated decoder throws for a negative array length; the exception must not cross LCM's

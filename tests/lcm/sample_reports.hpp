@@ -38,6 +38,7 @@ inline StepEvent sample_step() {
   e.foot = Foot::Left;
   e.step = 17;
   e.kind = StepEvent::Kind::ToeOff;
+  e.complete = false;
   e.frame = 1234;
   e.t_s = 12.34;
   return e;
