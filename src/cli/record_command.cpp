@@ -14,6 +14,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "commands.hpp"
 #include "drivers/frame_decoder.hpp"
@@ -63,7 +64,11 @@ class SessionRecorder {
     const auto foot = static_cast<std::size_t>(in.foot);
     auto& clock = clocks_[foot];
     if (!clock) clock.emplace(rate_hz_);
+    const std::int64_t before_us = clock->time_us();
     const DeviceClock::Tick tick = clock->advance(in.device_time_us);
+    if (tick == DeviceClock::Tick::Forward && spacings_us_.size() < kRateSpacings) {
+      spacings_us_.push_back(clock->time_us() - before_us);
+    }
     if (tick == DeviceClock::Tick::Repeated) {
       skip(fmt::format("foot {}: device time {} us repeated", foot_name(in.foot),
                        in.device_time_us));
@@ -94,6 +99,16 @@ class SessionRecorder {
   std::uint64_t written() const { return written_; }
   std::uint64_t skipped() const { return skipped_; }
 
+  /// The device's rate per foot from the median spacing of its first frames (a lost frame or a
+  /// gap does not move a median); none before 10 spacings.
+  std::optional<double> device_rate_hz() const {
+    if (spacings_us_.size() < 10) return std::nullopt;
+    std::vector<std::int64_t> sorted = spacings_us_;
+    const auto middle = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+    std::nth_element(sorted.begin(), middle, sorted.end());
+    return 1e6 / static_cast<double>(*middle);
+  }
+
  private:
   void open(const SensorFrame& first) {
     header_.insole_size = first.size;
@@ -119,6 +134,8 @@ class SessionRecorder {
   std::array<std::optional<DeviceClock>, 2> clocks_;
   std::array<std::int64_t, 2> last_host_ns_{};
   std::array<std::int64_t, 2> restart_offsets_us_{};  ///< time added at device restarts
+  static constexpr std::size_t kRateSpacings = 2000;
+  std::vector<std::int64_t> spacings_us_;  ///< between a foot's successive device times
   Frame frame_;
   std::uint64_t written_ = 0;
   std::uint64_t skipped_ = 0;
@@ -208,6 +225,15 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
     throw std::runtime_error("no frame was received from " + source_name + "; nothing written");
   }
   std::filesystem::rename(partial, args.out);
+  // The header's rate is the config's: a device at another rate makes segment and analyze
+  // misjudge every window in frames, so it must not pass quietly.
+  if (const auto rate = recorder.device_rate_hz();
+      rate && std::abs(*rate / config.sample_rate_hz - 1.0) > 0.05) {
+    spdlog::warn(
+        "record: the device's clock shows {:.1f} Hz per foot, but {} says sample_rate_hz {} (the "
+        "config's, {}): correct that header line, and set sample_rate_hz in the config for `run`",
+        *rate, args.out.string(), config.sample_rate_hz, config.source.string());
+  }
   fmt::print("wrote {} ({} frames); {} skipped, {} dropped (ring full)\n{}\n", args.out.string(),
              recorder.written(), recorder.skipped(), ring.drops(), link.summary());
 }
@@ -219,7 +245,8 @@ void add_record_command(CLI::App& app, const GlobalOptions& global) {
   CLI::App* sub = app.add_subcommand(
       "record",
       "Records what the insole link delivers as a session CSV v1 (times from the device "
-      "clock); Ctrl-C ends the recording");
+      "clock; the header's sample_rate_hz is the config's, and a device whose clock shows "
+      "another rate is warned of); Ctrl-C ends the recording");
   sub->add_option("--out,-o", args->out, "Session CSV to write")->required();
   CLI::Option* serial = sub->add_option("--serial", args->serial,
                                         "Serial device (default: [serial] device of the config)");

@@ -167,7 +167,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
   CLI::App* sub = app.add_subcommand(
       "simulate",
       "Simulate a two-foot walking session from the ellipsoid model: writes a session CSV v1 "
-      "and a ground-truth JSON");
+      "and a ground-truth JSON, at the config's sample_rate_hz");
   sub->add_option("--out,-o", args->out, "Session CSV to write")->required();
   sub->add_option("--truth", args->truth, "Ground-truth JSON (default: OUT with .truth.json)");
   sub->add_option("--size", args->size, "Insole size")

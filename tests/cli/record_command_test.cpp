@@ -171,6 +171,34 @@ TEST(RecordCommand, ADeviceRestartIsRecordedAsAGap) {
   EXPECT_EQ(recorded[4].bits[1], static_cast<std::uint8_t>(1 + 10000));
 }
 
+// The header's rate is the config's (100 Hz): a device at 50 Hz is recorded, and said loudly,
+// while one at the config's rate (with a lost frame, which the median ignores) is not.
+TEST(RecordCommand, ADeviceAtAnotherRateThanTheConfigsIsWarnedOf) {
+  for (const std::uint32_t spacing_us : {20000u, 10000u}) {
+    SCOPED_TRACE(spacing_us);
+    RecordFromPty r("record-rate-" + std::to_string(spacing_us));
+    ASSERT_TRUE(r.connected());
+    for (std::uint32_t i = 0; i < 12; ++i) {
+      if (i == 5) continue;
+      r.add(Foot::Left, InsoleSize::S37_38, 107, i * spacing_us);
+      r.add(Foot::Right, InsoleSize::S37_38, 107, i * spacing_us);
+    }
+    std::string text;
+    std::string log;
+    const std::optional<int> status = r.send_and_stop(text, log);
+    ASSERT_TRUE(status.has_value());
+    ASSERT_EQ(*status, 0) << text << log;
+    const std::string warning = "record: the device's clock shows 50.0 Hz per foot, but " +
+                                r.out.string() + " says sample_rate_hz 100 (the config's, ";
+    if (spacing_us == 20000u) {
+      EXPECT_NE(log.find(warning), std::string::npos) << log;
+    } else {
+      EXPECT_EQ(log.find("the device's clock shows"), std::string::npos) << log;
+    }
+    EXPECT_EQ(test::file_frames(r.out).size(), 22u);
+  }
+}
+
 TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
   RecordFromPty r("record-nothing");
   ASSERT_TRUE(r.connected());
