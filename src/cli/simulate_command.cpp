@@ -124,11 +124,15 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   options.model = *parse_model_variant(args.model);
   options.rasterisation = *parse_rasterisation(args.rasterisation);
   for (const auto& p : args.params) apply_param(p, config, options);
-  for (const auto& name : options.effects) {
+  for (auto it = options.effects.begin(); it != options.effects.end(); ++it) {
     try {
-      simulation_effect_params(name);  // known names only
+      simulation_effect_params(*it);  // known names only
     } catch (const std::invalid_argument& e) {
       throw CLI::ValidationError("--effect", e.what());
+    }
+    // Applied twice, an effect would double silently; analyze refuses the same.
+    if (std::find(options.effects.begin(), it, *it) != it) {
+      throw CLI::ValidationError("--effect", "'" + *it + "' is given twice");
     }
   }
   apply_effect_params(args.effect_params, options);
@@ -224,7 +228,8 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "sensor_creep");
   sub->add_option("--effect-params", args->effect_params,
                   R"(Effect parameters as JSON, e.g. '{"strength":0.3,"tau_s":0.1}' for one )"
-                  R"(--effect, or '{"NAME":{...},...}' for several (defaults otherwise))");
+                  R"(--effect, or '{"NAME":{...},...}' for several (defaults otherwise; the )"
+                  R"(README's table of effects lists each one's parameters, defaults and ranges))");
   sub->add_option("--subject", args->options.subject, "Subject label in the session metadata")
       ->capture_default_str();
   sub->callback([&global, args] { run_simulate(global, *args); });

@@ -106,6 +106,8 @@ TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
     const char* says;
   } bad[] = {
       {"--effect crosstalk", "--effect: unknown simulation effect 'crosstalk'"},
+      {"--effect hysteresis --effect sensor_creep --effect hysteresis",
+       "--effect: 'hysteresis' is given twice"},
       {R"(--effect hysteresis --effect-params '{"strength":')", "--effect-params: not valid JSON"},
       {"--effect hysteresis --effect-params '[0.1]'", "--effect-params: expected a JSON object"},
       {R"(--effect hysteresis --effect-params '{"tau_s":1}')", "unknown parameter 'tau_s'"},
