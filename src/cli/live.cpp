@@ -135,7 +135,8 @@ sigset_t stop_signals() {
 
 }  // namespace
 
-StopOnSignal::StopOnSignal(std::function<void(int)> on_signal) : on_signal_(std::move(on_signal)) {
+StopOnSignal::StopOnSignal(std::string stopping, std::function<void(int)> on_signal)
+    : stopping_(std::move(stopping)), on_signal_(std::move(on_signal)) {
   const sigset_t set = stop_signals();
   if (const int rc = pthread_sigmask(SIG_BLOCK, &set, nullptr); rc != 0) {
     throw std::system_error(rc, std::generic_category(), "pthread_sigmask");
@@ -147,8 +148,7 @@ StopOnSignal::StopOnSignal(std::function<void(int)> on_signal) : on_signal_(std:
       const int signal = sigtimedwait(&set, nullptr, &period);
       if (signal <= 0 || received_.load() != 0) continue;
       received_.store(signal);
-      spdlog::info("{}: stopping (the driver, then the ring, the fits and a final status)",
-                   signal == SIGINT ? "SIGINT" : "SIGTERM");
+      spdlog::info("{}: stopping ({})", signal == SIGINT ? "SIGINT" : "SIGTERM", stopping_);
       try {
         on_signal_(signal);
       } catch (const std::exception& e) {

@@ -79,10 +79,10 @@ class StepPrinter final : public Publisher {
 /// end) the first one calls `on_signal` (on a thread of its own) and later ones are ignored; they
 /// stay blocked after that, as the command is then finishing. Construct it before starting any
 /// other thread: it blocks both signals in the calling thread, and threads started later
-/// inherit that.
+/// inherit that. `stopping` says in the log what a signal stops, in order.
 class StopOnSignal {
  public:
-  explicit StopOnSignal(std::function<void(int signal)> on_signal);
+  StopOnSignal(std::string stopping, std::function<void(int signal)> on_signal);
   ~StopOnSignal();
   StopOnSignal(const StopOnSignal&) = delete;
   StopOnSignal& operator=(const StopOnSignal&) = delete;
@@ -95,6 +95,7 @@ class StopOnSignal {
   void finish();
 
  private:
+  std::string stopping_;
   std::function<void(int)> on_signal_;
   std::atomic<int> received_{0};
   std::atomic<bool> done_{false};

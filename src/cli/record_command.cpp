@@ -171,7 +171,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
   // Signals first: every thread started below inherits the blocked mask, those libusb starts
   // inside UsbSource's constructor included.
   std::atomic<drivers::ByteSource*> live_source{nullptr};
-  StopOnSignal on_signal([&](int) {
+  StopOnSignal on_signal("the driver, then the writer, which writes what the ring holds", [&](int) {
     if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
   const std::unique_ptr<drivers::ByteSource> source = make_insole_source(config, args.usb);

@@ -37,7 +37,7 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   // Signals first: every thread started below inherits the blocked mask.
   std::atomic<Monitor*> running{nullptr};
   // The driver first, then the monitor, to release the driver from a wait for room in the ring.
-  StopOnSignal on_signal([&](int) {
+  StopOnSignal on_signal("the fake driver, then the ring, the fits and a final status", [&](int) {
     source.stop();
     if (Monitor* m = running.load()) m->close();
   });

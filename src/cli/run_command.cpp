@@ -32,7 +32,7 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   std::atomic<drivers::ByteSource*> live_source{nullptr};
   // Only the driver: offer() never waits, so the monitor is closed once the driver has
   // returned, and the frames it decodes until then are not refused.
-  StopOnSignal on_signal([&](int) {
+  StopOnSignal on_signal("the driver, then the ring, the fits and a final status", [&](int) {
     if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
   source = make_insole_source(config, args.usb);

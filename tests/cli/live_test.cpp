@@ -227,7 +227,7 @@ std::vector<int> take_pending() {
 TEST(Live, TheFirstSignalStopsTheCommandOnceAndLaterOnesWaitBlocked) {
   std::atomic<int> calls{0};
   std::atomic<int> seen{0};
-  StopOnSignal stop([&](int signal) {
+  StopOnSignal stop("the test", [&](int signal) {
     seen = signal;
     ++calls;
   });
@@ -254,7 +254,7 @@ TEST(Live, TheFirstSignalStopsTheCommandOnceAndLaterOnesWaitBlocked) {
 TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   std::atomic<int> calls{0};
   {
-    StopOnSignal stop([&](int) {
+    StopOnSignal stop("the test", [&](int) {
       ++calls;
       throw std::runtime_error("the driver would not close");
     });
@@ -270,7 +270,7 @@ TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
 // the guard, declared after those, stops the watcher before they go.
 TEST(Live, TheGuardStopsTheWatcherWhenTheCommandThrows) {
   std::atomic<int> calls{0};
-  StopOnSignal stop([&](int) { ++calls; });
+  StopOnSignal stop("the test", [&](int) { ++calls; });
   try {
     const FinishOnExit watching(stop);
     throw std::runtime_error("the driver failed");
