@@ -245,7 +245,7 @@ nlohmann::json bounds_json(const FitBounds& b) {
 }
 
 nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
-  if (!fit) return nlohmann::json::array();
+  if (!fit) return nullptr;
   nlohmann::json effects = nlohmann::json::array();
   for (const EffectEstimate& e : fit->effects) {
     nlohmann::json params = nlohmann::json::object();
@@ -517,8 +517,9 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   }
 }
 
-std::vector<std::string> effect_names() {
-  std::vector<std::string> names;
+// `none` overrides the config's [model] effects.
+std::vector<std::string> effect_names_or_none() {
+  std::vector<std::string> names{"none"};
   for (std::string_view n : discrepancy_effect_names()) names.emplace_back(n);
   return names;
 }
@@ -560,12 +561,18 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                 "Also fit P = pi A B (keeping A/B); identifiable mode only");
   sub->add_option("--effects", args->effects,
                   "Effects added to the model, comma-separated (stress_relaxation, hysteresis, "
-                  "impact_transient, sensor_saturation, sensor_creep); default: [model] effects "
-                  "of the config")
+                  "impact_transient, sensor_saturation, sensor_creep), or none; default: [model] "
+                  "effects of the config")
       ->delimiter(',')
-      ->check(CLI::IsMember(effect_names()));
+      ->check(CLI::IsMember(effect_names_or_none()));
   sub->callback([&global, args, sub] {
     args->effects_given = sub->count("--effects") > 0;
+    if (std::find(args->effects.begin(), args->effects.end(), "none") != args->effects.end()) {
+      if (args->effects.size() > 1) {
+        throw CLI::ValidationError("--effects", "none cannot be combined with an effect");
+      }
+      args->effects.clear();
+    }
     for (auto it = args->effects.begin(); it != args->effects.end(); ++it) {
       if (std::find(std::next(it), args->effects.end(), *it) != args->effects.end()) {
         throw CLI::ValidationError("--effects", "'" + *it + "' is given twice");

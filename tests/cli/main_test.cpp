@@ -197,6 +197,12 @@ TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--effects: 'hysteresis' is given twice"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "a"));
+  out = run("analyze " + demo + " --out " + (dir / "a").string() + " --effects none,hysteresis",
+            &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--effects: none cannot be combined with an effect"), std::string::npos)
+      << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "a"));
 
   out = run("segment", &status);
   EXPECT_EQ(status, 2) << out;

@@ -140,6 +140,14 @@ TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
   ASSERT_EQ(extended.at("effects").size(), 1u);
   const nlohmann::json& expected = extended.at("effects").at(0);
   EXPECT_EQ(expected.at("name"), "impact_transient");
+  // --effects none turns the config's effects off.
+  ASSERT_EQ(test::run_command(gaitmon + " analyze " + session.string() + " --effects none --out " +
+                                  (dir / "baseline").string(),
+                              &output),
+            0)
+      << output;
+  std::ifstream baseline_in(dir / "baseline" / "session.json");
+  EXPECT_TRUE(nlohmann::json::parse(baseline_in).at("extended_model").is_null());
 
   const auto events = test::read_lcm_log(log);
   const auto reports = decode<gaitmon::effects_t>(events, "GAITMON_EFFECTS");
