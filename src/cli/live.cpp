@@ -37,6 +37,13 @@ double parse_speed(const std::string& text) {
 }
 
 std::unique_ptr<drivers::ByteSource> make_insole_source(const Config& config, bool usb) {
+  if (usb && config.usb.vendor_id == 0 && config.usb.product_id == 0) {
+    // No device has these ids, so the driver would wait for it without a word.
+    spdlog::warn(
+        "[usb] vendor_id and product_id of {} are 0000:0000, the shipped placeholders: set them "
+        "to your insole's (lsusb lists them)",
+        config.source.string());
+  }
   if (usb) return std::make_unique<drivers::UsbSource>(config.usb);
   return std::make_unique<drivers::SerialSource>(config.serial);
 }

@@ -279,6 +279,13 @@ TEST(RunCommand, UsbWithoutADeviceWaitsAndStopsOnSigint) {
   const auto started = run.read_until(test::ChildProcess::Stderr, "USB 0000:0000",
                                       Clock::now() + std::chrono::seconds(30));
   ASSERT_FALSE(started.empty()) << "gaitmon run --usb did not start";
+  bool warned = false;
+  for (const std::string& line : started) {
+    warned = warned || line.find(
+                           "are 0000:0000, the shipped placeholders: set them to your "
+                           "insole's") != std::string::npos;
+  }
+  EXPECT_TRUE(warned) << "no word that the shipped [usb] ids match no device";
   run.signal(SIGINT);
   const auto status = run.wait(Clock::now() + std::chrono::seconds(10));
   ASSERT_TRUE(status.has_value()) << "still running 10 s after SIGINT";
