@@ -558,7 +558,8 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "frames, less biased; better pooled values on sessions of a minute or more)")
       ->check(CLI::IsMember({"two-frame", "second-order"}));
   sub->add_flag("--free-scale", args->free_scale,
-                "Also fit P = pi A B (keeping A/B); identifiable mode only");
+                "Also fit P = pi A B (keeping A/B); identifiable mode only. The steps are then "
+                "not pooled (pooling needs P declared): the *_pooled columns stay empty");
   sub->add_option("--effects", args->effects,
                   "Effects added to the model, comma-separated (stress_relaxation, hysteresis, "
                   "impact_transient, sensor_saturation, sensor_creep), or none; default: [model] "

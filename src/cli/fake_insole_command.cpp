@@ -185,12 +185,13 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--truncate-rate", args->faults.truncate_rate,
-                  "Probability that a frame loses 1..N+C bytes from its end")
+                  "Probability that a frame loses 1 to N+C bytes from its end (N its sensors, C "
+                  "the CRC's bytes)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--reopen-after", args->reopen_after_s,
                   "Close the pty this many seconds after the start and open a new one (needs "
-                  "--link); bytes not yet read are lost, as with a real unplug")
+                  "--pty and --link); bytes not yet read are lost, as with a real unplug")
       ->check(number_in(0.0, 86400.0));
   sub->add_option("--reopen-gap-ms", args->reopen_gap_ms, "Time without a pty when reopening, ms")
       ->check(CLI::Range(0, 60000))
