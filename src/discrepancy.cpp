@@ -1089,7 +1089,8 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
 }
 
 DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
-                                   const DiscrepancySettings& settings) {
+                                   const DiscrepancySettings& settings,
+                                   const std::function<void(double)>& on_progress) {
   check_settings(settings, input);
   const Prepared prep = prepare(input, settings.folds);
   const std::vector<Unit>& units = prep.units;
@@ -1130,10 +1131,16 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
        out.ceiling_plateau_steps >=
            1e-2 * settings.min_ceiling_steps_pct * static_cast<double>(input.steps.size()));
 
+  // A second round, if the first names an effect, fits one candidate fewer.
+  const double rounds = settings.second_effect ? 2.0 : 1.0;
+  const auto report = [&](double fraction) {
+    if (on_progress) on_progress(std::min(1.0, fraction));
+  };
   std::vector<CandidateOutcome> outcomes;
   for (const CandidateSpec& spec : specs) {
     outcomes.push_back(fit_candidate(units, pooled, {}, spec));
     out.candidates.push_back(result_of(outcomes.back(), pooled, baseline, base_params));
+    report(static_cast<double>(outcomes.size()) / static_cast<double>(specs.size()) / rounds);
   }
   // A candidate is named when it shrinks the held-out error of the force or of the zero clearly
   // (a creeping sensor shows in the zero only: the zeroing takes it off the stance) and BIC
@@ -1200,6 +1207,9 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
         seconds.push_back(fit_candidate(units, pooled, chosen, spec));
         out.second_candidates.push_back(result_of(seconds.back(), pooled, first_fixed,
                                                   base_params + param_count(*first.spec, pooled)));
+        report((1.0 + static_cast<double>(seconds.size()) /
+                          static_cast<double>(std::max<std::size_t>(1, specs.size() - 1))) /
+               rounds);
       }
       if (!out.second_candidates.empty()) {
         const std::size_t b2 = most_likely(out.second_candidates);
@@ -1211,6 +1221,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
       }
     }
   }
+  report(1.0);
   const std::vector<double>& heldout = last->heldout.force;
   out.extended_heldout_nrmse_pct = nrmse(last->heldout.force_sse(), pooled.norm);
   out.gap_shrink_pct = shrink(out.baseline_heldout_nrmse_pct, out.extended_heldout_nrmse_pct);

@@ -171,10 +171,17 @@ class CleanSeries : public ::testing::TestWithParam<NamedCleanCase> {};
 
 TEST_P(CleanSeries, NamesTheEffectAndClosesTheHeldOutGap) {
   const auto& [expected, c] = GetParam();
-  const DiscrepancyResult r = find_discrepancy(clean_session(c, 14, 7));
+  std::vector<double> progress;
+  const DiscrepancyResult r =
+      find_discrepancy(clean_session(c, 14, 7), {}, [&](double f) { progress.push_back(f); });
   fmt::print("clean {}: named {}, held-out {:.2f} % -> {:.2f} % ({:.1f} %)\n", expected, named(r),
              r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
   ASSERT_FALSE(r.candidates.empty());
+  // Progress after every candidate of each round, never back, ending at 1.
+  EXPECT_EQ(progress.size(), r.candidates.size() + r.second_candidates.size() + 1);
+  EXPECT_TRUE(std::is_sorted(progress.begin(), progress.end()));
+  EXPECT_GT(progress.front(), 0.0);
+  EXPECT_EQ(progress.back(), 1.0);
   if (expected == "none") {
     EXPECT_TRUE(r.named_effects.empty()) << named(r);
     EXPECT_FALSE(r.not_named_reason.empty());

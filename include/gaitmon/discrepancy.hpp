@@ -68,6 +68,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <limits>
 #include <map>
 #include <span>
@@ -302,9 +303,11 @@ struct DiscrepancyResult {
 };
 
 /// Runs the workflow. Deterministic. Throws std::invalid_argument for bad settings or fewer
-/// steps than folds.
+/// steps than folds. `on_progress`, if set, receives the fraction of the candidate fits done
+/// (their k-fold fits are nearly all of the time) after each candidate, on the calling thread.
 DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
-                                   const DiscrepancySettings& settings = {});
+                                   const DiscrepancySettings& settings = {},
+                                   const std::function<void(double)>& on_progress = {});
 
 /// The extended model with the named effects (in the given order, each fitted on top of the
 /// previous), fitted on all steps: what `gaitmon analyze --effects` reports.

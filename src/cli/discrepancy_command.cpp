@@ -187,6 +187,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
   std::vector<Step> steps;
   DiscrepancyInput input;
+  DiscrepancyResult result;
   {
     ProgressBar progress("discrepancy");
     segment_session(
@@ -201,9 +202,10 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
                                    steps.size(), args.settings.folds));
     }
     input = prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
-    progress.update(0.6);
+    progress.update(0.3);
+    result = find_discrepancy(input, args.settings,
+                              [&](double fraction) { progress.update(0.3 + 0.7 * fraction); });
   }
-  const DiscrepancyResult result = find_discrepancy(input, args.settings);
 
   std::filesystem::create_directories(args.out_dir);
   OutputSet outputs(args.out_dir);
