@@ -4,10 +4,12 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
 
+#include "drivers/byte_source.hpp"
 #include "gaitmon/config.hpp"
 
 namespace lcm {
@@ -52,6 +54,13 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
 void add_spy_command(CLI::App& app, const GlobalOptions& global);
 void add_run_command(CLI::App& app, const GlobalOptions& global);
 void add_replay_command(CLI::App& app, const GlobalOptions& global);
-void add_record_command(CLI::App& app, const GlobalOptions& global);
+
+/// Makes the insole link from the config and --usb.
+using InsoleSourceFactory =
+    std::function<std::unique_ptr<drivers::ByteSource>(const Config& config, bool usb)>;
+/// `make_source` defaults to the serial or USB driver (make_insole_source); tests pass a source
+/// of their own, as no real driver can be made to fail at will.
+void add_record_command(CLI::App& app, const GlobalOptions& global,
+                        InsoleSourceFactory make_source = {});
 
 }  // namespace gaitmon::cli

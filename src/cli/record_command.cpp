@@ -163,7 +163,8 @@ class WriterThread {
   std::thread thread_;
 };
 
-void run_record(const GlobalOptions& global, const RecordArgs& args) {
+void run_record(const GlobalOptions& global, const RecordArgs& args,
+                const InsoleSourceFactory& make_source) {
   Config config = load_global_config(global);
   if (!args.serial.empty()) config.serial.device = args.serial;
   const std::filesystem::path partial = args.out.string() + ".partial";
@@ -174,7 +175,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
   StopOnSignal on_signal("the driver, then the writer, which writes what the ring holds", [&](int) {
     if (drivers::ByteSource* s = live_source.load()) s->stop();
   });
-  const std::unique_ptr<drivers::ByteSource> source = make_insole_source(config, args.usb);
+  const std::unique_ptr<drivers::ByteSource> source = make_source(config, args.usb);
   const FinishOnExit watching(on_signal);
   live_source.store(source.get());
   const std::string source_name = insole_source_name(config, args.usb);
@@ -240,7 +241,9 @@ void run_record(const GlobalOptions& global, const RecordArgs& args) {
 
 }  // namespace
 
-void add_record_command(CLI::App& app, const GlobalOptions& global) {
+void add_record_command(CLI::App& app, const GlobalOptions& global,
+                        InsoleSourceFactory make_source) {
+  if (!make_source) make_source = make_insole_source;
   auto args = std::make_shared<RecordArgs>();
   CLI::App* sub = app.add_subcommand(
       "record",
@@ -252,7 +255,9 @@ void add_record_command(CLI::App& app, const GlobalOptions& global) {
                                         "Serial device (default: [serial] device of the config)");
   sub->add_flag("--usb", args->usb, "Read the insole over USB ([usb] of the config)")
       ->excludes(serial);
-  sub->callback([&global, args] { run_record(global, *args); });
+  sub->callback([&global, args, make_source = std::move(make_source)] {
+    run_record(global, *args, make_source);
+  });
 }
 
 }  // namespace gaitmon::cli

@@ -1,17 +1,21 @@
 // `gaitmon record` end to end: `gaitmon fake-insole --pty` streams a session through a real
 // pseudo-terminal, the serial driver and the decoder; the recording reads back as the same
-// frames at the same times. Frames the recording cannot hold are skipped and counted, and a link
-// that delivers nothing leaves no file.
+// frames at the same times. Frames the recording cannot hold are skipped and counted, a link
+// that delivers nothing leaves no file, and a driver that throws ends the command with its error.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <array>
 #include <chrono>
+#include <memory>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "drivers/byte_source.hpp"
 #include "drivers/wire_format.hpp"
 #include "gaitmon/config.hpp"
 #include "gaitmon/session.hpp"
@@ -19,6 +23,7 @@
 #include "live_support.hpp"
 #include "monitor_support.hpp"
 #include "replay/pseudo_terminal.hpp"
+#include "src/cli/commands.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -52,8 +57,30 @@ TEST(RecordCommand, WritesWhatTheDeviceSentAsASessionFile) {
   EXPECT_EQ(recorded_header.sample_rate_hz, 100.0);
 }
 
+/// What an insole sends: frames in the shipped wire format.
+struct WireStream {
+  /// Appends a frame to `stream`; its readings depend on the time.
+  void add(Foot foot, InsoleSize size, std::uint16_t sensors, std::uint32_t time_us) {
+    SensorFrame f;
+    f.foot = foot;
+    f.size = size;
+    f.sensor_count = sensors;
+    f.sequence = ++sequence[static_cast<std::size_t>(foot)];
+    f.device_time_us = time_us;
+    for (std::size_t i = 0; i < sensors; ++i) f.bits[i] = static_cast<std::uint8_t>(i + time_us);
+    std::vector<std::uint8_t> bytes(4096);
+    bytes.resize(drivers::encode_frame(format, f, bytes));
+    stream.insert(stream.end(), bytes.begin(), bytes.end());
+  }
+
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const drivers::WireFormat format{config.wire};
+  std::vector<std::uint8_t> stream;
+  std::array<std::uint32_t, 2> sequence{};
+};
+
 // `gaitmon record` on a fresh pseudo-terminal, started and connected.
-struct RecordFromPty {
+struct RecordFromPty : WireStream {
   fs::path out;
   replay::PseudoTerminal pty;
   ChildProcess record;
@@ -66,20 +93,6 @@ struct RecordFromPty {
                 .read_until(ChildProcess::Stderr, "link connected",
                             Clock::now() + std::chrono::seconds(20))
                 .empty();
-  }
-
-  /// Appends a frame in the shipped wire format to `stream`; its readings depend on the time.
-  void add(Foot foot, InsoleSize size, std::uint16_t sensors, std::uint32_t time_us) {
-    SensorFrame f;
-    f.foot = foot;
-    f.size = size;
-    f.sensor_count = sensors;
-    f.sequence = ++sequence[static_cast<std::size_t>(foot)];
-    f.device_time_us = time_us;
-    for (std::size_t i = 0; i < sensors; ++i) f.bits[i] = static_cast<std::uint8_t>(i + time_us);
-    std::vector<std::uint8_t> bytes(4096);
-    bytes.resize(drivers::encode_frame(format, f, bytes));
-    stream.insert(stream.end(), bytes.begin(), bytes.end());
   }
 
   /// Sends `stream`, waits until the recorder has read it all, stops it with SIGINT and returns
@@ -100,11 +113,6 @@ struct RecordFromPty {
     }
     return status;
   }
-
-  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  const drivers::WireFormat format{config.wire};
-  std::vector<std::uint8_t> stream;
-  std::array<std::uint32_t, 2> sequence{};
 };
 
 TEST(RecordCommand, SkipsAndCountsFramesOfAnotherInsoleAndRepeatedTimes) {
@@ -213,6 +221,62 @@ TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
       << err;
   EXPECT_FALSE(fs::exists(r.out));
   EXPECT_FALSE(fs::exists(r.out.string() + ".partial"));
+}
+
+// A driver that fails: it connects, delivers `bytes` and throws.
+class FailingSource final : public drivers::ByteSource {
+ public:
+  explicit FailingSource(std::vector<std::uint8_t> bytes) : bytes_(std::move(bytes)) {}
+  void run(const BytesHandler& on_bytes, const StateHandler& on_state) override {
+    on_state(drivers::LinkState::Connecting, "fake");
+    on_state(drivers::LinkState::Connected, "fake");
+    on_bytes(bytes_);
+    throw std::runtime_error("fake: the driver failed");
+  }
+  void stop() override {}
+
+ private:
+  std::vector<std::uint8_t> bytes_;
+};
+
+// No real driver fails at will, so the command runs in this process on a source that does: a
+// writer thread left joinable by the throw would end the test program (std::terminate).
+TEST(RecordCommand, ADriverThatThrowsIsAnErrorAndLeavesNoFinishedFile) {
+  const fs::path out = test::scratch_dir("record-throws") / "recorded.csv";
+  WireStream device;
+  for (std::uint32_t t : {0u, 10000u, 20000u}) {
+    device.add(Foot::Left, InsoleSize::S37_38, 107, t);
+    device.add(Foot::Right, InsoleSize::S37_38, 107, t);
+  }
+  CLI::App app;
+  cli::GlobalOptions global;
+  global.config_path = test::source_dir() / "config" / "gaitmon.toml";
+  global.log_level = "warn";
+  cli::add_record_command(app, global, [&](const Config&, bool) {
+    return std::make_unique<FailingSource>(device.stream);
+  });
+  const std::string out_arg = out.string();
+  const std::array<const char*, 6> argv{"gaitmon",       "record",   "--out",
+                                        out_arg.c_str(), "--serial", "fake"};
+  try {
+    app.parse(static_cast<int>(argv.size()), argv.data());
+    ADD_FAILURE() << "record ended normally after its driver threw";
+  } catch (const std::runtime_error& e) {
+    // main() prints it as "gaitmon: error: ..." and exits 1.
+    EXPECT_STREQ(e.what(), "fake: the driver failed");
+  }
+
+  // The README's promise: a failed run leaves no file that looks finished. If the frames
+  // delivered before the failure are kept, under the partial name, they are all there.
+  EXPECT_FALSE(fs::exists(out));
+  const fs::path partial = out.string() + ".partial";
+  if (fs::exists(partial)) {
+    const std::vector<Frame> recorded = test::file_frames(partial);
+    ASSERT_EQ(recorded.size(), 6u);
+    EXPECT_EQ(recorded.back().foot, Foot::Right);
+    EXPECT_DOUBLE_EQ(recorded.back().t_s, 0.02);
+    EXPECT_EQ(recorded.back().bits[1], static_cast<std::uint8_t>(1 + 20000));
+  }
 }
 
 }  // namespace

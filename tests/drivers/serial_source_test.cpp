@@ -1,12 +1,15 @@
 // The serial driver against real pseudo-terminals made here: frames written to the master
-// arrive decoded; a pty that closes and comes back under the same link path is reconnected.
+// arrive decoded; a pty that closes and comes back under the same link path is reconnected, with
+// waits that grow while the device sends nothing and start over once it has sent data.
 #include "drivers/serial_source.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -23,6 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
 
 using replay::point_link;
 using replay::PseudoTerminal;
@@ -61,9 +65,11 @@ class Harness {
             });
           },
           [this](LinkState state, std::string_view detail) {
+            const auto now = Clock::now();
             if (state == LinkState::Disconnected) decoder_.reset();
             std::lock_guard lock(mutex_);
             states_.emplace_back(state, std::string(detail));
+            state_times_.push_back(now);
             changed_.notify_all();
           });
     });
@@ -82,6 +88,20 @@ class Harness {
     std::unique_lock lock(mutex_);
     return changed_.wait_for(lock, 10s, [&] { return states_.size() >= n; });
   }
+  /// Waits until `state` has been reported `n` times.
+  bool wait_state_count(LinkState state, std::size_t n) {
+    std::unique_lock lock(mutex_);
+    return changed_.wait_for(lock, 10s, [&] { return count_locked(state) >= n; });
+  }
+  /// When each report of `state` came, in order.
+  std::vector<Clock::time_point> times_of(LinkState state) {
+    std::lock_guard lock(mutex_);
+    std::vector<Clock::time_point> times;
+    for (std::size_t i = 0; i < states_.size(); ++i) {
+      if (states_[i].first == state) times.push_back(state_times_[i]);
+    }
+    return times;
+  }
   std::vector<std::uint32_t> sequences() {
     std::lock_guard lock(mutex_);
     return sequences_;
@@ -97,12 +117,18 @@ class Harness {
   DecoderCounters counters() const { return decoder_.counters(); }
 
  private:
+  std::size_t count_locked(LinkState state) const {
+    return static_cast<std::size_t>(std::count_if(states_.begin(), states_.end(),
+                                                  [&](const auto& s) { return s.first == state; }));
+  }
+
   SerialSource source_;
   FrameDecoder decoder_;
   std::mutex mutex_;
   std::condition_variable changed_;
   std::vector<std::uint32_t> sequences_;
   std::vector<std::pair<LinkState, std::string>> states_;
+  std::vector<Clock::time_point> state_times_;  ///< when each of states_ was reported
   bool bits_ok_ = true;
   std::thread thread_;
 };
@@ -189,6 +215,74 @@ TEST(SerialSource, WaitsForAMissingDeviceAndStopsCleanly) {
   ASSERT_EQ(states.size(), 3U);
   EXPECT_EQ(states[1].first, LinkState::Connected);
   EXPECT_EQ(states[2].first, LinkState::Disconnected);
+}
+
+// A device that opens but hangs up before sending a byte: each time the driver connects, the
+// link moves to a fresh pty (first, so that the next attempt finds it) and the one the driver
+// opened is closed, which fails its read. Returns false if the driver did not connect.
+bool hang_up_at_connections(Harness& harness, const fs::path& link,
+                            std::unique_ptr<PseudoTerminal>& pty, std::size_t from,
+                            std::size_t to) {
+  for (std::size_t k = from; k <= to; ++k) {
+    if (!harness.wait_state_count(LinkState::Connected, k)) return false;
+    auto next = std::make_unique<PseudoTerminal>();
+    point_link(link, next->path());
+    pty = std::move(next);
+  }
+  return true;
+}
+
+TEST(SerialSource, ADeviceThatHangsUpBeforeSendingIsRetriedWithGrowingWaits) {
+  const fs::path link = test::scratch_dir("serial-no-data") / "insole";
+  auto pty = std::make_unique<PseudoTerminal>();
+  point_link(link, pty->path());
+  SerialSettings settings = settings_for(link);
+  settings.reconnect_initial_ms = 10;
+  settings.reconnect_max_ms = 320;
+  Harness harness(settings);
+  ASSERT_TRUE(hang_up_at_connections(harness, link, pty, 1, 8));
+  ASSERT_TRUE(harness.wait_state_count(LinkState::Connected, 9));
+  harness.stop();
+
+  // An open without data does not reset the backoff: waits of 10, 20, 40, 80, 160 ms, then
+  // 320 ms on, where a reset per open would wait 10 ms each time. Each wait starts after the
+  // Connected before it, so a gap is never shorter, however loaded the machine.
+  const std::vector<Clock::time_point> connected = harness.times_of(LinkState::Connected);
+  ASSERT_EQ(connected.size(), 9U);
+  for (std::size_t i = 0; i + 1 < connected.size(); ++i) {
+    const auto wait = std::chrono::milliseconds(std::min(10 << i, 320));
+    EXPECT_GE(connected[i + 1] - connected[i], wait)
+        << "between connections " << i + 1 << " and " << i + 2;
+  }
+  EXPECT_EQ(harness.times_of(LinkState::Disconnected).size(), 9U);
+  EXPECT_EQ(harness.counters().bytes, 0U);
+}
+
+TEST(SerialSource, DataResetsTheBackoff) {
+  const fs::path link = test::scratch_dir("serial-data-resets") / "insole";
+  auto pty = std::make_unique<PseudoTerminal>();
+  point_link(link, pty->path());
+  SerialSettings settings = settings_for(link);
+  settings.reconnect_initial_ms = 10;
+  settings.reconnect_max_ms = 5000;
+  Harness harness(settings);
+  // Seven connections without data take the backoff to 1280 ms.
+  ASSERT_TRUE(hang_up_at_connections(harness, link, pty, 1, 7));
+  ASSERT_TRUE(harness.wait_state_count(LinkState::Connected, 8));
+  write_all(pty->fd(), frames_bytes(Foot::Left, 0, 10));
+  ASSERT_TRUE(harness.wait_frames(10));
+  ASSERT_TRUE(hang_up_at_connections(harness, link, pty, 8, 8));
+  ASSERT_TRUE(harness.wait_state_count(LinkState::Connected, 9));
+  harness.stop();
+
+  const std::vector<Clock::time_point> connected = harness.times_of(LinkState::Connected);
+  const std::vector<Clock::time_point> lost = harness.times_of(LinkState::Disconnected);
+  ASSERT_EQ(connected.size(), 9U);
+  ASSERT_GE(lost.size(), 8U);
+  EXPECT_GE(connected[7] - connected[6], 640ms) << "the backoff did not grow";
+  // The data reset it: the driver came back after 10 ms, where the backoff it had reached
+  // would wait 1280 ms.
+  EXPECT_LT(connected[8] - lost[7], 1s);
 }
 
 TEST(SerialSource, StopBeforeRunReturnsAtOnce) {
