@@ -13,8 +13,9 @@ namespace gaitmon::drivers {
 /// delivers what it reads. When the device disappears (a read error, end of file, the path
 /// gone) it reports Disconnected, then Connecting, and reopens the path after
 /// reconnect_initial_ms, doubling the wait after each failed attempt up to reconnect_max_ms,
-/// until it opens (Connected) or stop() is called. Only changes of state are reported; the
-/// detail names the device and the error.
+/// until it opens (Connected) or stop() is called. Only data resets the wait: a device that
+/// opens but fails before its first byte keeps backing off. Only changes of state are
+/// reported; the detail names the device and the error.
 ///
 /// Threading: run() on one thread (the driver thread), once per object; stop() from any thread.
 class SerialSource final : public ByteSource {

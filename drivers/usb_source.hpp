@@ -28,8 +28,9 @@ TransferAction on_transfer_complete(int status, std::span<const std::uint8_t> da
 /// (detaching a kernel driver where libusb can), and keeps settings.transfers bulk IN transfers
 /// of transfer_bytes each in flight on settings.endpoint. When the device goes away it reports
 /// Disconnected, cancels and retires its transfers, and tries again after reconnect_initial_ms,
-/// doubling up to reconnect_max_ms; a hotplug arrival (where libusb supports hotplug) ends the
-/// wait early. Events are handled with a 100 ms timeout, so stop() takes effect promptly.
+/// doubling up to reconnect_max_ms (only data resets the wait, not an open or a claim); a
+/// hotplug arrival (where libusb supports hotplug) ends the wait early. Events are handled with a
+/// 100 ms timeout, so stop() takes effect promptly.
 ///
 /// Threading: run() on one thread, once per object; stop() from any thread.
 class UsbSource final : public ByteSource {

@@ -210,11 +210,22 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
   spdlog::info("record: {} -> {}", source_name, args.out.string());
   // A signal that came before live_source was set found nothing to stop.
   if (on_signal.received() == 0) {
-    source->run(
-        [&](std::span<const std::uint8_t> bytes) {
-          decoder.feed(bytes, [&](const SensorFrame& frame) { (void)ring.try_push(frame); });
-        },
-        [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+    try {
+      source->run(
+          [&](std::span<const std::uint8_t> bytes) {
+            decoder.feed(bytes, [&](const SensorFrame& frame) { (void)ring.try_push(frame); });
+          },
+          [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+    } catch (...) {
+      // What was recorded before the driver failed is whole rows: it is kept, under the partial
+      // name, as no recording can be taken again.
+      writer.join();
+      if (!writer_error && recorder.close()) {
+        spdlog::error("record: the driver failed; the {} frames recorded before are kept in {}",
+                      recorder.written(), partial.string());
+      }
+      throw;
+    }
   }
   writer.join();
   if (writer_error) {

@@ -266,17 +266,17 @@ TEST(RecordCommand, ADriverThatThrowsIsAnErrorAndLeavesNoFinishedFile) {
     EXPECT_STREQ(e.what(), "fake: the driver failed");
   }
 
-  // The README's promise: a failed run leaves no file that looks finished. If the frames
-  // delivered before the failure are kept, under the partial name, they are all there.
+  // The README's promise: a failed run leaves no file that looks finished; and nothing recorded
+  // is lost: the frames delivered before the failure are kept, all of them, under the partial
+  // name.
   EXPECT_FALSE(fs::exists(out));
   const fs::path partial = out.string() + ".partial";
-  if (fs::exists(partial)) {
-    const std::vector<Frame> recorded = test::file_frames(partial);
-    ASSERT_EQ(recorded.size(), 6u);
-    EXPECT_EQ(recorded.back().foot, Foot::Right);
-    EXPECT_DOUBLE_EQ(recorded.back().t_s, 0.02);
-    EXPECT_EQ(recorded.back().bits[1], static_cast<std::uint8_t>(1 + 20000));
-  }
+  ASSERT_TRUE(fs::exists(partial));
+  const std::vector<Frame> recorded = test::file_frames(partial);
+  ASSERT_EQ(recorded.size(), 6u);
+  EXPECT_EQ(recorded.back().foot, Foot::Right);
+  EXPECT_DOUBLE_EQ(recorded.back().t_s, 0.02);
+  EXPECT_EQ(recorded.back().bits[1], static_cast<std::uint8_t>(1 + 20000));
 }
 
 }  // namespace
