@@ -66,6 +66,12 @@ void LinkStatus::on_state(drivers::LinkState state, std::string_view detail) {
   }
 }
 
+void LinkStatus::on_end(std::string_view detail) {
+  state_.store(drivers::LinkState::Disconnected);
+  decoder_.reset();
+  spdlog::info("link ended: {}", detail);
+}
+
 void LinkStatus::fill(StatusReport& status) const {
   const drivers::DecoderCounters c = decoder_.counters();
   status.connection = std::string(drivers::link_state_name(state_.load()));

@@ -42,6 +42,9 @@ class LinkStatus {
   /// reconnections (a Connected after the first) and resets the decoder on a Disconnected, as
   /// a partial frame of the old connection must not be joined to the new one's bytes.
   void on_state(drivers::LinkState state, std::string_view detail);
+  /// A Disconnected that is the planned end of a finite source (a replay's end of session or
+  /// stop): handled as one, but logged as information rather than as a warning.
+  void on_end(std::string_view detail);
   /// Fills the driver's fields of a status report from this and the decoder's counters.
   void fill(StatusReport& status) const;
   /// One line of the link's totals for a command's closing summary: what was decoded, every

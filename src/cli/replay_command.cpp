@@ -66,7 +66,14 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
           if (!monitor.offer_wait(frame)) source.stop();
         });
       },
-      [&](drivers::LinkState state, std::string_view detail) { link.on_state(state, detail); });
+      [&](drivers::LinkState state, std::string_view detail) {
+        // The fake driver never drops: its Disconnected is the session's end or a stop.
+        if (state == drivers::LinkState::Disconnected) {
+          link.on_end(detail);
+        } else {
+          link.on_state(state, detail);
+        }
+      });
   // A signal handled just now may still be closing the monitor: it has to return first.
   on_signal.finish();
   monitor.stop();
