@@ -118,9 +118,19 @@ struct UsbSource::Impl {
     slots.assign(static_cast<std::size_t>(settings.transfers), Slot{});
     for (Slot& slot : slots) {
       slot.owner = this;
-      slot.buffer.resize(static_cast<std::size_t>(settings.transfer_bytes));
+      // Out of memory is a lost connection, not an exception: the transfers already submitted
+      // must be cancelled and the handle closed on the way out, as for any loss.
+      try {
+        slot.buffer.resize(static_cast<std::size_t>(settings.transfer_bytes));
+      } catch (const std::bad_alloc&) {
+        mark_lost("out of memory for the transfer buffers");
+        break;
+      }
       slot.transfer = libusb_alloc_transfer(0);
-      if (slot.transfer == nullptr) throw std::bad_alloc();
+      if (slot.transfer == nullptr) {
+        mark_lost("libusb_alloc_transfer: out of memory");
+        break;
+      }
       libusb_fill_bulk_transfer(slot.transfer, handle, settings.endpoint, slot.buffer.data(),
                                 settings.transfer_bytes, &Impl::completed, &slot, 0);
       if (const int rc = libusb_submit_transfer(slot.transfer); rc != 0) {
@@ -146,7 +156,9 @@ struct UsbSource::Impl {
   // is closed: libusb then drops it from its in-flight list, and closing the usbfs file makes
   // the kernel kill its URB, so nothing writes into the buffer any more.
   void free_slots() {
-    for (Slot& slot : slots) libusb_free_transfer(slot.transfer);
+    for (Slot& slot : slots) {
+      if (slot.transfer != nullptr) libusb_free_transfer(slot.transfer);
+    }
     slots.clear();
   }
 };
