@@ -372,9 +372,9 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
       }
     }
     if (!undetermined.empty()) {
-      fmt::print(
-          "warning: --fit seed8 frees parameters the data cannot determine: {}; their values are "
-          "wherever the optimiser stopped (model-notes section 2)\n",
+      spdlog::warn(
+          "--fit seed8 frees parameters the data cannot determine: {}; their values are "
+          "wherever the optimiser stopped (model-notes section 2)",
           fmt::join(undetermined, ", "));
     }
   }
