@@ -108,10 +108,7 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(SegmentSession, ReportsTheFileAndLineOfABadFrame) {
   const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
   const auto dir = test::scratch_dir("batch-bad");
-  std::string text =
-      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
-  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
-  text += "\n";
+  std::string text = test::session_head();
   for (int k = 0; k < 3; ++k) {
     text += std::to_string(0.01 * k) + ",L";
     for (int i = 1; i <= 93; ++i) text += k == 2 && i == 40 ? ",256" : ",0";
@@ -133,13 +130,8 @@ TEST(SegmentSession, ARateTooLowForTheConfigsWindowsNamesBoth) {
   config.segmentation.swing_window_frames = 20;
   config.segmentation.max_gap_s = 0.2;
   const auto dir = test::scratch_dir("batch-rate");
-  std::string text =
-      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 10\n# sensors: 93\nt_s,foot";
-  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
-  text += "\n0,L";
-  for (int i = 1; i <= 93; ++i) text += ",0";
-  text += "\n";
-  const auto path = test::write_text(dir / "slow.csv", text);
+  const auto path =
+      test::write_text(dir / "slow.csv", test::session_head("10") + test::session_row("0,L"));
   try {
     segment_session(path, config, [](Step&&) {});
     FAIL() << "expected InputError";

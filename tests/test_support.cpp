@@ -66,6 +66,19 @@ std::filesystem::path write_text(const std::filesystem::path& path, const std::s
   return path;
 }
 
+std::string session_head(const std::string& rate_hz) {
+  std::string text = "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: " + rate_hz +
+                     "\n# sensors: 93\nt_s,foot";
+  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
+  return text + "\n";
+}
+
+std::string session_row(const std::string& time_and_foot, int cells, int value) {
+  std::string row = time_and_foot;
+  for (int i = 0; i < cells; ++i) row += "," + std::to_string(value);
+  return row + "\n";
+}
+
 int run_command(const std::string& command, std::string* output) {
   std::string full = command + " 2>&1";
   FILE* pipe = ::popen(full.c_str(), "r");

@@ -23,6 +23,10 @@ std::filesystem::path gaitmon_binary();
 std::filesystem::path scratch_dir(const std::string& name);
 /// Writes `text` to `path`, creating folders; returns path.
 std::filesystem::path write_text(const std::filesystem::path& path, const std::string& text);
+/// The header and column line of a hand-made 35-36 session (93 sensors) at `rate_hz`.
+std::string session_head(const std::string& rate_hz = "100");
+/// One row of such a session: `time_and_foot` (e.g. "0.01,L") and `cells` readings of `value`.
+std::string session_row(const std::string& time_and_foot, int cells = 93, int value = 0);
 /// Runs a shell command, returns its exit status, and captures stdout+stderr into `output`.
 int run_command(const std::string& command, std::string* output = nullptr);
 /// The sample standard deviation (n - 1); needs at least two values.

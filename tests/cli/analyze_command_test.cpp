@@ -394,15 +394,8 @@ TEST(AnalyzeCommand, FreeScaleFitsTheScaleAndIsRefusedWithSeed8) {
 
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-bad");
-  std::string text =
-      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
-  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
-  text += "\n0.0,L";
-  for (int i = 1; i <= 93; ++i) text += ",0";
-  text += "\n0.01,L";
-  for (int i = 1; i <= 92; ++i) text += ",0";
-  text += "\n";
-  test::write_text(dir / "bad.csv", text);
+  test::write_text(dir / "bad.csv", test::session_head() + test::session_row("0.0,L") +
+                                        test::session_row("0.01,L", 92));
   int status = -1;
   const std::string out =
       run("analyze " + (dir / "bad.csv").string() + " --out " + (dir / "o").string() + " --report",

@@ -110,13 +110,7 @@ TEST(Cli, TheBundledDemoIsReproducedByTheCommandInReplayReadme) {
 
 TEST(Cli, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("cli-bad");
-  std::string text =
-      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
-  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
-  text += "\n0.0,X";
-  for (int i = 1; i <= 93; ++i) text += ",0";
-  text += "\n";
-  test::write_text(dir / "bad.csv", text);
+  test::write_text(dir / "bad.csv", test::session_head() + test::session_row("0.0,X"));
   int status = -1;
   const std::string out =
       run("segment " + (dir / "bad.csv").string() + " --out " + (dir / "o").string(), &status);
@@ -147,16 +141,10 @@ TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
 // a perfect fit (medians of 0, an NRMSE of 0 %).
 TEST(Cli, ASessionWithoutACompleteStepIsRefusedByAnalyzeAndDiscrepancy) {
   const auto dir = test::scratch_dir("cli-no-steps");
-  std::string text =
-      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 100\n# sensors: 93\nt_s,foot";
-  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
-  text += "\n";
+  std::string text = test::session_head();
   for (int k = 0; k < 300; ++k) {
-    for (const char* foot : {",L", ",R"}) {
-      text += std::to_string(0.01 * k) + foot;
-      for (int i = 1; i <= 93; ++i) text += ",3";
-      text += "\n";
-    }
+    for (const char* foot : {",L", ",R"})
+      text += test::session_row(std::to_string(0.01 * k) + foot, 93, 3);
   }
   const std::string session = test::write_text(dir / "standing.csv", text).string();
   int status = -1;

@@ -49,6 +49,14 @@ std::vector<Message> decode(const std::vector<test::LogEvent>& events, const std
   return out;
 }
 
+// `gaitmon replay SESSION --speed max`, its LCM messages logged into `dir`; the exit status.
+int replay_at_max_speed(const fs::path& session, const fs::path& dir, std::string* out) {
+  return test::run_command(test::gaitmon_binary().string() + " replay " + session.string() +
+                               " --speed max --lcm-url file://" + (dir / "log").string() +
+                               "?mode=w",
+                           out);
+}
+
 using test::expect_printed;
 using test::read_regions_csv;
 
@@ -216,12 +224,7 @@ TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
   const fs::path session = test::write_text(dir / "bad.csv", text);
 
   std::string out;
-  EXPECT_EQ(
-      test::run_command(test::gaitmon_binary().string() + " replay " + session.string() +
-                            " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
-                        &out),
-      2)
-      << out;
+  EXPECT_EQ(replay_at_max_speed(session, dir, &out), 2) << out;
   EXPECT_NE(out.find("bad.csv:" + std::to_string(bad + 1)), std::string::npos) << out;
 }
 
@@ -229,20 +232,10 @@ TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
 // be segmented, which is bad input named like `analyze` names it, not an internal error.
 TEST(ReplayCommand, ASessionRateTheConfigCannotSegmentIsAnInputError) {
   const fs::path dir = test::scratch_dir("replay-slow");
-  std::string text =
-      "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: 20\n# sensors: 93\nt_s,foot";
-  for (int i = 1; i <= 93; ++i) text += ",s" + std::to_string(i);
-  text += "\n0,L";
-  for (int i = 1; i <= 93; ++i) text += ",0";
-  text += "\n";
-  const fs::path session = test::write_text(dir / "slow.csv", text);
+  const fs::path session =
+      test::write_text(dir / "slow.csv", test::session_head("20") + test::session_row("0,L"));
   std::string out;
-  EXPECT_EQ(
-      test::run_command(test::gaitmon_binary().string() + " replay " + session.string() +
-                            " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
-                        &out),
-      2)
-      << out;
+  EXPECT_EQ(replay_at_max_speed(session, dir, &out), 2) << out;
   EXPECT_NE(out.find(session.string() + ": sample_rate_hz 20 does not fit [segmentation] of "),
             std::string::npos)
       << out;
