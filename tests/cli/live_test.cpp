@@ -238,7 +238,11 @@ TEST(Live, TheFirstSignalStopsTheCommandOnceAndLaterOnesWaitBlocked) {
   EXPECT_EQ(stop.received(), SIGTERM);
 
   ASSERT_EQ(kill(getpid(), SIGINT), 0);  // taken by the watcher and ignored
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ASSERT_TRUE(eventually([] {
+    sigset_t pending;
+    sigpending(&pending);
+    return sigismember(&pending, SIGINT) == 0;
+  })) << "the watcher did not take the second signal";
   stop.finish();
   EXPECT_EQ(calls.load(), 1);
   EXPECT_EQ(stop.received(), SIGTERM);
