@@ -138,11 +138,14 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyAreAffineInTheForceAre) {
 
 TEST(DiscrepancyEffects, TheAffineCheckCatchesTheCeilingThatIsNot) {
   const std::vector<Unit> units = two_steps();
+  int found = 0;
   for (const Made& m : every_candidate(units)) {
     if (m.name != "sensor_saturation") continue;
+    ++found;
     EXPECT_FALSE(m.effect->affine());
     EXPECT_GT(affine_defect(*m.effect, 0, units[0], 0), 1.0);
   }
+  EXPECT_EQ(found, 1) << "no sensor_saturation candidate to check";
 }
 
 TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {

@@ -325,10 +325,7 @@ TEST(Discrepancy, AnEffectAtItsTrueParametersExplainsWhatItAdded) {
   const DiscrepancyResult fitted = find_discrepancy(input);
   fmt::print("relaxation at its truth: {:.2f} % -> {:.2f} %; fitted, held out: {:.2f} %\n",
              truth.baseline_nrmse_pct, truth.extended_nrmse_pct, fitted.extended_heldout_nrmse_pct);
-  ASSERT_EQ(truth.params.size(), 2u);
-  EXPECT_EQ(truth.params[0].name, "strength");
-  EXPECT_EQ(truth.params[0].value, 0.4);
-  EXPECT_EQ(truth.params[1].value, 0.3);
+  // The same baseline as the workflow's, so that the two extended NRMSEs compare.
   EXPECT_DOUBLE_EQ(truth.baseline_nrmse_pct, fitted.baseline_heldout_nrmse_pct);
   EXPECT_LT(truth.extended_nrmse_pct, 0.5 * truth.baseline_nrmse_pct);
   EXPECT_NEAR(fitted.extended_heldout_nrmse_pct, truth.extended_nrmse_pct,

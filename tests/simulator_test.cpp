@@ -122,7 +122,9 @@ double sensor_area(Region region) {
   return static_cast<double>(layout_37_38().region_sensors(region).size()) * 7.5 * 15.0;
 }
 
-TEST(Simulator, RasterisedCellsSumToTheModelForceInBothModes) {
+// The rescaling to the force given, and loads never negative; how the loads are spread is
+// checked against the pressure field in the tests below.
+TEST(Simulator, RasterisedCellsAreRescaledToTheForceGivenInBothModes) {
   for (const RasterCase& rc : kRasterCases) {
     const EllipsoidParams p = seed_means(rc.region);
     const double d = deformation(p, rc.area_fraction_of_sensors * sensor_area(rc.region));

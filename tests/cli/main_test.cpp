@@ -77,13 +77,16 @@ TEST(Cli, SegmentEndsAStepAtAGapAndSaysSo) {
   EXPECT_NE(out.find("time gaps over max_gap_s: L 1, R 1"), std::string::npos) << out;
   std::ifstream steps(dir / "seg" / "steps.csv");
   std::getline(steps, line);
+  int rows = 0;
   while (std::getline(steps, line)) {
     // foot,step,t_heel_strike_s,t_toe_off_s,stance_s,...
     std::istringstream fields(line);
     std::string field;
     for (int i = 0; i < 5; ++i) std::getline(fields, field, ',');
     EXPECT_LT(std::stod(field), 2.0) << line;
+    ++rows;
   }
+  EXPECT_GE(rows, 14) << "10 s of walking at 1.1 s a stride: about 9 steps a foot";
 }
 
 std::string read_all(const std::filesystem::path& path) {
