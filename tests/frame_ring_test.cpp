@@ -90,13 +90,19 @@ TEST(FrameRing, WaitingPushGivesUpOnlyWhenStopped) {
 TEST(FrameRing, WaitingPushResumesWhenTheConsumerMakesRoom) {
   FrameRing ring(1);
   std::atomic<bool> stop{false};
+  std::atomic<bool> waiting{false};
   ASSERT_TRUE(ring.try_push(frame_with(0)));
   std::thread consumer([&] {
+    // Room is made only after the producer is about to wait for it (and, 20 ms later, most
+    // likely waiting), so that the push cannot simply find room.
+    while (!waiting.load()) std::this_thread::yield();
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    EXPECT_EQ(ring.depth(), 1u) << "the waiting push went through a full ring";
     SensorFrame out;
     ASSERT_TRUE(ring.try_pop(out));
     EXPECT_EQ(out.sequence, 0u);
   });
+  waiting.store(true);
   EXPECT_TRUE(ring.push_wait(frame_with(1), stop));
   consumer.join();
   SensorFrame out;

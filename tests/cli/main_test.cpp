@@ -98,14 +98,20 @@ std::string read_all(const std::filesystem::path& path) {
 
 TEST(Cli, TheBundledDemoIsReproducedByTheCommandInReplayReadme) {
   const auto dir = test::scratch_dir("cli-demo");
-  int status = -1;
-  const std::string out =
-      run("simulate --size 37-38 --duration 60 --seed 1 --subject "
-          "demo-simulated --out " +
-              (dir / "demo.csv").string(),
-          &status);
-  ASSERT_EQ(status, 0) << out;
   const auto replay = test::source_dir() / "replay";
+  // The command as the README prints it, with the output moved to the scratch folder.
+  const std::string readme = read_all(replay / "README.md");
+  const std::string prefix = "build/gaitmon simulate ";
+  const auto at = readme.find(prefix);
+  ASSERT_NE(at, std::string::npos) << "replay/README.md shows no simulate command";
+  std::string args = readme.substr(at + prefix.size(), readme.find('\n', at) - at - prefix.size());
+  const std::string out_arg = "--out replay/demo-simulated-37-38.csv";
+  const auto out_at = args.find(out_arg);
+  ASSERT_NE(out_at, std::string::npos) << args;
+  args.replace(out_at, out_arg.size(), "--out " + (dir / "demo.csv").string());
+  int status = -1;
+  const std::string out = run("simulate " + args, &status);
+  ASSERT_EQ(status, 0) << out;
   EXPECT_TRUE(read_all(dir / "demo.csv") == read_all(replay / "demo-simulated-37-38.csv"));
   EXPECT_NE(read_all(replay / "demo-simulated-37-38.csv").find("# note: SIMULATED"),
             std::string::npos);

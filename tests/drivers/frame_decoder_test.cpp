@@ -433,19 +433,24 @@ TEST(FrameDecoder, CountersAreReadableFromAnotherThread) {
   std::atomic<bool> done{false};
   std::uint64_t last_seen = 0;
   bool monotonic = true;
+  std::atomic<std::uint64_t> reads{0};
   std::thread reader([&] {
     while (!done.load()) {
       const DecoderCounters c = decoder.counters();
       monotonic = monotonic && c.frames >= last_seen;
       last_seen = c.frames;
+      reads.fetch_add(1);
     }
   });
+  // Reading while the decoder is fed is the point: feed only once the reader reads.
+  while (reads.load() == 0) std::this_thread::yield();
   for (std::size_t at = 0; at < stream.size(); at += 500) {
     decoder.feed(std::span(stream).subspan(at, std::min<std::size_t>(500, stream.size() - at)),
                  [](const SensorFrame&) {});
   }
   done = true;
   reader.join();
+  EXPECT_GT(reads.load(), 1U);
   EXPECT_TRUE(monotonic);
   EXPECT_EQ(decoder.counters().frames, 2000U);
   EXPECT_EQ(decoder.counters().lost_frames[0], 1999U);
