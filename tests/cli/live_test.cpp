@@ -4,11 +4,15 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdint>
 #include <limits>
+#include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -257,6 +261,15 @@ TEST(Live, TheFirstSignalStopsTheCommandOnceAndLaterOnesWaitBlocked) {
 
 TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   std::atomic<int> calls{0};
+  // Removed on every way out, a failed ASSERT too: the sink must not outlive `log`.
+  struct LogCapture {
+    std::ostringstream text;
+    LogCapture() {
+      spdlog::default_logger()->sinks().push_back(
+          std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
+    }
+    ~LogCapture() { spdlog::default_logger()->sinks().pop_back(); }
+  } log;
   {
     StopOnSignal stop("the test", [&](int) {
       ++calls;
@@ -268,6 +281,9 @@ TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   }  // the destructor joins the watcher
   EXPECT_EQ(calls.load(), 1);
   EXPECT_TRUE(take_pending().empty());
+  const std::string text = log.text.str();
+  EXPECT_NE(text.find("SIGINT: stopping (the test)"), std::string::npos) << text;
+  EXPECT_NE(text.find("stopping failed: the driver would not close"), std::string::npos) << text;
 }
 
 // A command that throws unwinds what the callback touches before the watcher it declared first:
