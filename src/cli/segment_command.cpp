@@ -103,12 +103,8 @@ void print_summary(const SegmentArgs& args, const SegmentedSessionInfo& info,
              steps.size(), (args.out_dir / "frames.csv").string(), frame_rows);
 }
 
-void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
-  const Config config = load_global_config(global);
-  // The layout follows the session's insole size, so read its header first.
-  const InsoleLayout layout(config.insole(SessionReader(args.session).header().insole_size),
-                            config.sensor);
-  std::filesystem::create_directories(args.out_dir);
+void segment_into_out_dir(const SegmentArgs& args, const Config& config,
+                          const InsoleLayout& layout) {
   OutputFile frames_csv(args.out_dir / "frames.csv");
   frames_csv.write(
       "foot,step,t_s,region,force_n,sensor_area_mm2,ellipse_area_mm2,case,cx_mm,cy_mm,ra_mm,"
@@ -159,6 +155,23 @@ void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
   OutputFile* const outputs[] = {&frames_csv, &steps_csv};
   OutputFile::commit_all(outputs);
   print_summary(args, info, steps, cases, frame_rows);
+}
+
+void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
+  const Config config = load_global_config(global);
+  // The layout follows the session's insole size, so read its header first.
+  const InsoleLayout layout(config.insole(SessionReader(args.session).header().insole_size),
+                            config.sensor);
+  // frames.csv is written as the session is read, so the folder comes first; a run that fails
+  // takes back a folder it made, as it takes back its files.
+  const bool created = std::filesystem::create_directories(args.out_dir);
+  try {
+    segment_into_out_dir(args, config, layout);
+  } catch (...) {
+    std::error_code ignored;
+    if (created) std::filesystem::remove(args.out_dir, ignored);
+    throw;
+  }
 }
 
 }  // namespace

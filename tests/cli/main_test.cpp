@@ -125,9 +125,15 @@ TEST(Cli, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
       run("segment " + (dir / "bad.csv").string() + " --out " + (dir / "o").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("bad.csv:6"), std::string::npos) << out;
-  EXPECT_FALSE(std::filesystem::exists(dir / "o" / "steps.csv"));
-  EXPECT_FALSE(std::filesystem::exists(dir / "o" / "frames.csv"));
-  EXPECT_FALSE(std::filesystem::exists(dir / "o" / "frames.csv.partial"));
+  // Nothing at all: not even the folder the run made.
+  EXPECT_FALSE(std::filesystem::exists(dir / "o"));
+  // Into a folder that was there, the run leaves it as it was.
+  std::filesystem::create_directories(dir / "kept");
+  test::write_text(dir / "kept" / "notes.txt", "mine\n");
+  run("segment " + (dir / "bad.csv").string() + " --out " + (dir / "kept").string(), &status);
+  EXPECT_EQ(status, 2);
+  EXPECT_TRUE(std::filesystem::exists(dir / "kept" / "notes.txt"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "kept" / "frames.csv.partial"));
 }
 
 TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
