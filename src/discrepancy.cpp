@@ -1266,7 +1266,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
                                     const DiscrepancySettings& settings,
-                                    const std::stop_token& stop) {
+                                    const std::stop_token& stop,
+                                    const std::function<void(double)>& on_progress) {
   check_settings(settings, input);
   for (std::size_t i = 0; i < effects.size(); ++i) {
     check_discrepancy_effect(effects[i]);
@@ -1294,6 +1295,9 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
     chosen.push_back({c.spec, c.theta});
     heldout = c.heldout;
     in_sample = c.in_sample;
+    if (on_progress) {
+      on_progress(static_cast<double>(chosen.size()) / static_cast<double>(effects.size()));
+    }
   }
   out.extended_nrmse_pct = nrmse(in_sample.force_sse(), prep.pooled.norm);
   out.extended_heldout_nrmse_pct = nrmse(heldout.force_sse(), prep.pooled.norm);

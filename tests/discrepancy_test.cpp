@@ -308,10 +308,16 @@ TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
   EXPECT_THROW(fit_extended_model(input, unknown), std::invalid_argument);
 
   // A stop request (the live monitor's shutdown on a signal) ends the fit with FitStopped; an
-  // unrequested token changes nothing.
+  // unrequested token changes nothing, nor does a second effect fitted on top of the first. The
+  // progress comes after each effect.
   std::stop_source stop;
-  const ExtendedModelFit again = fit_extended_model(input, effects, {}, stop.get_token());
+  const std::vector<std::string> two{"impact_transient", "hysteresis"};
+  std::vector<double> progress;
+  const ExtendedModelFit again = fit_extended_model(input, two, {}, stop.get_token(),
+                                                    [&](double f) { progress.push_back(f); });
+  ASSERT_EQ(again.effects.size(), 2u);
   EXPECT_EQ(again.effects.front().params[0].value, params[0].value);
+  EXPECT_EQ(progress, (std::vector<double>{0.5, 1.0}));
   stop.request_stop();
   EXPECT_THROW(fit_extended_model(input, effects, {}, stop.get_token()), FitStopped);
 }

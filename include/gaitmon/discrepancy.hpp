@@ -331,10 +331,13 @@ class FitStopped : public std::runtime_error {
 
 /// Throws std::invalid_argument for an unknown or repeated name or fewer steps than folds, and
 /// FitStopped soon after `stop` is requested (the live monitor's shutdown on a signal).
+/// `on_progress`, if set, receives the fraction of the effects fitted after each, on the
+/// calling thread.
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
                                     const DiscrepancySettings& settings = {},
-                                    const std::stop_token& stop = {});
+                                    const std::stop_token& stop = {},
+                                    const std::function<void(double)>& on_progress = {});
 
 /// One effect at given parameters on top of the baseline, nothing fitted but each step's n, K
 /// and D (and each step's own choices: sensor_creep's unknown start lags, impact_transient's

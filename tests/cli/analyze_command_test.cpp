@@ -1,10 +1,17 @@
 // `gaitmon analyze` end to end: its files, their headers, the report, and its errors.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <poll.h>
+#include <pty.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <sstream>
 #include <vector>
 
@@ -437,6 +444,66 @@ TEST(AnalyzeCommand, AFailedRenameLeavesNoOutputAtAll) {
                            "session.json.partial"}) {
     EXPECT_FALSE(fs::exists(dir / "o" / name)) << name;
   }
+}
+
+// `args` run with stderr on a real pseudo-terminal (stdout to /dev/null): what the terminal
+// showed, and the exit status in `status`.
+std::string run_on_terminal(const std::vector<std::string>& args, int* status) {
+  int master = -1;
+  int slave = -1;
+  if (openpty(&master, &slave, nullptr, nullptr, nullptr) != 0) return "openpty failed";
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_adddup2(&actions, slave, STDERR_FILENO);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
+  std::vector<std::string> argv{test::gaitmon_binary().string()};
+  argv.insert(argv.end(), args.begin(), args.end());
+  std::vector<char*> pointers;
+  for (std::string& a : argv) pointers.push_back(a.data());
+  pointers.push_back(nullptr);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, pointers[0], &actions, nullptr, pointers.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  ::close(slave);
+  std::string shown;
+  if (rc == 0) {
+    // The master reads until the child's end closes the terminal (EIO); 120 s bound a hang.
+    char buffer[512];
+    pollfd p{master, POLLIN, 0};
+    while (::poll(&p, 1, 120'000) == 1) {
+      const ssize_t n = ::read(master, buffer, sizeof buffer);
+      if (n <= 0) break;
+      shown.append(buffer, static_cast<std::size_t>(n));
+    }
+    ::kill(pid, SIGKILL);
+    int wstatus = 0;
+    ::waitpid(pid, &wstatus, 0);
+    *status = WIFEXITED(wstatus) ? WEXITSTATUS(wstatus) : -1;
+  }
+  ::close(master);
+  return shown;
+}
+
+// The bar covers the whole job, the extended model's fit and the session-level fits too: it
+// ended at 95 % before.
+TEST(AnalyzeCommand, ProgressBarOnATerminalRisesToAHundredPercent) {
+  const auto dir = test::scratch_dir("analyze-progress");
+  int status = -1;
+  const std::string shown =
+      run_on_terminal({"analyze", (analysed().dir / "s.csv").string(), "--out",
+                       (dir / "o").string(), "--effects", "impact_transient"},
+                      &status);
+  EXPECT_EQ(status, 0) << shown;
+  std::vector<int> percents;
+  const std::regex bar(R"(analyze \[[# ]{40}\] +([0-9]+)%)");
+  for (auto it = std::sregex_iterator(shown.begin(), shown.end(), bar);
+       it != std::sregex_iterator(); ++it) {
+    percents.push_back(std::stoi((*it)[1].str()));
+  }
+  ASSERT_GE(percents.size(), 3u) << shown;
+  EXPECT_TRUE(std::is_sorted(percents.begin(), percents.end())) << shown;
+  EXPECT_EQ(percents.back(), 100) << shown;
+  EXPECT_TRUE(fs::exists(dir / "o" / "session.json"));
 }
 
 }  // namespace
