@@ -88,6 +88,7 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
   out.step = step.index;
   out.t_heel_strike_s = step.t_heel_strike_s;
   out.t_toe_off_s = step.t_toe_off_s;
+  out.model = settings.fit.model;
   out.t_s = stance.t_s;
   out.measured_total_force_n.assign(frames, 0.0);
   out.model_total_force_n.assign(frames, 0.0);

@@ -45,7 +45,8 @@ double g_of(double area, double P) {
 }
 
 // The elastic and damping shapes of one series (tissue_fit's raw-series model): F = K E + D V.
-void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Unit& u) {
+void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, ModelVariant model,
+            Unit& u) {
   const std::size_t n = s.t_s.size();
   u.E.assign(n, 0.0);
   u.En.assign(1 + kExponentGrid.size(), std::vector<double>(n, 0.0));
@@ -66,7 +67,7 @@ void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, Un
         u.En[k + 1][i] = id.P_mm2 * std::pow(g, 2.0 + kExponentGrid[k]) * (1.0 - g / 3.0);
       }
       u.V[i] =
-          id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot * (6.0 - 4.0 * g + g * g) / (3.0 * (2.0 - g));
+          damping_sign(model) * id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot * damping_shape(g, model);
       u.d_mm[i] = g * C_mm;
       u.ddot_mm_per_s[i] = gdot * C_mm;
     }
@@ -784,7 +785,7 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
       if (!(u.peak_n > 0.0)) continue;
       const EllipsoidParams p = ra.fit.params();
       const IdentifiableParams id = identifiable(p);
-      shapes(contact, id, p.C_mm, u);
+      shapes(contact, id, p.C_mm, input.model, u);
       std::tie(u.K0, u.D0) = nnls2(u.y, u.E, u.V);
       const std::size_t n = u.t.size();
       u.phase.resize(n);
@@ -1042,6 +1043,12 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
     throw std::invalid_argument("make_discrepancy_input: one analysis per step expected");
   }
   DiscrepancyInput input;
+  if (!analyses.empty()) input.model = analyses.front().model;
+  for (const StepAnalysis& a : analyses) {
+    if (a.model != input.model) {
+      throw std::invalid_argument("make_discrepancy_input: steps fitted with different models");
+    }
+  }
   input.sample_rate_hz = config.sample_rate_hz;
   input.cell_area_mm2 = config.sensor.area_mm2();
   input.newtons_per_bit = config.calibration.newtons_per_bit(config.sensor.area_mm2());

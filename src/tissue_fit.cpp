@@ -492,7 +492,6 @@ SeparableData separable_data(const std::vector<FitFrame>& frames, const Layout& 
                              ModelVariant variant) {
   const auto& d = layout.declared;
   const double P = std::numbers::pi * d[kA] * d[kB];
-  const double sign = variant == ModelVariant::Correct ? 1.0 : -1.0;
   SeparableData s;
   s.log_c = std::log(d[kC]);
   s.log_ratio = s.log_c - std::log(d[kD0]);
@@ -506,11 +505,11 @@ SeparableData separable_data(const std::vector<FitFrame>& frames, const Layout& 
       gdot = f.area_rate_mm2_per_s / (P * 2.0 * std::sqrt(1.0 - a));
     }
     // ellipsoid_force at K = D = 1 and n = m = 0, split into its elastic and damping parts.
-    const double elastic = ellipsoid_force(P, 1.0, 0.0, 0.0, 0.0, g, gdot, ModelVariant::Correct);
-    const double total = ellipsoid_force(P, 1.0, 0.0, 1.0, 0.0, g, gdot, ModelVariant::Correct);
+    const double elastic = ellipsoid_force(P, 1.0, 0.0, 0.0, 0.0, g, gdot, variant);
+    const double total = ellipsoid_force(P, 1.0, 0.0, 1.0, 0.0, g, gdot, variant);
     s.log_g.push_back(g > 0.0 ? std::log(g) : -745.0);
     s.e_base.push_back(elastic);
-    s.v_base.push_back(sign * (total - elastic));
+    s.v_base.push_back(total - elastic);
     s.force.push_back(f.force_n);
   }
   return s;

@@ -44,12 +44,21 @@ double area_fraction(const EllipsoidParams& p, double area_mm2) {
 }  // namespace
 
 std::string_view model_variant_name(ModelVariant variant) {
-  return variant == ModelVariant::Correct ? "correct" : "seed_eq25";
+  switch (variant) {
+    case ModelVariant::Correct:
+      return "correct";
+    case ModelVariant::SeedEq25:
+      return "seed_eq25";
+    case ModelVariant::MaterialRate:
+      return "material_rate";
+  }
+  return "unknown";
 }
 
 std::optional<ModelVariant> parse_model_variant(std::string_view text) {
   if (text == "correct") return ModelVariant::Correct;
   if (text == "seed_eq25") return ModelVariant::SeedEq25;
+  if (text == "material_rate") return ModelVariant::MaterialRate;
   return std::nullopt;
 }
 
@@ -102,10 +111,9 @@ double force_n(const EllipsoidParams& params, double d_mm, double ddot_mm_per_s,
   const double k = params.kbar_n_per_mm3 * std::pow(d / params.d0_mm, params.n);
   const double c = params.cbar_ns_per_mm3 * std::pow(d / params.d0_mm, params.m);
   const double elastic = k * (d - d * d / (3.0 * C));
-  const double damping =
-      c * ddot_mm_per_s * (6.0 * C * C - 4.0 * C * d + d * d) / (3.0 * C * (2.0 * C - d));
-  const double sign = variant == ModelVariant::Correct ? 1.0 : -1.0;
-  return std::numbers::pi * params.A_mm * params.B_mm * d / C * (elastic + sign * damping);
+  const double damping = c * ddot_mm_per_s * damping_shape(d / C, variant);
+  return std::numbers::pi * params.A_mm * params.B_mm * d / C *
+         (elastic + damping_sign(variant) * damping);
 }
 
 PressureField::PressureField(const EllipsoidParams& params, double d_mm, double ddot_mm_per_s,
@@ -115,7 +123,8 @@ PressureField::PressureField(const EllipsoidParams& params, double d_mm, double 
       ddot_(ddot_mm_per_s),
       k_(0.0),
       c_(0.0),
-      sign_(variant == ModelVariant::Correct ? 1.0 : -1.0),
+      sign_(damping_sign(variant)),
+      material_rate_(variant == ModelVariant::MaterialRate),
       radii_(contact_radii_mm(params, d_mm)) {
   if (d_mm > 0.0) {
     k_ = params.kbar_n_per_mm3 * std::pow(d_mm / params.d0_mm, params.n);

@@ -50,6 +50,7 @@ struct CleanCase {
   /// heel strike and one 0.2 s after toe off, averaged, is the step's zero (with 0.3 N of noise)
   /// and comes off its stance.
   bool zeroed = false;
+  ModelVariant model = ModelVariant::Correct;  ///< the damping form made and fitted
 };
 
 // Steps of one foot, heel and met3_5 only, whose areas follow smooth bumps (stance 0.55-0.65 s,
@@ -114,7 +115,7 @@ DiscrepancyInput clean_session(const CleanCase& c, int steps, unsigned seed) {
         if (area > 0.0) {
           const double d = deformation_mm(p, area);
           const double ddot = deformation_rate_mm_per_s(p, area, peak_area * rate);
-          force = force_n(p, d, ddot, ModelVariant::Correct);
+          force = force_n(p, d, ddot, c.model);
           const TissueSample sample{Foot::Left, region, t, contact_s, area, d, ddot};
           if (effect) {
             force = effect->tissue_force_n(sample, force);
@@ -141,12 +142,15 @@ DiscrepancyInput clean_session(const CleanCase& c, int steps, unsigned seed) {
       }
       ra.aspect = p.A_mm / p.B_mm;
       ra.declared = declared_params(seed_stats, ra.aspect);
-      ra.fit = fit_region(ra.series, ra.declared, config.fit_bounds,
-                          discrepancy_analysis_settings().fit);
+      FitSettings fit = discrepancy_analysis_settings().fit;
+      fit.model = c.model;
+      ra.fit = fit_region(ra.series, ra.declared, config.fit_bounds, fit);
     }
+    sa.model = c.model;
     input.steps.push_back(std::move(ds));
     t0 += 1.1;
   }
+  input.model = c.model;
   return input;
 }
 
@@ -284,6 +288,33 @@ TEST(Discrepancy, SaturationIsNamedOnlyWhereTheReadingsShowACeiling) {
   DiscrepancySettings bad;
   bad.min_ceiling_steps = -1;
   EXPECT_THROW(find_discrepancy(clean, bad), std::invalid_argument);
+}
+
+// The baseline's damping shape is the fits' own: on a material-rate session the material rate's
+// shape leaves less than eq 15's, which misses the damping's rise with the contact.
+TEST(Discrepancy, BaselineTakesTheDampingFormTheStepsWereFittedWith) {
+  CleanCase material{"none", {}};
+  material.model = ModelVariant::MaterialRate;
+  DiscrepancyInput input = clean_session(material, 10, 5);
+  const DiscrepancyResult own = find_discrepancy(input);
+  input.model = ModelVariant::Correct;
+  const DiscrepancyResult other = find_discrepancy(input);
+  fmt::print(
+      "material-rate session: baseline held-out NRMSE {:.3f} % (material_rate shape), "
+      "{:.3f} % (eq 15's)\n",
+      own.baseline_heldout_nrmse_pct, other.baseline_heldout_nrmse_pct);
+  EXPECT_LT(own.baseline_heldout_nrmse_pct, other.baseline_heldout_nrmse_pct);
+
+  // The steps' model comes with their analyses, and one input has one.
+  std::vector<Step> steps(2);
+  std::vector<StepAnalysis> analyses(2);
+  analyses[0].model = analyses[1].model = ModelVariant::MaterialRate;
+  const InsoleLayout layout(shipped_config().insole(InsoleSize::S37_38), shipped_config().sensor);
+  EXPECT_EQ(make_discrepancy_input(steps, analyses, layout, shipped_config()).model,
+            ModelVariant::MaterialRate);
+  analyses[1].model = ModelVariant::Correct;
+  EXPECT_THROW(make_discrepancy_input(steps, analyses, layout, shipped_config()),
+               std::invalid_argument);
 }
 
 TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {

@@ -1,4 +1,5 @@
-// Tests of the ellipsoid model against the seed's eq 22 integrated numerically and model-notes.
+// Tests of the ellipsoid model against the seed's eq 22 integrated numerically, model-notes, and
+// the damping rate of a fixed tissue column by finite differences.
 #include "gaitmon/tissue_model.hpp"
 
 #include <ceres/jet.h>
@@ -145,9 +146,69 @@ TEST(TissueModel, DampingPartEqualsQuadratureOfEq22WithPlusSign) {
   }
 }
 
+/// The damping force as the integral over the contact of c times the local rate, the rate by a
+/// central difference in time of delta at one point, d moving at ddot: at a fixed tissue column
+/// (x, y) (delta = d - C + C sqrt(1 - x^2/A^2 - y^2/B^2), the ellipsoid's surface over the
+/// plane), or at a fixed normalised radius rho (eq 14, the point moving with the rim).
+double damping_by_rate_difference(const EllipsoidParams& p, double d, double ddot,
+                                  bool fixed_column) {
+  const double C = p.C_mm;
+  const double c = p.cbar_ns_per_mm3 * std::pow(d / p.d0_mm, p.m);
+  const double h = 1e-4;  // s; delta is linear in d at a fixed column and smooth at a fixed rho
+  const auto delta_at = [&](double rho, double theta, double dd) {
+    if (fixed_column) {
+      const ContactRadii r = contact_radii_mm(p, d);
+      const double x = rho * r.rA_mm * std::cos(theta);
+      const double y = rho * r.rB_mm * std::sin(theta);
+      return dd - C + C * std::sqrt(1.0 - x * x / (p.A_mm * p.A_mm) - y * y / (p.B_mm * p.B_mm));
+    }
+    return dd - C + std::sqrt(C * C - rho * rho * (2.0 * C * dd - dd * dd));
+  };
+  const double rA_rB = p.A_mm * p.B_mm * (2.0 * C * d - d * d) / (C * C);
+  const Quadrature rho_q = gauss_legendre(96, 0.0, 1.0);
+  const Quadrature theta_q = gauss_legendre(16, 0.0, 2.0 * kPi);
+  double sum = 0.0;
+  for (std::size_t i = 0; i < rho_q.x.size(); ++i) {
+    for (std::size_t j = 0; j < theta_q.x.size(); ++j) {
+      const double rate = (delta_at(rho_q.x[i], theta_q.x[j], d + ddot * h) -
+                           delta_at(rho_q.x[i], theta_q.x[j], d - ddot * h)) /
+                          (2.0 * h);
+      sum += rho_q.w[i] * theta_q.w[j] * c * rate * rho_q.x[i] * rA_rB;
+    }
+  }
+  return sum;
+}
+
+// Eq 15 is the rate at a fixed rho; the tissue's own rate, at a fixed column, is d-dot all over
+// the contact, and its damping force c ddot Ae is MaterialRate's.
+TEST(TissueModel, MaterialRateIsTheFixedColumnsRateAndEq15TheFixedRhos) {
+  for (const State& s : kStates) {
+    const EllipsoidParams p = without_stiffness(s.params);
+    const double column = damping_by_rate_difference(p, s.d_mm, s.ddot_mm_per_s, true);
+    const double rho = damping_by_rate_difference(p, s.d_mm, s.ddot_mm_per_s, false);
+    const double c = p.cbar_ns_per_mm3 * std::pow(s.d_mm / p.d0_mm, p.m);
+    const double tol = 1e-6 * std::abs(column);
+    EXPECT_NEAR(column, c * s.ddot_mm_per_s * contact_area_mm2(p, s.d_mm), tol);
+    EXPECT_NEAR(force_n(p, s.d_mm, s.ddot_mm_per_s, ModelVariant::MaterialRate), column, tol)
+        << "d = " << s.d_mm;
+    EXPECT_NEAR(force_n(p, s.d_mm, s.ddot_mm_per_s, ModelVariant::Correct), rho,
+                1e-6 * std::abs(rho))
+        << "d = " << s.d_mm;
+    // At a small contact the fixed column's rate gives twice eq 15's damping.
+    if (s.d_mm / p.C_mm < 0.05) {
+      EXPECT_NEAR(column / rho, 2.0, 0.1) << "d = " << s.d_mm;
+    }
+  }
+  // The elastic part is the same in every variant.
+  const EllipsoidParams p = without_damping(kHeel);
+  EXPECT_EQ(force_n(p, 2.5, 40.0, ModelVariant::MaterialRate),
+            force_n(p, 2.5, 40.0, ModelVariant::Correct));
+}
+
 TEST(TissueModel, PressureFieldIntegratesToTheForce) {
   for (const State& s : kStates) {
-    for (ModelVariant v : {ModelVariant::Correct, ModelVariant::SeedEq25}) {
+    for (ModelVariant v :
+         {ModelVariant::Correct, ModelVariant::SeedEq25, ModelVariant::MaterialRate}) {
       const double expected = force_n(s.params, s.d_mm, s.ddot_mm_per_s, v);
       EXPECT_NEAR(pressure_quadrature(s.params, s.d_mm, s.ddot_mm_per_s, v), expected,
                   1e-8 * std::abs(expected))
@@ -168,6 +229,10 @@ TEST(TissueModel, PressureAtCentreAndRim) {
   // d = C: the contact plane at the equator, delta = C sqrt(1 - rho^2), deltadot = ddot.
   EXPECT_NEAR(pressure_n_per_mm2(p, 60.0, 30.0, 0.5, ModelVariant::Correct),
               0.1 * 60.0 * std::sqrt(0.75) + 0.002 * 30.0, 1e-12);
+  // The material rate: c ddot everywhere in the contact, the rim included.
+  EXPECT_NEAR(pressure_n_per_mm2(p, 5.0, 30.0, 0.0, ModelVariant::MaterialRate), 0.5 + 0.06, 1e-12);
+  EXPECT_NEAR(pressure_n_per_mm2(p, 5.0, 30.0, 1.0, ModelVariant::MaterialRate), 0.06, 1e-12);
+  EXPECT_EQ(pressure_n_per_mm2(p, 5.0, 30.0, 1.01, ModelVariant::MaterialRate), 0.0);
 }
 
 TEST(TissueModel, DeformationFromAreaByHand) {
@@ -221,7 +286,8 @@ TEST(TissueModel, IdentifiableFormEqualsPhysicalForm) {
     EXPECT_NEAR(q.D_ns_per_mm2, D, 1e-12 * D);
     EXPECT_EQ(q.n, p.n);
     EXPECT_EQ(q.m, p.m);
-    for (ModelVariant v : {ModelVariant::Correct, ModelVariant::SeedEq25}) {
+    for (ModelVariant v :
+         {ModelVariant::Correct, ModelVariant::SeedEq25, ModelVariant::MaterialRate}) {
       const double g = s.d_mm / p.C_mm;
       const double gdot = s.ddot_mm_per_s / p.C_mm;
       const double physical = force_n(p, s.d_mm, s.ddot_mm_per_s, v);
@@ -301,6 +367,8 @@ TEST(TissueModel, VariantNames) {
   EXPECT_EQ(model_variant_name(ModelVariant::SeedEq25), "seed_eq25");
   EXPECT_EQ(parse_model_variant("correct"), ModelVariant::Correct);
   EXPECT_EQ(parse_model_variant("seed_eq25"), ModelVariant::SeedEq25);
+  EXPECT_EQ(model_variant_name(ModelVariant::MaterialRate), "material_rate");
+  EXPECT_EQ(parse_model_variant("material_rate"), ModelVariant::MaterialRate);
   EXPECT_EQ(parse_model_variant("Correct"), std::nullopt);
   EXPECT_EQ(parse_model_variant(""), std::nullopt);
 }

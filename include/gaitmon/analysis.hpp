@@ -67,6 +67,7 @@ struct StepAnalysis {
   std::vector<double> measured_total_force_n;  ///< per frame, the sum of the regions' forces
   std::vector<double> model_total_force_n;     ///< per frame, the sum of the regions' model forces
   double nrmse_total_pct = 0.0;                ///< eq 58 on the totals above
+  ModelVariant model = ModelVariant::Correct;  ///< the damping form the regions were fitted with
 
   const RegionAnalysis& at(Region region) const { return regions[index_of(region)]; }
 };

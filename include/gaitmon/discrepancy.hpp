@@ -115,6 +115,7 @@ struct DiscrepancyInput {
   double sample_rate_hz = 100.0;
   double cell_area_mm2 = 112.5;
   double newtons_per_bit = 0.2824;
+  ModelVariant model = ModelVariant::Correct;  ///< the damping form of the steps' fits
 };
 
 /// The analysis settings of the workflow's baseline: the raw series (Smoothing::None), because
@@ -129,7 +130,7 @@ DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const In
                                            const Config& config, const AnalysisSettings& settings);
 
 /// The same from steps already analysed: analyses[i] is analyse_step of steps[i]. Throws
-/// std::invalid_argument if the counts differ.
+/// std::invalid_argument if the counts differ or the analyses used different damping forms.
 DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
                                         std::vector<StepAnalysis> analyses,
                                         const InsoleLayout& layout, const Config& config);

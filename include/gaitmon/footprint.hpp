@@ -8,7 +8,9 @@
 // Derivation: for a contact small against the ellipsoid (g = d/C << 1; at the heel g ~ 0.05),
 // eqs 14 and 15 give a local indentation delta = d (1 - rho^2) (1 + O(g)) and a rate
 // deltadot = ddot (1 - rho^2) (1 + O(g)), so the pressure k delta + c deltadot is a paraboloid
-// p = p_max (1 - rho^2) whatever the material: it vanishes exactly on the contact ellipse. With
+// p = p_max (1 - rho^2) whatever the material: it vanishes exactly on the contact ellipse. (Not
+// so with a fixed tissue column's rate, ModelVariant::MaterialRate: deltadot = ddot throughout,
+// the pressure is c ddot on the rim, and this estimator's area is biased; README, The model.) With
 // the ellipsoid's axes along the insole's (A lateral-medial, B anterior-posterior) the pressure
 // at a cell centre (x, y) is the axis-aligned quadratic
 //     p = c0 + c1 x + c2 y + c3 x^2 + c4 y^2,

@@ -24,13 +24,31 @@ struct EllipsoidParams {
 /// Every function below that takes EllipsoidParams throws std::invalid_argument unless A, B, C
 /// and d0 are positive and finite.
 
-/// Which sign the damping term carries. `Correct` is the integral of eq 22 (plus);
-/// `SeedEq25` is the seed's printed minus (eqs 24, 25, 36, 41), kept for comparison.
-enum class ModelVariant { Correct, SeedEq25 };
+/// The damping term's form. `Correct` is the integral of eq 22 with the seed's local rate (eq
+/// 15) and the plus sign (model-notes section 1); `SeedEq25` is the seed's printed minus (eqs
+/// 24, 25, 36, 41), kept for comparison. `MaterialRate` takes the rate of a fixed column of
+/// tissue, which is d-dot everywhere in the contact: eq 15 differentiates eq 14 at a fixed
+/// normalised radius rho, and a point at fixed rho moves outward with the growing contact, so
+/// its rate is not any tissue's. Its damping force is c ddot Ae.
+enum class ModelVariant { Correct, SeedEq25, MaterialRate };
 
-/// "correct" or "seed_eq25".
+/// "correct", "seed_eq25" or "material_rate".
 std::string_view model_variant_name(ModelVariant variant);
 std::optional<ModelVariant> parse_model_variant(std::string_view text);
+
+/// The damping term's sign: -1 for SeedEq25, +1 otherwise.
+inline double damping_sign(ModelVariant variant) {
+  return variant == ModelVariant::SeedEq25 ? -1.0 : 1.0;
+}
+
+/// The damping force's shape in g = d/C, so that the damping force is
+/// P D g^(1+m) gdot damping_shape(g): (6 - 4g + g^2) / (3 (2 - g)) with eq 15's rate (it tends
+/// to 1 at small g), 2 - g with the material rate (the contact area's own shape, Ae / (P g)).
+template <class T>
+T damping_shape(const T& g, ModelVariant variant) {
+  if (variant == ModelVariant::MaterialRate) return T(2.0) - g;
+  return (T(6.0) - T(4.0) * g + g * g) / (T(3.0) * (T(2.0) - g));
+}
 
 /// The five combinations of the eight parameters that force and contact area determine
 /// (model-notes section 2): P = pi A B, K = kbar C^(1+n) d0^(-n), D = cbar C^(1+m) d0^(-m).
@@ -45,18 +63,17 @@ struct IdentifiableParams {
 IdentifiableParams identifiable(const EllipsoidParams& params);
 
 /// The force (N) in identifiable form, g = d/C and gdot = ddot/C (1/s):
-///   F = P K g^(2+n) (1 - g/3) + s P D g^(1+m) gdot (6 - 4g + g^2) / (3 (2 - g)),
-/// s = +1 for Correct, -1 for SeedEq25. Zero for g <= 0 (no contact), which is also the limit
-/// of every term and of their parameter derivatives for n > -2, m > -1.
+///   F = P K g^(2+n) (1 - g/3) + s P D g^(1+m) gdot damping_shape(g),
+/// s = damping_sign. Zero for g <= 0 (no contact), which is also the limit of every term and of
+/// their parameter derivatives for n > -2, m > -1.
 template <class T>
 T ellipsoid_force(const T& P, const T& K, const T& n, const T& D, const T& m, const T& g,
                   const T& gdot, ModelVariant variant) {
   using std::pow;
   if (g <= T(0.0)) return T(0.0);
   const T elastic = P * K * pow(g, T(2.0) + n) * (T(1.0) - g / T(3.0));
-  const T damping =
-      P * D * pow(g, T(1.0) + m) * gdot * (T(6.0) - T(4.0) * g + g * g) / (T(3.0) * (T(2.0) - g));
-  return variant == ModelVariant::Correct ? elastic + damping : elastic - damping;
+  const T damping = P * D * pow(g, T(1.0) + m) * gdot * damping_shape(g, variant);
+  return elastic + T(damping_sign(variant)) * damping;
 }
 
 /// Deformation d (mm) that gives contact ellipse area `area_mm2` (eq 32). Zero area gives 0;
@@ -84,14 +101,16 @@ struct ContactRadii {
 ContactRadii contact_radii_mm(const EllipsoidParams& params, double d_mm);
 
 /// The force (N) at deformation d and rate ddot in physical terms, k = kbar (d/d0)^n and
-/// c = cbar (d/d0)^m:  F = (pi A B d / C) (k (d - d^2/(3C)) + s c ddot (6C^2 - 4Cd + d^2) /
-/// (3C (2C - d))). Zero for d <= 0. Throws std::domain_error for d > C.
+/// c = cbar (d/d0)^m:  F = (pi A B d / C) (k (d - d^2/(3C)) + s c ddot damping_shape(d/C)); with
+/// eq 15's rate damping_shape(d/C) = (6C^2 - 4Cd + d^2) / (3C (2C - d)). Zero for d <= 0. Throws
+/// std::domain_error for d > C.
 double force_n(const EllipsoidParams& params, double d_mm, double ddot_mm_per_s,
                ModelVariant variant);
 
-/// The local pressure field of one contact state: k delta + s c deltadot with delta and
-/// deltadot from eqs 14, 15 and k, c evaluated once at the global d. Its integral over the
-/// contact ellipse is force_n. Built once per state so rasterisation can sample it cheaply.
+/// The local pressure field of one contact state: k delta + s c deltadot with delta from eq
+/// 14, deltadot from eq 15 (ddot for MaterialRate), and k, c evaluated once at the global d. Its
+/// integral over the contact ellipse is force_n. Eq 15's pressure vanishes on the rim; the
+/// material rate's is c ddot there. Built once per state so rasterisation can sample it cheaply.
 class PressureField {
  public:
   /// Throws std::domain_error unless 0 <= d <= C.
@@ -108,7 +127,8 @@ class PressureField {
     const double delta = d_mm_ - C_mm_ + root;
     // At d = C the rim's root is 0 but so is C - d: the rate there is ddot throughout.
     const double lateral = C_mm_ - d_mm_;
-    const double delta_dot = lateral > 0.0 ? ddot_ * (1.0 - rho2 * lateral / root) : ddot_;
+    const double delta_dot =
+        material_rate_ || !(lateral > 0.0) ? ddot_ : ddot_ * (1.0 - rho2 * lateral / root);
     return k_ * delta + sign_ * c_ * delta_dot;
   }
 
@@ -119,6 +139,7 @@ class PressureField {
   double k_;
   double c_;
   double sign_;
+  bool material_rate_;
   ContactRadii radii_;
 };
 

@@ -547,8 +547,11 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("session", args->session, "Session CSV v1")->required()->check(CLI::ExistingFile);
   sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
   sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
-  sub->add_option("--model", args->model, "Damping sign: correct (default) or seed_eq25")
-      ->check(CLI::IsMember({"correct", "seed_eq25"}));
+  sub->add_option("--model", args->model,
+                  "Damping term: correct (default: eq 15's rate, the integral's plus sign), "
+                  "seed_eq25 (the seed's minus) or material_rate (the rate of a fixed tissue "
+                  "column, d-dot)")
+      ->check(CLI::IsMember({"correct", "seed_eq25", "material_rate"}));
   sub->add_option("--fit", args->fit,
                   "identifiable (default: kbar, n, cbar, m free; C, d0 declared) or seed8 (all "
                   "eight free, as the seed)")

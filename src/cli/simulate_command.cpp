@@ -199,8 +199,10 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
       ->check(number_in(0.0, 10.0))
       ->capture_default_str();
   sub->add_option("--model", args->model,
-                  "Damping sign: correct (the integral of eq 22) or seed_eq25 (the seed's sign)")
-      ->check(CLI::IsMember({"correct", "seed_eq25"}))
+                  "Damping term: correct (the integral of eq 22: eq 15's rate, plus sign), "
+                  "seed_eq25 (the seed's minus) or material_rate (the rate of a fixed tissue "
+                  "column, d-dot)")
+      ->check(CLI::IsMember({"correct", "seed_eq25", "material_rate"}))
       ->capture_default_str();
   sub->add_option("--rasterisation", args->rasterisation,
                   "centre: a cell reads when its centre is in contact; coverage: cells average "

@@ -446,6 +446,30 @@ TEST(AnalyzeCommand, AFailedRenameLeavesNoOutputAtAll) {
   }
 }
 
+// The fixed tissue column's damping rate, made and fitted end to end: the truth and the settings
+// name it, and the fits differ from eq 15's. (How well it recovers the truth through the
+// footprint: tissue_fit_test, OnAMaterialRateSessionTheFootprintAbsorbsTheDamping.)
+TEST(AnalyzeCommand, MaterialRateIsSimulatedAndFittedByName) {
+  const auto dir = test::scratch_dir("analyze-material-rate");
+  int status = -1;
+  std::string out = run("simulate --size 37-38 --duration 6 --seed 4 --model material_rate --out " +
+                            (dir / "s.csv").string(),
+                        &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(nlohmann::json::parse(read_all(dir / "s.truth.json")).at("model"), "material_rate");
+  std::vector<std::string> regions;
+  for (const char* model : {"material_rate", "correct"}) {
+    const fs::path o = dir / model;
+    out = run("analyze " + (dir / "s.csv").string() + " --out " + o.string() + " --model " + model,
+              &status);
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_EQ(nlohmann::json::parse(read_all(o / "session.json")).at("settings").at("model"),
+              model);
+    regions.push_back(read_all(o / "regions.csv"));
+  }
+  EXPECT_NE(regions[0], regions[1]);
+}
+
 // `args` run with stderr on a real pseudo-terminal (stdout to /dev/null): what the terminal
 // showed, and the exit status in `status`.
 std::string run_on_terminal(const std::vector<std::string>& args, int* status) {
