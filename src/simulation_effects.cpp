@@ -27,7 +27,10 @@
 //   (capacitive insoles creep by a few per cent, resistive ones by up to 20-30 %, over seconds).
 //
 // The filters use the exact step response of a first-order lag between successive samples, with
-// the newer input held over the interval, so the result does not depend on the sample rate.
+// the newer input held over the interval. That is exact for an input that steps at the samples;
+// for a smoothly changing one it leads by half a sample, as a lag shorter by that much would (5 ms
+// at 100 Hz, against time constants of 20 ms to 10 s; the discrepancy workflow's candidates use
+// the same update, so its fitted tau carries the same half sample).
 #include <cmath>
 #include <numbers>
 #include <stdexcept>

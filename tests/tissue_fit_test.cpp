@@ -50,8 +50,9 @@ struct RegionStep {
   }
 };
 
-std::vector<RegionStep> simulated_region_steps(InsoleSize size, std::uint64_t seed,
-                                               double duration_s, ModelVariant variant) {
+std::vector<RegionStep> simulated_region_steps(
+    InsoleSize size, std::uint64_t seed, double duration_s, ModelVariant variant,
+    Rasterisation rasterisation = Rasterisation::CellCentre) {
   const auto dir =
       test::scratch_dir("fit-" + std::string(insole_size_name(size)) + "-" + std::to_string(seed));
   SimulationOptions options;
@@ -59,6 +60,7 @@ std::vector<RegionStep> simulated_region_steps(InsoleSize size, std::uint64_t se
   options.seed = seed;
   options.duration_s = duration_s;
   options.model = variant;
+  options.rasterisation = rasterisation;
   const SimulationTruth truth =
       simulate_session(config(), options, dir / "session.csv", dir / "truth.json");
   const InsoleLayout layout(config().insole(size), config().sensor);
@@ -756,6 +758,37 @@ TEST(TissueFit, OnAMaterialRateSessionTheFootprintAbsorbsTheDamping) {
       "median NRMSE %.2f %%\n",
       median(ratio), median(nrmse));
   EXPECT_LT(median(ratio), 0.3);
+}
+
+// Cells that average the pressure over their area (the coverage raster, model-notes section 4)
+// break the footprint's premise that a cell reads the pressure at its centre: partly covered rim
+// cells read more than the paraboloid through the others, inner cells less (the average of a
+// concave quadratic over a 7.5 x 15 mm cell), which flattens and widens the fitted cap, most at
+// a small contact, so that the area would grow too slowly against the force and the fit take a
+// larger n (the mechanism is inferred; the bias in n is measured). Measured here, as the recovery
+// figures are made on the cell-centre raster, so that an estimator for averaging cells shows it
+// has changed this.
+TEST(TissueFit, OnACoverageRasterTheFootprintOverReadsAndTheStiffnessExponentIsBiased) {
+  double ratio_n[2] = {0.0, 0.0};
+  int i = 0;
+  for (Rasterisation raster : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
+    const auto steps =
+        simulated_region_steps(InsoleSize::S39_40, 25, 8.0, ModelVariant::Correct, raster);
+    std::vector<double> ratio, nrmse;
+    for (const RegionStep& rs : steps) {
+      if (rs.contact_frames < 10 || !area_determined(rs.region)) continue;
+      const RegionFit fit = fit_region(rs.footprint, rs.truth, config().fit_bounds, FitSettings{});
+      if (fit.status != FitStatus::Ok) continue;
+      ratio.push_back(fit.n.value / rs.truth.n);
+      nrmse.push_back(fit.nrmse_pct);
+    }
+    ASSERT_GE(ratio.size(), 20u);
+    ratio_n[i++] = median(ratio);
+    std::printf("[ %s raster ] median fitted / true n %.2f, median NRMSE %.2f %%\n",
+                std::string(rasterisation_name(raster)).c_str(), median(ratio), median(nrmse));
+  }
+  EXPECT_NEAR(ratio_n[0], 1.0, 0.2);
+  EXPECT_GT(ratio_n[1], 1.5);
 }
 
 TEST(TissueFit, NoContactAndTooFewFrames) {
