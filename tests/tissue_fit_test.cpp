@@ -479,6 +479,9 @@ TEST(OneStepBound, TheFitScattersAsTheBoundSaysOnExactAreas) {
   std::normal_distribution<double> unit(0.0, 1.0);
   std::vector<double> ln_kbar;
   std::vector<double> n;
+  // The standard errors the fit reports for ln kbar and n, relative as the bound's.
+  std::vector<double> se_ln_kbar;
+  std::vector<double> se_n;
   for (int draw = 0; draw < 300; ++draw) {
     RegionSeries noisy = b.exact;
     for (std::size_t i = 0; i < noisy.force_n.size(); ++i) {
@@ -488,12 +491,25 @@ TEST(OneStepBound, TheFitScattersAsTheBoundSaysOnExactAreas) {
     ASSERT_EQ(fit.status, FitStatus::Ok);
     ln_kbar.push_back(std::log(fit.kbar_n_per_mm3.value / truth.kbar_n_per_mm3));
     n.push_back(fit.n.value / truth.n - 1.0);
+    se_ln_kbar.push_back(fit.kbar_n_per_mm3.se / fit.kbar_n_per_mm3.value);
+    se_n.push_back(fit.n.se / truth.n);
   }
   const auto& sd = test::sample_sd;
   std::printf("heel 41-42: scatter / bound  kbar %.3f / %.3f  n %.3f / %.3f\n", sd(ln_kbar),
               b.relative_sd[0], sd(n), b.relative_sd[1]);
   EXPECT_NEAR(sd(ln_kbar) / b.relative_sd[0], 1.0, 0.2);
   EXPECT_NEAR(sd(n) / b.relative_sd[1], 1.0, 0.2);
+  // The reported standard errors assume one noise variance for every frame, where the noise here
+  // grows with the cells in contact (as a real insole's does), so they are not exact: here they
+  // come out larger than the scatter (1.31 times). Printed and bounded on both sides (README, How
+  // the fit works).
+  const double kbar_ratio = median(se_ln_kbar) / sd(ln_kbar);
+  const double n_ratio = median(se_n) / sd(n);
+  std::printf("heel 41-42: median reported SE / scatter  kbar %.3f  n %.3f\n", kbar_ratio, n_ratio);
+  EXPECT_GT(kbar_ratio, 0.8);
+  EXPECT_LT(kbar_ratio, 1.6);
+  EXPECT_GT(n_ratio, 0.8);
+  EXPECT_LT(n_ratio, 1.6);
 }
 
 // The penalty keeps every fitted model essentially non-negative on its own inputs: no model
