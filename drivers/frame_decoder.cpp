@@ -6,7 +6,7 @@
 #include <chrono>
 #include <cstring>
 
-#include "gaitmon/session.hpp"
+#include "gaitmon/types.hpp"
 
 namespace gaitmon::drivers {
 namespace {

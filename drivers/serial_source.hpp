@@ -5,7 +5,7 @@
 #include <memory>
 
 #include "drivers/byte_source.hpp"
-#include "gaitmon/config.hpp"
+#include "gaitmon/link_settings.hpp"
 
 namespace gaitmon::drivers {
 

@@ -7,7 +7,7 @@
 #include <span>
 
 #include "drivers/byte_source.hpp"
-#include "gaitmon/config.hpp"
+#include "gaitmon/link_settings.hpp"
 
 namespace gaitmon::drivers {
 

@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "gaitmon/session.hpp"
+#include "gaitmon/types.hpp"
 
 namespace gaitmon::drivers {
 namespace {

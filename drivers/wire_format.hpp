@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <span>
 
-#include "gaitmon/config.hpp"
+#include "gaitmon/link_settings.hpp"
 #include "gaitmon/sensor_frame.hpp"
 
 namespace gaitmon::drivers {

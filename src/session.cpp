@@ -251,24 +251,6 @@ LineSource stream_lines(std::istream& in, std::string name) {
 
 }  // namespace
 
-std::size_t session_sensor_count(InsoleSize size) {
-  switch (size) {
-    case InsoleSize::S35_36:
-      return 93;
-    case InsoleSize::S37_38:
-      return 107;
-    case InsoleSize::S39_40:
-      return 116;
-    case InsoleSize::S41_42:
-      return 129;
-    case InsoleSize::S43_44:
-      return 151;
-    case InsoleSize::S45_46:
-      return 161;
-  }
-  throw std::invalid_argument("session_sensor_count: invalid insole size");
-}
-
 // ---------------------------------------------------------------------------------------------
 // Reader
 

@@ -1,6 +1,8 @@
 // Text names of the shared vocabulary; the names are part of the file formats.
 #include "gaitmon/types.hpp"
 
+#include <stdexcept>
+
 namespace gaitmon {
 namespace {
 constexpr std::array<std::string_view, kRegionCount> kRegionNames{
@@ -33,6 +35,24 @@ std::optional<InsoleSize> parse_insole_size(std::string_view text) {
     if (kSizeNames[index_of(s)] == text) return s;
   }
   return std::nullopt;
+}
+
+std::size_t session_sensor_count(InsoleSize size) {
+  switch (size) {
+    case InsoleSize::S35_36:
+      return 93;
+    case InsoleSize::S37_38:
+      return 107;
+    case InsoleSize::S39_40:
+      return 116;
+    case InsoleSize::S41_42:
+      return 129;
+    case InsoleSize::S43_44:
+      return 151;
+    case InsoleSize::S45_46:
+      return 161;
+  }
+  throw std::invalid_argument("session_sensor_count: invalid insole size");
 }
 
 }  // namespace gaitmon

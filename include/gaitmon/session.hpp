@@ -19,9 +19,6 @@
 
 namespace gaitmon {
 
-/// The number of sensor columns the format fixes for each insole size (93 ... 161).
-std::size_t session_sensor_count(InsoleSize size);
-
 struct SessionHeader {
   int version = 1;
   InsoleSize insole_size = InsoleSize::S37_38;

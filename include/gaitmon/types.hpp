@@ -63,4 +63,8 @@ constexpr std::size_t index_of(InsoleSize size) {
   return static_cast<std::size_t>(size);
 }
 
+/// The number of sensors of each insole size as sessions and devices carry them (93 ... 161;
+/// Appendix B's count, shared/docs/session-format.md).
+std::size_t session_sensor_count(InsoleSize size);
+
 }  // namespace gaitmon
