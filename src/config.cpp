@@ -399,6 +399,15 @@ void read_regions(TableReader table, InsoleSpec& spec) {
       }
     }
   }
+  // Sessions and devices carry a fixed count per size: a layout of another count would accept
+  // the file and then reject every frame of it.
+  const std::size_t expected = session_sensor_count(spec.size);
+  if (owner.size() != expected) {
+    table.fail_here(
+        fmt::format("the regions hold {} sensors; insole size {} has {} (the session "
+                    "format's count, shared/docs/session-format.md)",
+                    owner.size(), insole_size_name(spec.size), expected));
+  }
   table.finish();
 }
 

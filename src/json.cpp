@@ -14,4 +14,8 @@ void to_json(nlohmann::json& j, const EllipsoidParams& p) {
        {"m", p.m}};
 }
 
+std::string json_file_text(const nlohmann::json& j) {
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+}
+
 }  // namespace gaitmon

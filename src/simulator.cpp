@@ -391,7 +391,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
   j["dc_bias_bits"] = biases;
   j["steps"] = steps;
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << j.dump(2) << '\n';
+  out << json_file_text(j);
   out.close();
   if (!out) throw std::runtime_error("cannot write the simulation truth " + path.string());
 }

@@ -483,6 +483,11 @@ const Refusal kRefusals[] = {
      "sizes.\"37-38\".regions.toe1[2]", "row 1 sensor 5 is listed twice in toe1"},
     {"SensorInNoRegion", kInsoles, replace(kRegions37, "\"2:6-7\"", "\"2:7\""),
      "sizes.\"37-38\".regions", "row 2 sensor 6 is in no region"},
+    // Row 15 one sensor short: 106 sensors where size 37-38 has 107 (and one more: 108).
+    {"SensorCountOfAnotherSize", kInsoles, replace("\"15:1-4\"", "\"15:1-3\""),
+     "sizes.\"37-38\".regions", "the regions hold 106 sensors; insole size 37-38 has 107"},
+    {"SensorCountOneTooMany", kInsoles, replace("\"15:1-4\"", "\"15:1-5\""),
+     "sizes.\"37-38\".regions", "the regions hold 108 sensors; insole size 37-38 has 107"},
     {"EmptyRowBetweenRows", kInsoles,
      replace(kRegions37, "[\"8:1-7\", \"9:1-7\"]", "[\"8:1-7\"]"), "sizes.\"37-38\".regions",
      "row 9 has no sensors"},

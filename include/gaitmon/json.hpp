@@ -3,6 +3,7 @@
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "gaitmon/tissue_model.hpp"
 
@@ -11,5 +12,10 @@ namespace gaitmon {
 /// {"A_mm": ..., "B_mm": ..., "C_mm": ..., "d0_mm": ..., "kbar_n_per_mm3": ..., "n": ...,
 /// "cbar_ns_per_mm3": ..., "m": ...}; found by nlohmann::json through argument-dependent lookup.
 void to_json(nlohmann::json& j, const EllipsoidParams& p);
+
+/// `j` as the text of a file, indented by 2, with bytes that are not UTF-8 (a file name or a
+/// header's subject given in another encoding) replaced by U+FFFD rather than thrown on after
+/// all the work.
+std::string json_file_text(const nlohmann::json& j);
 
 }  // namespace gaitmon

@@ -323,7 +323,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
   }
   j["regions"] = regions;
   j["extended_model"] = effects_json(extended);
-  return j.dump(2) + "\n";
+  return json_file_text(j);
 }
 
 void print_summary(const AnalyzeArgs& args, const SessionHeader& header,

@@ -15,6 +15,7 @@
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/error.hpp"
 #include "gaitmon/insole.hpp"
+#include "gaitmon/json.hpp"
 #include "gaitmon/session.hpp"
 #include "output_file.hpp"
 #include "progress.hpp"
@@ -178,7 +179,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
                      {"drifting", z.drifting}});
   }
   j["diagnostics"]["zero_levels"] = zeros;
-  return j.dump(2) + "\n";
+  return json_file_text(j);
 }
 
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {

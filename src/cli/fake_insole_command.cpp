@@ -20,6 +20,7 @@
 
 #include "commands.hpp"
 #include "drivers/wire_format.hpp"
+#include "gaitmon/json.hpp"
 #include "live.hpp"
 #include "replay/fault_injector.hpp"
 #include "replay/pacer.hpp"
@@ -140,7 +141,7 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
        {{"L", counts.faulted_sequences[0]}, {"R", counts.faulted_sequences[1]}}}};
   if (!args.summary.empty()) {
     std::ofstream out(args.summary);
-    out << summary.dump(2) << '\n';
+    out << json_file_text(summary);
     if (!out) throw std::runtime_error("cannot write " + args.summary.string());
   }
   fmt::print(stderr,

@@ -3,6 +3,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <CLI/CLI.hpp>
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
@@ -14,6 +15,21 @@ namespace {
   throw std::runtime_error(path.string() + ": " + what + ": " + std::strerror(errno));
 }
 }  // namespace
+
+void check_output_path(const std::filesystem::path& path, const std::string& option) {
+  if (path.empty()) throw CLI::ValidationError(option, "the path is empty");
+  std::error_code ec;
+  const auto status = std::filesystem::symlink_status(path, ec);
+  if (ec || !std::filesystem::exists(status)) return;
+  if (std::filesystem::is_directory(status)) {
+    throw CLI::ValidationError(option, path.string() + " is a directory");
+  }
+  if (!std::filesystem::is_regular_file(status)) {
+    throw CLI::ValidationError(option, path.string() +
+                                           " exists and is not a regular file (a device, pipe, "
+                                           "socket or link), which writing it would replace");
+  }
+}
 
 OutputFile::OutputFile(std::filesystem::path path)
     : path_(std::move(path)), partial_(path_.string() + ".partial") {

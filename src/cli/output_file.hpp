@@ -6,10 +6,17 @@
 #include <filesystem>
 #include <memory>
 #include <span>
+#include <string>
 #include <string_view>
 #include <vector>
 
 namespace gaitmon::cli {
+
+/// Refuses, before any work, an output path that publishing would harm or cannot reach: empty,
+/// an existing directory, or an existing node that is not a regular file (a device, a FIFO, a
+/// socket or a symlink, which the final rename would replace with a regular file). Throws
+/// CLI::ValidationError naming `option` (a usage error, exit 2).
+void check_output_path(const std::filesystem::path& path, const std::string& option);
 
 class OutputFile {
  public:

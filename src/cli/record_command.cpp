@@ -23,6 +23,7 @@
 #include "gaitmon/log_throttle.hpp"
 #include "gaitmon/session.hpp"
 #include "live.hpp"
+#include "output_file.hpp"
 
 namespace gaitmon::cli {
 namespace {
@@ -167,6 +168,8 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
                 const InsoleSourceFactory& make_source) {
   Config config = load_global_config(global);
   if (!args.serial.empty()) config.serial.device = args.serial;
+  // Before the recording: a session must not be recorded and then fail to take its name.
+  check_output_path(args.out, "--out");
   const std::filesystem::path partial = args.out.string() + ".partial";
 
   // Signals first: every thread started below inherits the blocked mask, those libusb starts

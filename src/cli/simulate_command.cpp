@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <map>
 #include <memory>
@@ -49,6 +50,9 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
     throw CLI::ValidationError("--param", "'" + text + "': the value is not a number");
   }
   if (!(value > 0.0)) throw CLI::ValidationError("--param", "'" + text + "': must be > 0");
+  if (!std::isfinite(value)) {
+    throw CLI::ValidationError("--param", "'" + text + "': must be finite");
+  }
   auto& slot = options.region_params[index_of(*region)];
   if (!slot) slot = config.tissue(options.size, *region).mean;
   const std::map<std::string, double EllipsoidParams::*> fields{
@@ -80,7 +84,8 @@ void apply_effect_params(const std::string& text, SimulationOptions& options) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {
+    // A syntax error, or a number beyond a double's range (1e999).
     throw bad("not valid JSON (" + std::string(e.what()) + ")");
   }
   if (!j.is_object()) throw bad("expected a JSON object");
@@ -139,6 +144,12 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   if (args.truth.empty()) {
     args.truth = args.out;
     args.truth.replace_extension(".truth.json");
+  }
+  check_output_path(args.out, "--out");
+  check_output_path(args.truth, "--truth");
+  if (std::filesystem::absolute(args.truth).lexically_normal() ==
+      std::filesystem::absolute(args.out).lexically_normal()) {
+    throw CLI::ValidationError("--truth", "is the same file as --out");
   }
   if (args.out.has_parent_path()) std::filesystem::create_directories(args.out.parent_path());
   OutputFile csv(args.out);

@@ -415,6 +415,20 @@ TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   }
 }
 
+// A file name that is not UTF-8 (a Latin-1 name from an older system) is written into
+// session.json with U+FFFD in place of the bad byte; the analysis no longer fails at the end.
+TEST(AnalyzeCommand, ASessionNameThatIsNotUtf8IsWrittenWithAReplacementCharacter) {
+  const auto dir = test::scratch_dir("analyze-latin1-name");
+  const fs::path session = dir / "gang\xe4nge.csv";
+  fs::copy_file(analysed().dir / "s.csv", session);
+  int status = -1;
+  const std::string out =
+      run("analyze '" + session.string() + "' --out " + (dir / "o").string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  const auto j = nlohmann::json::parse(read_all(dir / "o" / "session.json"));
+  EXPECT_NE(j.dump().find("gang\xef\xbf\xbdnge.csv"), std::string::npos);
+}
+
 // A report of an earlier run with --report would sit beside this run's CSVs and show other fits.
 TEST(AnalyzeCommand, WithoutReportAnEarlierRunsReportIsRemoved) {
   const auto dir = test::scratch_dir("analyze-stale-report");

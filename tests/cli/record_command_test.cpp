@@ -223,6 +223,23 @@ TEST(RecordCommand, ALinkThatDeliversNothingIsAnErrorAndLeavesNoFile) {
   EXPECT_FALSE(fs::exists(r.out.string() + ".partial"));
 }
 
+// An --out that cannot take the session's name is refused before the device is opened, not after
+// the whole recording (the device here does not exist: the check must come first).
+TEST(RecordCommand, AnOutputThatIsAFolderIsAUsageErrorBeforeRecording) {
+  const fs::path dir = test::scratch_dir("record-out-folder");
+  fs::create_directories(dir / "taken");
+  std::string output;
+  const int status =
+      test::run_command("timeout 30 " + test::gaitmon_binary().string() + " record --serial " +
+                            (dir / "no-such-tty").string() + " --out " + (dir / "taken").string(),
+                        &output);
+  EXPECT_EQ(status, 2) << output;
+  EXPECT_NE(output.find("--out: " + (dir / "taken").string() + " is a directory"),
+            std::string::npos)
+      << output;
+  EXPECT_FALSE(fs::exists(dir / "taken.partial"));
+}
+
 // A driver that fails: it connects, delivers `bytes` and throws.
 class FailingSource final : public drivers::ByteSource {
  public:

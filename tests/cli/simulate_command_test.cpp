@@ -2,6 +2,7 @@
 // --effect-params add hidden effects, and every malformed value is a usage error (exit 2) that
 // quotes what was given and writes nothing.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <filesystem>
 #include <fstream>
@@ -64,6 +65,8 @@ TEST(SimulateCommand, AMalformedParamIsAUsageErrorThatNamesItAndWritesNothing) {
       {"heel.n=0.3x", "'heel.n=0.3x': the value is not a number"},
       {"heel.n=-0.3", "'heel.n=-0.3': must be > 0"},
       {"heel.n=0", "'heel.n=0': must be > 0"},
+      {"heel.kbar_n_per_mm3=inf", "'heel.kbar_n_per_mm3=inf': must be finite"},
+      {"heel.A_mm=1e400", "'heel.A_mm=1e400': the value is not a number"},
   };
   for (const auto& c : cases) {
     int status = -1;
@@ -75,20 +78,49 @@ TEST(SimulateCommand, AMalformedParamIsAUsageErrorThatNamesItAndWritesNothing) {
   }
 }
 
+// Publishing renames a finished file over the output's name, which would replace a device, a
+// pipe or a link with a regular file: such outputs are refused before anything is simulated,
+// and so is a truth file that is the session file.
+TEST(SimulateCommand, AnOutputThatIsNotARegularFileIsRefusedAndLeftAlone) {
+  const auto dir = test::scratch_dir("simulate-special-out");
+  const fs::path fifo = dir / "pipe";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const fs::path link = dir / "link.csv";
+  test::write_text(dir / "target.csv", "kept\n");
+  fs::create_symlink(dir / "target.csv", link);
+  fs::create_directories(dir / "folder");
+  const struct {
+    std::string args;
+    std::string says;
+  } cases[] = {
+      {(fifo).string(), "--out: " + fifo.string() + " exists and is not a regular file"},
+      {(link).string(), "--out: " + link.string() + " exists and is not a regular file"},
+      {(dir / "folder").string(), "--out: " + (dir / "folder").string() + " is a directory"},
+      {(dir / "s.csv").string() + " --truth " + fifo.string(),
+       "--truth: " + fifo.string() + " exists and is not a regular file"},
+      {(dir / "s.csv").string() + " --truth " + (dir / "s.csv").string(),
+       "--truth: is the same file as --out"},
+  };
+  for (const auto& c : cases) {
+    int status = -1;
+    const std::string out = simulate(c.args, "", &status);
+    EXPECT_EQ(status, 2) << c.args << "\n" << out;
+    EXPECT_NE(out.find(c.says), std::string::npos) << out;
+  }
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(fifo)));
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(link)));
+  EXPECT_FALSE(fs::exists(dir / "s.csv"));
+  std::ifstream kept(dir / "target.csv");
+  std::string line;
+  std::getline(kept, line);
+  EXPECT_EQ(line, "kept");
+}
+
 TEST(SimulateCommand, AFailedRunLeavesNeitherFileUnderItsFinalName) {
   const auto dir = test::scratch_dir("simulate-fails");
-  // A folder that is not empty cannot be replaced by the truth file, so publication fails after
-  // the session was written in full.
-  test::write_text(dir / "truth" / "keep", "x");
-  int status = -1;
-  const std::string out = simulate(dir / "s.csv", "--truth " + (dir / "truth").string(), &status);
-  EXPECT_EQ(status, 1) << out;
-  EXPECT_NE(out.find((dir / "truth").string() + ": cannot rename"), std::string::npos) << out;
-  EXPECT_FALSE(fs::exists(dir / "s.csv"));
-  EXPECT_FALSE(fs::exists(dir / "s.csv.partial"));
-  EXPECT_FALSE(fs::exists(dir / "truth.partial"));
-  EXPECT_TRUE(fs::is_directory(dir / "truth"));
-
+  // (A rename that fails after the session was written, which takes back the file already
+  // renamed, is tested on OutputFile itself: a folder in the truth's place, which made it fail
+  // here, is now refused before anything is written.)
   // Cut short by the file size limit (SIGXFSZ ignored, so the write fails instead).
   const std::string limited = "(trap '' XFSZ; ulimit -f 64; " + test::gaitmon_binary().string() +
                               " simulate --duration 10 --out " + (dir / "big.csv").string() + ")";
@@ -109,6 +141,8 @@ TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
       {"--effect hysteresis --effect sensor_creep --effect hysteresis",
        "--effect: 'hysteresis' is given twice"},
       {R"(--effect hysteresis --effect-params '{"strength":')", "--effect-params: not valid JSON"},
+      {R"(--effect hysteresis --effect-params '{"strength":1e999}')",
+       "--effect-params: not valid JSON"},
       {"--effect hysteresis --effect-params '[0.1]'", "--effect-params: expected a JSON object"},
       {R"(--effect hysteresis --effect-params '{"tau_s":1}')", "unknown parameter 'tau_s'"},
       {R"(--effect hysteresis --effect-params '{"strength":"high"}')",

@@ -35,6 +35,9 @@ TEST(SpyCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
            Case{"--timeout-s 0", "--timeout-s: '0' is not in [0.001, 1000000000]"},
            Case{"--lcm-url bogus:// --timeout-s 1", "--lcm-url: LCM cannot open \"bogus://\""},
            Case{"--lcm-url memq --timeout-s 1", "--lcm-url: LCM cannot open \"memq\""},
+           // Port 1 on this host: no LCM TCP server; LCM opens it without a socket.
+           Case{"--lcm-url tcpq://127.0.0.1:1 --timeout-s 1",
+                "--lcm-url: LCM has no connection for \"tcpq://127.0.0.1:1\""},
            Case{"fit bogus --timeout-s 1",
                 "channels: \"bogus\" is not a gaitmon channel: frame, step, fit, status, raw, "
                 "effects or the config's names GAITMON_FRAME,"},
