@@ -70,8 +70,6 @@
 // one, so that the shutdown stays within the 2 s.
 #pragma once
 
-#include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>

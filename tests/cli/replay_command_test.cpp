@@ -13,11 +13,8 @@
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/status_t.hpp>
 #include <iterator>
-#include <map>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include "lcm/bus_support.hpp"
