@@ -52,7 +52,6 @@ class LcmPublisher final : public Publisher {
   std::uint64_t failed_publishes() const noexcept {
     return failed_.load(std::memory_order_relaxed);
   }
-  const LcmSettings& settings() const noexcept { return settings_; }
 
  private:
   template <typename Report, typename Message>
