@@ -483,6 +483,9 @@ struct Monitor::Impl {
         }
         complete(job->foot, job->seq, std::move(ready));
       } catch (const std::exception& e) {
+        // A failed fit rather than a drop: step_drops says the backlog was too small for the
+        // load, and this step was taken by a worker; no fit came of it.
+        fits_failed.fetch_add(1, std::memory_order_relaxed);
         spdlog::error("monitor: foot {} step {} lost: {}", foot_name(job->foot), job->step.index,
                       e.what());
         complete(job->foot, job->seq, std::nullopt);

@@ -112,7 +112,9 @@ struct MonitorCounters {
   std::uint64_t step_backlog = 0;    ///< waiting for a worker now
   std::uint64_t step_drops = 0;
   std::uint64_t fits_published = 0;
-  std::uint64_t fits_failed = 0;  ///< published steps whose analysis threw or a region failed
+  /// Steps whose analysis threw or a region failed (published with fit_failed), and steps lost
+  /// to an error after their analysis (nothing published for them).
+  std::uint64_t fits_failed = 0;
   /// Frames of a foot more than [segmentation] max_gap_s after its previous one (lost frames, a
   /// link drop-out, a device restart seen as a jump forward): each restarted its segmentation.
   std::uint64_t segmentation_gaps = 0;
