@@ -63,8 +63,6 @@ class FrameDecoder {
   /// not one instant).
   DecoderCounters counters() const;
 
-  const WireFormat& format() const { return format_; }
-
  private:
   struct SinkRef {
     void* target;

@@ -29,6 +29,7 @@ struct SerialSource::Impl {
   std::chrono::milliseconds backoff{0};
   LinkState state = LinkState::Connecting;
   bool state_reported = false;
+  std::string open_error;  ///< of the last failed attempt since the last connection
   // 4 KiB holds about 33 frames of the largest insole: one wake-up per ~0.17 s of data at
   // 100 Hz per foot, and far less than a pty's buffer.
   std::array<std::uint8_t, 4096> buffer{};
@@ -78,9 +79,16 @@ struct SerialSource::Impl {
       }
     }
     if (ec) {
+      // A wrong path, permission or setting says why once, not at every attempt; a new reason
+      // (the device appeared but is not ours to open) says it again.
+      if (ec.message() != open_error) {
+        open_error = ec.message();
+        (*on_state)(LinkState::Connecting, settings.device + ": " + open_error);
+      }
       schedule_retry();
       return;
     }
+    open_error.clear();
     report(LinkState::Connected, settings.device);
     read();
   }

@@ -15,7 +15,8 @@ namespace gaitmon::drivers {
 /// reconnect_initial_ms, doubling the wait after each failed attempt up to reconnect_max_ms,
 /// until it opens (Connected) or stop() is called. Only data resets the wait: a device that
 /// opens but fails before its first byte keeps backing off. Only changes of state are
-/// reported; the detail names the device and the error.
+/// reported, and a failed attempt whose error differs from the last one's (Connecting again);
+/// the detail names the device and the error.
 ///
 /// Threading: run() on one thread (the driver thread), once per object; stop() from any thread.
 class SerialSource final : public ByteSource {

@@ -7,8 +7,10 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <boost/asio/post.hpp>
 #include <boost/asio/thread_pool.hpp>
+#include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <deque>
@@ -481,6 +483,9 @@ struct Monitor::Impl {
         }
         complete(job->foot, job->seq, std::move(ready));
       } catch (const std::exception& e) {
+        // A failed fit rather than a drop: step_drops says the backlog was too small for the
+        // load, and this step was taken by a worker; no fit came of it.
+        fits_failed.fetch_add(1, std::memory_order_relaxed);
         spdlog::error("monitor: foot {} step {} lost: {}", foot_name(job->foot), job->step.index,
                       e.what());
         complete(job->foot, job->seq, std::nullopt);
@@ -648,8 +653,12 @@ struct Monitor::Impl {
     try {
       publisher.publish(message);
     } catch (const std::exception& e) {
+      const std::uint64_t failures = publish_failures.fetch_add(1, std::memory_order_relaxed) + 1;
       if (auto held = publish_log.allow()) {
-        spdlog::warn("monitor: publishing failed: {} ({} similar suppressed)", e.what(), *held);
+        spdlog::warn(
+            "monitor: publishing failed, the message is lost: {}; {} lost so far ({} "
+            "similar suppressed)",
+            e.what(), failures, *held);
       }
     }
   }
@@ -669,6 +678,7 @@ struct Monitor::Impl {
     c.fits_published = fits_published.load(std::memory_order_relaxed);
     c.fits_failed = fits_failed.load(std::memory_order_relaxed);
     c.segmentation_gaps = segmentation_gaps.load(std::memory_order_relaxed);
+    c.publish_failures = publish_failures.load(std::memory_order_relaxed);
     return c;
   }
 
@@ -742,7 +752,8 @@ struct Monitor::Impl {
   std::uint64_t ring_drops_logged = 0;
 
   std::atomic<std::uint64_t> processed{0}, rejected{0}, steps_detected{0}, steps_queued{0},
-      backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0}, segmentation_gaps{0};
+      backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0}, segmentation_gaps{0},
+      publish_failures{0};
 
   // The backlog, shared by the detector and the workers.
   std::mutex jobs_mutex;

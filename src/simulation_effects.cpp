@@ -35,8 +35,6 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
-#include <unordered_map>
-#include <utility>
 #include <vector>
 
 #include "gaitmon/simulator.hpp"

@@ -18,6 +18,7 @@
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -606,6 +607,37 @@ TEST(Monitor, AFailedAnalysisIsPublishedWithItsStatus) {
     }
   }
   EXPECT_EQ(publisher.statuses().back().fits_failed, fits.size());
+}
+
+// A Publisher that refuses every frame report: the rest still goes out.
+class FrameRefusingPublisher final : public RecordingPublisher {
+ public:
+  using RecordingPublisher::publish;
+  void publish(const FrameReport&) override { throw std::runtime_error("no room for frames"); }
+};
+
+TEST(Monitor, APublisherThatThrowsIsCountedAndLogged) {
+  const Config config = shipped_config();
+  std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  frames.resize(200);
+  MonitorOptions options;
+  options.analysis = quick_fits();
+  options.backlog_overflow = BacklogOverflow::Wait;
+  FrameRefusingPublisher publisher;
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  Monitor monitor(config, options, publisher);
+  for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
+  monitor.stop();
+  spdlog::default_logger()->sinks().pop_back();
+  EXPECT_EQ(monitor.counters().publish_failures, frames.size());
+  EXPECT_EQ(publisher.statuses().back().frames_processed, frames.size());
+  const std::string text = log.str();
+  EXPECT_NE(text.find("monitor: publishing failed, the message is lost: no room for frames; 1 "
+                      "lost so far"),
+            std::string::npos)
+      << text;
 }
 
 TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {

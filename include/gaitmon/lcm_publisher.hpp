@@ -8,6 +8,7 @@
 #include <mutex>
 
 #include "gaitmon/config.hpp"
+#include "gaitmon/log_throttle.hpp"
 #include "gaitmon/publisher.hpp"
 
 namespace lcm {
@@ -24,9 +25,9 @@ namespace gaitmon {
 /// thread encodes into its own buffer, and a mutex serialises the sends.
 ///
 /// Failures: a message LCM does not send (a full socket buffer, no route) is counted in
-/// failed_publishes() and otherwise ignored, so the publish functions never throw and never
-/// block longer than the send itself. LcmPublisher itself allocates nothing per message once a
-/// thread has published each type once.
+/// failed_publishes() and logged (at most once a second), and otherwise ignored, so the publish
+/// functions never throw and never block longer than the send itself. LcmPublisher itself allocates
+/// nothing per message once a thread has published each type once.
 class LcmPublisher final : public Publisher {
  public:
   /// Opens its own connection on settings.url.
@@ -52,7 +53,6 @@ class LcmPublisher final : public Publisher {
   std::uint64_t failed_publishes() const noexcept {
     return failed_.load(std::memory_order_relaxed);
   }
-  const LcmSettings& settings() const noexcept { return settings_; }
 
  private:
   template <typename Report, typename Message>
@@ -63,6 +63,7 @@ class LcmPublisher final : public Publisher {
   std::mutex send_mutex_;
   std::atomic<std::uint64_t> published_{0};
   std::atomic<std::uint64_t> failed_{0};
+  LogThrottle failure_log_;
 };
 
 }  // namespace gaitmon

@@ -50,7 +50,8 @@ class LcmSubscriber {
   bool handle(int timeout_ms);
 
   /// Messages on a subscribed channel that were not the expected type, were malformed or held
-  /// impossible values (a foot other than 0 or 1, ...); they are skipped.
+  /// impossible values (a foot other than 0 or 1, ...); they are skipped and logged (at most
+  /// once a second).
   std::uint64_t decode_errors() const noexcept { return decode_errors_; }
 
  private:

@@ -53,7 +53,8 @@
 //
 // Errors: exceptions never cross threads. A step whose analysis throws is published with every
 // region's status fit_failed:<reason>; a frame that cannot be processed is rejected and counted;
-// a Publisher that throws is logged (rate-limited) and the message is lost.
+// a Publisher that throws is counted (publish_failures), logged (rate-limited) and the message
+// is lost.
 //
 // Shutdown, by stop(): (1) stop accepting: offer() and offer_wait() return false from now on;
 // (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
@@ -70,8 +71,6 @@
 // one, so that the shutdown stays within the 2 s.
 #pragma once
 
-#include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -114,10 +113,14 @@ struct MonitorCounters {
   std::uint64_t step_backlog = 0;    ///< waiting for a worker now
   std::uint64_t step_drops = 0;
   std::uint64_t fits_published = 0;
-  std::uint64_t fits_failed = 0;  ///< published steps whose analysis threw or a region failed
+  /// Steps whose analysis threw or a region failed (published with fit_failed), and steps lost
+  /// to an error after their analysis (nothing published for them).
+  std::uint64_t fits_failed = 0;
   /// Frames of a foot more than [segmentation] max_gap_s after its previous one (lost frames, a
   /// link drop-out, a device restart seen as a jump forward): each restarted its segmentation.
   std::uint64_t segmentation_gaps = 0;
+  /// Messages the Publisher threw on, lost (LcmPublisher never throws: it counts its own).
+  std::uint64_t publish_failures = 0;
 };
 
 class Monitor {

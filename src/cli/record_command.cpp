@@ -192,10 +192,27 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
                            source_name);
   std::atomic<bool> driver_done{false};
   std::exception_ptr writer_error;
+  // As the monitor's: once per [monitor] status_period_s and at the end, so that a recording
+  // that loses frames says so while it runs.
+  std::uint64_t drops_logged = 0;
+  const auto log_drops = [&](std::string_view when) {
+    const std::uint64_t drops = ring.drops();
+    if (drops <= drops_logged) return;
+    spdlog::warn("record: ring full: {} frames dropped {}, {} in all", drops - drops_logged, when,
+                 drops);
+    drops_logged = drops;
+  };
+  const auto drop_period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(config.monitor.status_period_s));
   WriterThread writer(driver_done, [&] {
     try {
       SensorFrame frame;
+      auto next_drop_log = std::chrono::steady_clock::now() + drop_period;
       for (;;) {
+        if (const auto now = std::chrono::steady_clock::now(); now >= next_drop_log) {
+          log_drops(fmt::format("in the last {:.1f} s", config.monitor.status_period_s));
+          next_drop_log = now + drop_period;
+        }
         if (ring.try_pop(frame)) {
           recorder.write(frame);
         } else if (driver_done.load(std::memory_order_acquire)) {
@@ -223,6 +240,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
       // What was recorded before the driver failed is whole rows: it is kept, under the partial
       // name, as no recording can be taken again.
       writer.join();
+      log_drops("since the last warning");
       if (!writer_error && recorder.close()) {
         spdlog::error("record: the driver failed; the {} frames recorded before are kept in {}",
                       recorder.written(), partial.string());
@@ -231,9 +249,18 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
     }
   }
   writer.join();
+  log_drops("since the last warning");
   if (writer_error) {
-    std::error_code ignored;
-    std::filesystem::remove(partial, ignored);
+    // As after a driver failure, what reached the file is kept: a recording cannot be taken
+    // again. The rows still buffered follow when the recorder closes it; after a failed write
+    // to the disk they may be lost.
+    if (recorder.written() > 0) {
+      spdlog::error("record: writing failed after {} frames; what reached the file is kept in {}",
+                    recorder.written(), partial.string());
+    } else {
+      std::error_code ignored;
+      std::filesystem::remove(partial, ignored);
+    }
     std::rethrow_exception(writer_error);
   }
   if (!recorder.close()) {

@@ -85,10 +85,11 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   fmt::print(
       "replayed {} frames (about {:.1f} s of two feet) in {:.2f} s ({:.0f} x real time); steps {}, "
       "fits {} published ({} with failures); rejected {}, ring drops {}, refused {}, step drops "
-      "{}; segmentation restarted at {} time gaps\n{}\n",
+      "{}; segmentation restarted at {} time gaps; {} messages lost (publishing failed)\n{}\n",
       c.frames_processed, session_s, wall_s, wall_s > 0.0 ? session_s / wall_s : 0.0,
       c.steps_detected, c.fits_published, c.fits_failed, c.frames_rejected, c.ring_drops,
-      c.frames_refused, c.step_drops, c.segmentation_gaps, link.summary());
+      c.frames_refused, c.step_drops, c.segmentation_gaps,
+      c.publish_failures + lcm.failed_publishes(), link.summary());
 }
 
 }  // namespace

@@ -68,9 +68,10 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   fmt::print(
       "frames {} processed, {} rejected, {} dropped (ring full), {} refused (monitor closed); "
       "segmentation restarted at {} time gaps; steps {} ({} dropped from the backlog); fits {} "
-      "published, {} with failures\n{}\n",
+      "published, {} with failures; {} messages lost (publishing failed)\n{}\n",
       c.frames_processed, c.frames_rejected, c.ring_drops, c.frames_refused, c.segmentation_gaps,
-      c.steps_detected, c.step_drops, c.fits_published, c.fits_failed, link.summary());
+      c.steps_detected, c.step_drops, c.fits_published, c.fits_failed,
+      c.publish_failures + lcm.failed_publishes(), link.summary());
 }
 
 }  // namespace

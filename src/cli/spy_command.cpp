@@ -15,6 +15,7 @@
 #include "commands.hpp"
 #include "gaitmon/contact_ellipse.hpp"
 #include "gaitmon/lcm_subscriber.hpp"
+#include "live.hpp"
 
 namespace gaitmon::cli {
 namespace {
@@ -177,6 +178,10 @@ std::vector<std::string> resolve_channels(const LcmChannels& channels,
 
 void run_spy(const GlobalOptions& global, const SpyArgs& args) {
   LcmSettings settings = load_global_config(global).lcm;
+  // Before LCM starts its threads, which inherit the blocked signals: Ctrl-C ends the loop below,
+  // so that the closing line is printed.
+  StopOnSignal on_signal("the spy", [](int) {});
+  const FinishOnExit watching(on_signal);
   if (!args.lcm_url.empty()) settings.url = args.lcm_url;
   std::uint64_t received = 0;
   LcmSubscriber subscriber(
@@ -197,8 +202,9 @@ void run_spy(const GlobalOptions& global, const SpyArgs& args) {
   using Clock = std::chrono::steady_clock;
   const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                            std::chrono::duration<double>(args.timeout_s));
-  while (args.count == 0 || received < args.count) {
-    int wait_ms = 1000;
+  while ((args.count == 0 || received < args.count) && on_signal.received() == 0) {
+    // Short waits, so that a signal ends the loop soon.
+    int wait_ms = 100;
     if (args.timeout_s > 0.0) {
       const auto left =
           std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
@@ -207,7 +213,9 @@ void run_spy(const GlobalOptions& global, const SpyArgs& args) {
     }
     subscriber.handle(wait_ms);
   }
-  if (args.count > 0 && received < args.count) {
+  fmt::print(stderr, "gaitmon spy: {} messages printed, {} malformed ones skipped\n", received,
+             subscriber.decode_errors());
+  if (args.count > 0 && received < args.count && on_signal.received() == 0) {
     throw std::runtime_error(
         fmt::format("spy: {} of {} messages within {} s", received, args.count, args.timeout_s));
   }

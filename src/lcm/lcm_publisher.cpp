@@ -3,6 +3,8 @@
 // sends (file:// interleaves concurrent writes and corrupts the log).
 #include "gaitmon/lcm_publisher.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <lcm/lcm-cpp.hpp>
 #include <mutex>
 #include <stdexcept>
@@ -28,6 +30,7 @@ template <typename Report, typename Message>
 void LcmPublisher::send(const std::string& channel, const Report& report,
                         Message& message) noexcept {
   thread_local std::vector<std::uint8_t> buffer;
+  const char* failure = nullptr;
   try {
     lcm_messages::to_lcm(report, message);
     const int size = message.getEncodedSize();
@@ -35,16 +38,22 @@ void LcmPublisher::send(const std::string& channel, const Report& report,
       buffer.resize(static_cast<std::size_t>(size));
     }
     if (message.encode(buffer.data(), 0, size) != size) {
-      failed_.fetch_add(1, std::memory_order_relaxed);
-      return;
-    }
-    const std::lock_guard lock(send_mutex_);
-    if (lcm_publish(lcm_->getUnderlyingLCM(), channel.c_str(), buffer.data(), size) != 0) {
-      failed_.fetch_add(1, std::memory_order_relaxed);
-      return;
+      failure = "it could not be encoded";
+    } else {
+      const std::lock_guard lock(send_mutex_);
+      if (lcm_publish(lcm_->getUnderlyingLCM(), channel.c_str(), buffer.data(), size) != 0) {
+        failure = "LCM did not send it";
+      }
     }
   } catch (const std::bad_alloc&) {
-    failed_.fetch_add(1, std::memory_order_relaxed);
+    failure = "out of memory";
+  }
+  if (failure != nullptr) {
+    const std::uint64_t failed = failed_.fetch_add(1, std::memory_order_relaxed) + 1;
+    if (auto held = failure_log_.allow()) {
+      spdlog::warn("LCM: a message on {} was lost: {}; {} lost so far ({} similar suppressed)",
+                   channel, failure, failed, *held);
+    }
     return;
   }
   published_.fetch_add(1, std::memory_order_relaxed);

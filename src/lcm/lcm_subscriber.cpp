@@ -121,18 +121,22 @@ void LcmSubscriber::dispatch(const Route& route, const void* data, std::uint32_t
   if (pending_) return;
   LcmMessage message;
   bool ok = false;
+  std::string thrown;
   // The generated decoders throw for some malformed messages (a negative array length makes
   // resize throw); an exception must not cross LCM's C callback.
   try {
     ok = decode(route.kind, data, size, message);
   } catch (const std::exception& e) {
-    if (auto held = decode_log_.allow()) {
-      spdlog::warn("LCM: a malformed message on {} skipped: {} ({} similar suppressed)",
-                   route.channel, e.what(), *held);
-    }
+    thrown = e.what();
   }
   if (!ok) {
     ++decode_errors_;
+    if (auto held = decode_log_.allow()) {
+      spdlog::warn("LCM: a malformed message on {} skipped: {}; {} so far ({} similar suppressed)",
+                   route.channel,
+                   thrown.empty() ? "another type, cut short or an impossible value" : thrown,
+                   decode_errors_, *held);
+    }
     return;
   }
   try {

@@ -4,12 +4,19 @@
 // that delivers nothing leaves no file, and a driver that throws ends the command with its error.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
+#include <fstream>
+#include <iterator>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -294,6 +301,104 @@ TEST(RecordCommand, ADriverThatThrowsIsAnErrorAndLeavesNoFinishedFile) {
   EXPECT_EQ(recorded.back().foot, Foot::Right);
   EXPECT_DOUBLE_EQ(recorded.back().t_s, 0.02);
   EXPECT_EQ(recorded.back().bits[1], static_cast<std::uint8_t>(1 + 20000));
+}
+
+// A driver that delivers `frames` frames of each foot in pieces, and ends when it has or when
+// it is stopped.
+class StreamingSource final : public drivers::ByteSource {
+ public:
+  explicit StreamingSource(std::uint32_t frames) {
+    WireStream device;
+    for (std::uint32_t k = 0; k < frames; ++k) {
+      device.add(Foot::Left, InsoleSize::S37_38, 107, k * 10000);
+      device.add(Foot::Right, InsoleSize::S37_38, 107, k * 10000);
+    }
+    const std::size_t piece_bytes = 200 * device.format.frame_bytes(107);
+    for (std::size_t at = 0; at < device.stream.size(); at += piece_bytes) {
+      const auto from = device.stream.begin() + static_cast<std::ptrdiff_t>(at);
+      pieces_.emplace_back(from, from + static_cast<std::ptrdiff_t>(
+                                            std::min(piece_bytes, device.stream.size() - at)));
+    }
+  }
+  void run(const BytesHandler& on_bytes, const StateHandler& on_state) override {
+    on_state(drivers::LinkState::Connecting, "fake");
+    on_state(drivers::LinkState::Connected, "fake");
+    for (const auto& piece : pieces_) {
+      if (stopped_.load()) break;
+      on_bytes(piece);
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    on_state(drivers::LinkState::Disconnected, "fake: stopped");
+  }
+  void stop() override { stopped_.store(true); }
+
+ private:
+  std::vector<std::vector<std::uint8_t>> pieces_;
+  std::atomic<bool> stopped_{false};
+};
+
+// `gaitmon record --out OUT` in this process on `source`, with the config `config`; the error
+// it ended with ("" if none) and its log.
+std::string record_in_process(const fs::path& config, const fs::path& out,
+                              std::unique_ptr<drivers::ByteSource> source, std::string& log) {
+  CLI::App app;
+  cli::GlobalOptions global;
+  global.config_path = config;
+  global.log_level = "warn";
+  cli::add_record_command(app, global, [&](const Config&, bool) { return std::move(source); });
+  const std::string out_arg = out.string();
+  const std::array<const char*, 6> argv{"gaitmon",       "record",   "--out",
+                                        out_arg.c_str(), "--serial", "fake"};
+  std::ostringstream text;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
+  std::string error;
+  try {
+    app.parse(static_cast<int>(argv.size()), argv.data());
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  spdlog::default_logger()->sinks().pop_back();
+  log = text.str();
+  return error;
+}
+
+// The writer fails (a full disk: the partial file is /dev/full) after the first megabyte of
+// rows: what reached the file is kept, under the partial name, which the log names.
+TEST(RecordCommand, AWriterThatFailsKeepsThePartialFile) {
+  const fs::path dir = test::scratch_dir("record-writer-fails");
+  const fs::path out = dir / "recorded.csv";
+  const fs::path partial = out.string() + ".partial";
+  fs::create_symlink("/dev/full", partial);
+  std::string log;
+  const std::string error = record_in_process(test::source_dir() / "config" / "gaitmon.toml", out,
+                                              std::make_unique<StreamingSource>(3000), log);
+  EXPECT_EQ(error, "cannot write " + partial.string() + ": No space left on device");
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_TRUE(fs::is_symlink(partial)) << "the partial file was removed";
+  EXPECT_NE(log.find("record: writing failed after "), std::string::npos) << log;
+  EXPECT_NE(log.find("; what reached the file is kept in " + partial.string()), std::string::npos)
+      << log;
+}
+
+// Frames a full ring drops are logged while the recording runs, as the monitor logs them, and
+// at its end; not only in the final line.
+TEST(RecordCommand, FramesDroppedByAFullRingAreLogged) {
+  const fs::path dir = test::scratch_dir("record-ring-drops");
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / name, dir / name);
+  }
+  std::ifstream in(dir / "gaitmon.toml");
+  std::string config((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto at = config.find("\ncapacity_frames = 4096\n");
+  ASSERT_NE(at, std::string::npos);
+  config.replace(at, std::string("\ncapacity_frames = 4096\n").size(), "\ncapacity_frames = 8\n");
+  test::write_text(dir / "gaitmon.toml", config);
+  std::string log;
+  const std::string error = record_in_process(dir / "gaitmon.toml", dir / "recorded.csv",
+                                              std::make_unique<StreamingSource>(1000), log);
+  EXPECT_EQ(error, "");
+  EXPECT_NE(log.find("record: ring full: "), std::string::npos) << log;
 }
 
 }  // namespace

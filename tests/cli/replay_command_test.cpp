@@ -13,13 +13,11 @@
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/status_t.hpp>
 #include <iterator>
-#include <map>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
-#include <tuple>
 #include <vector>
 
+#include "gaitmon/lcm_publisher.hpp"
 #include "lcm/bus_support.hpp"
 #include "live_support.hpp"
 #include "monitor_support.hpp"
@@ -189,6 +187,32 @@ TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
 }
 
 // A URL LCM cannot open and a speed too slow for the pacer are command-line errors (exit 2).
+// A bus that refuses every message (an LCM log opened for reading): the replay runs to its
+// end, logs the loss and counts it in its closing line.
+TEST(ReplayCommand, MessagesTheBusRefusesAreLoggedAndCounted) {
+  const fs::path dir = test::scratch_dir("replay-refused");
+  const fs::path session = test::cut_session(test::demo_session(), dir / "demo5.csv", 5.0);
+  const fs::path log = dir / "one.lcmlog";
+  {
+    LcmSettings settings;
+    settings.url = "file://" + log.string() + "?mode=w";
+    LcmPublisher(settings).publish(StatusReport{});  // LCM reads only a log that holds an event
+  }
+  std::string output;
+  ASSERT_EQ(test::run_command(test::gaitmon_binary().string() + " --log-level warn replay " +
+                                  session.string() + " --speed max --lcm-url 'file://" +
+                                  log.string() + "?mode=r'",
+                              &output),
+            0)
+      << output;
+  EXPECT_NE(output.find("LCM: a message on GAITMON_"), std::string::npos) << output;
+  const std::size_t frames = test::session_frames(session).size();
+  const auto at = output.find(" messages lost (publishing failed)");
+  ASSERT_NE(at, std::string::npos) << output;
+  const std::size_t lost = std::stoul(output.substr(output.rfind(' ', at - 1) + 1));
+  EXPECT_GE(lost, frames) << "every frame report at least: " << output;
+}
+
 TEST(ReplayCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
   struct Case {
     std::string args;

@@ -66,6 +66,10 @@ TEST(SpyCommand, SurvivesAMalformedMessageAndAStringThatIsNotUtf8) {
     ASSERT_EQ(message.encode(raw.data(), 0, static_cast<int>(raw.size())),
               static_cast<int>(raw.size()));
     for (std::size_t i = raw.size() - 4; i < raw.size(); ++i) raw[i] = 0xFF;
+    // First, as the log holds back a second failure within a second: bytes that are no message
+    // at all, which the decoder refuses without throwing.
+    const char junk[] = "junk";
+    bus->publish(settings.channels.status, junk, sizeof junk);
     bus->publish(settings.channels.raw, raw.data(), static_cast<unsigned>(raw.size()));
     StatusReport status = test::sample_status();
     status.connection = "bad \xff byte";
@@ -79,6 +83,14 @@ TEST(SpyCommand, SurvivesAMalformedMessageAndAStringThatIsNotUtf8) {
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find("\"connection\":\"bad \xEF\xBF\xBD byte\""), std::string::npos) << out;
   EXPECT_NE(out.find("\"channel\":\"GAITMON_FIT\""), std::string::npos) << out;
+  // The skipped messages are logged, and counted when the spy ends.
+  EXPECT_NE(out.find("LCM: a malformed message on GAITMON_STATUS skipped: another type, cut short "
+                     "or an impossible value; 1 so far"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("gaitmon spy: 2 messages printed, 2 malformed ones skipped"),
+            std::string::npos)
+      << out;
 }
 
 }  // namespace

@@ -183,13 +183,16 @@ TEST(SerialSource, ReconnectsWhenThePtyComesBackUnderTheLink) {
   harness.stop();
 
   const auto states = harness.states();
-  ASSERT_GE(states.size(), 5U);
+  ASSERT_GE(states.size(), 6U);
   EXPECT_EQ(states[0].first, LinkState::Connecting);
   EXPECT_EQ(states[1].first, LinkState::Connected);
   EXPECT_EQ(states[2].first, LinkState::Disconnected);
   EXPECT_NE(states[2].second.find(link.string()), std::string::npos) << states[2].second;
   EXPECT_EQ(states[3].first, LinkState::Connecting);
-  EXPECT_EQ(states[4].first, LinkState::Connected);
+  // The failed reopen attempts, once.
+  EXPECT_EQ(states[4],
+            std::pair(LinkState::Connecting, link.string() + ": No such file or directory"));
+  EXPECT_EQ(states[5].first, LinkState::Connected);
   EXPECT_EQ(harness.counters().lost_frames_total(), 0U);
   EXPECT_EQ(harness.counters().frames, 100U);
 }
@@ -200,8 +203,11 @@ TEST(SerialSource, WaitsForAMissingDeviceAndStopsCleanly) {
   ASSERT_TRUE(harness.wait_states(1));
   std::this_thread::sleep_for(400ms);  // attempts after 50, 150 and 350 ms
   auto states = harness.states();
-  ASSERT_EQ(states.size(), 1U);  // failed attempts are not reported again and again
+  // The first failed attempt says why; the same failure is not reported again and again.
+  ASSERT_EQ(states.size(), 2U);
   EXPECT_EQ(states[0].first, LinkState::Connecting);
+  EXPECT_EQ(states[1],
+            std::pair(LinkState::Connecting, link.string() + ": No such file or directory"));
 
   PseudoTerminal pty;  // the device appears late
   point_link(link, pty.path());
@@ -213,9 +219,20 @@ TEST(SerialSource, WaitsForAMissingDeviceAndStopsCleanly) {
   // A stop waits for no timer and no read: seconds would mean it hung on one.
   EXPECT_LT(std::chrono::steady_clock::now() - before, 5s);
   states = harness.states();
-  ASSERT_EQ(states.size(), 3U);
-  EXPECT_EQ(states[1].first, LinkState::Connected);
-  EXPECT_EQ(states[2].first, LinkState::Disconnected);
+  ASSERT_EQ(states.size(), 4U);
+  EXPECT_EQ(states[2].first, LinkState::Connected);
+  EXPECT_EQ(states[3].first, LinkState::Disconnected);
+}
+
+// A path that is no serial device: the error is in the detail, where `run` and `record` log it.
+TEST(SerialSource, ADeviceThatCannotBeConfiguredSaysWhy) {
+  const fs::path file = test::write_text(test::scratch_dir("serial-not-a-tty") / "plain", "");
+  Harness harness(settings_for(file));
+  ASSERT_TRUE(harness.wait_states(2));
+  const auto states = harness.states();
+  EXPECT_EQ(states[1].first, LinkState::Connecting);
+  EXPECT_EQ(states[1].second.rfind(file.string() + ": ", 0), 0U) << states[1].second;
+  EXPECT_GT(states[1].second.size(), file.string().size() + 2) << "no error text";
 }
 
 // A device that opens but hangs up before sending a byte: each time the driver connects, the

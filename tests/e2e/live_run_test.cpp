@@ -6,16 +6,12 @@
 #include <signal.h>
 
 #include <chrono>
-#include <cmath>
-#include <fstream>
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/step_t.hpp>
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include "lcm/bus_support.hpp"

@@ -16,7 +16,6 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
-#include <thread>
 
 #include "gaitmon/lcm_publisher.hpp"
 #include "lcm/bus_support.hpp"

@@ -4,6 +4,8 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
@@ -13,7 +15,9 @@
 #include <gaitmon/step_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
+#include <memory>
 #include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -275,8 +279,9 @@ TEST(LcmPublisher, RefusesABadUrlAtConstruction) {
   }
 }
 
-// A file:// bus opened for reading refuses every publish: the publisher counts and carries on.
-TEST(LcmPublisher, CountsFailedPublishesWithoutThrowing) {
+// A file:// bus opened for reading refuses every publish: the publisher counts, logs (at most
+// once a second) and carries on.
+TEST(LcmPublisher, CountsAndLogsFailedPublishesWithoutThrowing) {
   const auto log = test::scratch_dir("lcm-failed") / "one.log";
   LcmSettings settings;
   settings.url = "file://" + log.string() + "?mode=w";
@@ -287,10 +292,20 @@ TEST(LcmPublisher, CountsFailedPublishesWithoutThrowing) {
   }
   settings.url = "file://" + log.string() + "?mode=r";
   LcmPublisher publisher(settings);
+  std::ostringstream text;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
   EXPECT_NO_THROW(publisher.publish(test::sample_status()));
   EXPECT_NO_THROW(publisher.publish(test::sample_fit()));
+  spdlog::default_logger()->sinks().pop_back();
   EXPECT_EQ(publisher.failed_publishes(), 2U);
   EXPECT_EQ(publisher.published(), 0U);
+  const std::string logged = text.str();
+  EXPECT_NE(logged.find("LCM: a message on GAITMON_STATUS was lost: LCM did not send it; 1 lost so "
+                        "far"),
+            std::string::npos)
+      << logged;
+  EXPECT_EQ(logged.find("GAITMON_FIT"), std::string::npos) << "not throttled: " << logged;
 }
 
 // Several threads publish at once (the detector, the fit workers, the status timer): every

@@ -4,11 +4,15 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
 #include <gaitmon/step_t.hpp>
 #include <lcm/lcm-cpp.hpp>
+#include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -222,9 +226,18 @@ TEST_F(LcmSubscriberMemq, ForeignAndImpossibleMessagesAreCountedNotDelivered) {
   frame.foot = 0;
   frame.regions[3].ellipse_case = 6;
   bus->publish("GAITMON_FRAME", &frame);
+  std::ostringstream log;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
   drain(subscriber);
+  spdlog::default_logger()->sinks().pop_back();
   EXPECT_TRUE(deliveries.empty());
   EXPECT_EQ(subscriber.decode_errors(), 4U);
+  // Logged too, the first of them (the others come within the same second).
+  EXPECT_NE(log.str().find("LCM: a malformed message on GAITMON_FIT skipped: another type, cut "
+                           "short or an impossible value; 1 so far (0 similar suppressed)"),
+            std::string::npos)
+      << log.str();
 }
 
 // The generated decoder throws for a negative array length; the exception must not cross LCM's
