@@ -233,11 +233,17 @@ TEST(FakeInsole, APtyClosedAndReopenedIsReconnectedThroughTheLink) {
   const std::vector<LinkState> want{LinkState::Connecting,   LinkState::Connected,
                                     LinkState::Disconnected, LinkState::Connecting,
                                     LinkState::Connected,    LinkState::Disconnected};
-  // After the last Disconnected the driver may already be trying again before stop().
-  ASSERT_GE(receiver.states().size(), want.size());
-  EXPECT_EQ(std::vector<LinkState>(receiver.states().begin(),
-                                   receiver.states().begin() + static_cast<long>(want.size())),
-            want);
+  // The transitions: a failed open while the link is gone repeats Connecting with its reason
+  // (serial_source.hpp). After the last Disconnected the driver may already be trying again
+  // before stop().
+  std::vector<LinkState> changes;
+  for (LinkState state : receiver.states()) {
+    if (changes.empty() || changes.back() != state) changes.push_back(state);
+  }
+  ASSERT_GE(changes.size(), want.size());
+  EXPECT_EQ(
+      std::vector<LinkState>(changes.begin(), changes.begin() + static_cast<long>(want.size())),
+      want);
   const std::vector<Frame> file = test::file_frames(test::demo_session());
   const DecoderCounters c = receiver.counters();
   // Bytes still in the old pty at the close are lost, as with an unplug; the sequence
