@@ -2,6 +2,7 @@
 #include "replay/pseudo_terminal.hpp"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <sys/ioctl.h>
 #include <termios.h>
 #include <unistd.h>
@@ -22,7 +23,9 @@ namespace {
 }  // namespace
 
 PseudoTerminal::PseudoTerminal() {
-  master_ = posix_openpt(O_RDWR | O_NOCTTY);
+  // Non-blocking, so that a writer with no reader on the other side still sees a stop request
+  // (write_all waits for room in short polls).
+  master_ = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK);
   if (master_ < 0) fail_errno("posix_openpt");
   try {
     if (grantpt(master_) != 0) fail_errno("grantpt");
@@ -70,7 +73,12 @@ bool write_all(int fd, std::span<const std::uint8_t> bytes, const std::atomic<bo
   while (!bytes.empty()) {
     const ssize_t n = ::write(fd, bytes.data(), bytes.size());
     if (n < 0) {
-      if (errno != EINTR) fail_errno("write");
+      if (errno == EAGAIN || errno == EWOULDBLOCK) {
+        pollfd room{fd, POLLOUT, 0};
+        if (::poll(&room, 1, 100) < 0 && errno != EINTR) fail_errno("poll");
+      } else if (errno != EINTR) {
+        fail_errno("write");
+      }
       if (stop != nullptr && stop->load()) return false;
       continue;
     }

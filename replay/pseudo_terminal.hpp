@@ -40,8 +40,9 @@ class PseudoTerminal {
   std::string path_;
 };
 
-/// Writes every byte to `fd`, through partial writes. An interrupted write is retried, unless
-/// *stop is set: then it returns false. Throws std::system_error on any other failure.
+/// Writes every byte to `fd`, through partial writes. An interrupted write, or one that finds no
+/// room on a non-blocking fd (a pty nobody reads), is retried after at most 100 ms, unless *stop
+/// is set: then it returns false. Throws std::system_error on any other failure.
 bool write_all(int fd, std::span<const std::uint8_t> bytes,
                const std::atomic<bool>* stop = nullptr);
 

@@ -118,6 +118,33 @@ TEST(PseudoTerminal, WritesMoreThanThePtyHoldsThroughPartialWrites) {
 
 extern "C" void interrupt_only(int) {}
 
+// fake-insole takes its signals on a watcher thread (StopOnSignal), so no signal interrupts the
+// writer: with nobody reading, the pty's own non-blocking master lets it see the stop request
+// (within 100 ms) without one.
+TEST(PseudoTerminal, AWriteToAPtyNobodyReadsGivesUpOnStopWithoutASignal) {
+  PseudoTerminal pty;
+  std::atomic<bool> stop{false};
+  std::atomic<int> result{-1};
+  const std::vector<std::uint8_t> bytes(1 << 20, 1);  // far more than a pty holds
+  std::thread writer([&] { result = write_all(pty.fd(), bytes, &stop) ? 1 : 0; });
+  std::this_thread::sleep_for(100ms);
+  EXPECT_EQ(result.load(), -1) << "nobody reads, so the write waits";
+  stop = true;
+  const auto give_up = std::chrono::steady_clock::now() + 10s;
+  while (result.load() == -1 && std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(10ms);
+  }
+  const bool returned = result.load() != -1;
+  if (!returned) {  // unblock the writer so that the test can end
+    const int reader = open_reader(pty);
+    read_exactly(reader, bytes.size());
+    ::close(reader);
+  }
+  writer.join();
+  EXPECT_TRUE(returned);
+  EXPECT_EQ(result.load(), 0);
+}
+
 // fake-insole's stop signals have no SA_RESTART, so a write blocked on a full pty returns EINTR;
 // with the stop flag set, write_all gives up instead of writing on. A signal that arrives once
 // some bytes went through ends that write short instead, and the next write blocks again, so
