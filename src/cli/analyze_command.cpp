@@ -544,7 +544,9 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
       "Fit the ellipsoid tissue model per step and region (seed 5.2) and once per region over "
       "the session: writes DIR/steps.csv, DIR/regions.csv, DIR/session.json and, with "
       "--report, DIR/report.html");
-  sub->add_option("session", args->session, "Session CSV v1")->required()->check(CLI::ExistingFile);
+  sub->add_option("session", args->session, "Session CSV v1")
+      ->required()
+      ->check(session_file_read_twice());
   sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
   sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
   sub->add_option("--model", args->model,

@@ -6,6 +6,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <system_error>
@@ -36,6 +37,21 @@ CLI::Validator number_in(double min, double max, bool open_min) {
         return {};
       },
       "NUMBER in " + range);
+}
+
+CLI::Validator session_file_read_twice() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        std::error_code ec;
+        const auto status = std::filesystem::status(text, ec);
+        if (ec || !std::filesystem::exists(status)) return "File does not exist: " + text;
+        if (!std::filesystem::is_regular_file(status)) {
+          return text + " is not a regular file; this command reads a session twice, which a " +
+                 "pipe cannot give (save it to a file first)";
+        }
+        return {};
+      },
+      "FILE");
 }
 
 CLI::Validator whole_number_in(std::uint64_t min, std::uint64_t max) {

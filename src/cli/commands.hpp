@@ -46,6 +46,11 @@ CLI::Validator number_in(double min, double max, bool open_min = false);
 /// number too large for the type, and wraps or clamps them.
 CLI::Validator whole_number_in(std::uint64_t min, std::uint64_t max);
 
+/// The check of a session a command reads twice (its header first, then the whole file): an
+/// existing regular file. A pipe (`/dev/stdin`, `<(...)`) would lose what the first read took
+/// and fail with a misleading "missing version".
+CLI::Validator session_file_read_twice();
+
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);

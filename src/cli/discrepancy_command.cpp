@@ -278,7 +278,9 @@ void add_discrepancy_command(CLI::App& app, const GlobalOptions& global) {
       "Find where the fitted tissue model and the session disagree, name the missing effect "
       "and show the held-out gap shrink: writes DIR/discrepancy.json and, with --report, "
       "DIR/discrepancy.html");
-  sub->add_option("session", args->session, "Session CSV v1")->required()->check(CLI::ExistingFile);
+  sub->add_option("session", args->session, "Session CSV v1")
+      ->required()
+      ->check(session_file_read_twice());
   sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
   sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
   sub->add_option("--folds", args->settings.folds, "k of the k-fold over steps")

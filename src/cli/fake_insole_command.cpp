@@ -11,6 +11,7 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -22,6 +23,7 @@
 #include "drivers/wire_format.hpp"
 #include "gaitmon/json.hpp"
 #include "live.hpp"
+#include "output_file.hpp"
 #include "replay/fault_injector.hpp"
 #include "replay/pacer.hpp"
 #include "replay/pseudo_terminal.hpp"
@@ -171,11 +173,12 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_flag("--hold", args->hold,
                 "Keep the pty open after the session until SIGINT or SIGTERM");
   sub->add_option("--seed", args->faults.seed, "Seed of the fault injection")
+      ->check(whole_number_in(0, std::numeric_limits<std::uint64_t>::max()))
       ->capture_default_str();
   sub->add_option("--garbage-rate", args->faults.garbage_rate,
                   "Probability of a garbage burst before a frame (bytes never equal the first "
                   "sync byte)")
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--garbage-max-bytes", args->faults.garbage_max_bytes,
                   "Longest garbage burst, bytes")
@@ -183,12 +186,12 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
       ->capture_default_str();
   sub->add_option("--crc-rate", args->faults.crc_rate,
                   "Probability that a frame has one bit flipped after its header")
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--truncate-rate", args->faults.truncate_rate,
                   "Probability that a frame loses 1 to N+C bytes from its end (N its sensors, C "
                   "the CRC's bytes)")
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--reopen-after", args->reopen_after_s,
                   "Close the pty this many seconds after the start and open a new one (needs "
@@ -200,7 +203,26 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--summary", args->summary,
                   "Write what was sent and injected as JSON (a fault summary also goes to "
                   "stderr)");
-  sub->callback([&global, args] { run_fake_insole(global, *args); });
+  sub->callback([&global, args] {
+    // Checked before the playback, which can take as long as the session.
+    if (!args->link.empty()) {
+      const auto status = std::filesystem::symlink_status(args->link);
+      if (std::filesystem::exists(status) && !std::filesystem::is_symlink(status)) {
+        throw CLI::ValidationError("--link", args->link.string() +
+                                                 " exists and is not a symlink, which the link "
+                                                 "would replace");
+      }
+    }
+    if (!args->summary.empty()) {
+      check_output_path(args->summary, "--summary");
+      const fs::path folder = fs::absolute(args->summary).parent_path();
+      if (!fs::is_directory(folder)) {
+        throw CLI::ValidationError("--summary",
+                                   "the folder " + folder.string() + " does not exist");
+      }
+    }
+    run_fake_insole(global, *args);
+  });
 }
 
 }  // namespace gaitmon::cli

@@ -183,7 +183,9 @@ void add_segment_command(CLI::App& app, const GlobalOptions& global) {
       "Cut a session into steps (seed 3.3) and measure every region's force, active-sensor "
       "area and contact ellipse per frame (seed 3.4, ch. 4): writes DIR/steps.csv and "
       "DIR/frames.csv");
-  sub->add_option("session", args->session, "Session CSV v1")->required()->check(CLI::ExistingFile);
+  sub->add_option("session", args->session, "Session CSV v1")
+      ->required()
+      ->check(session_file_read_twice());
   sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
   sub->callback([&global, args] { run_segment(global, *args); });
 }

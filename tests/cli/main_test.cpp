@@ -249,6 +249,17 @@ TEST(Cli, ANumberOutsideItsRangeNanOrANegativeSeedIsAUsageError) {
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "s.csv"));
   EXPECT_FALSE(std::filesystem::exists(dir / "d"));
+  // Read twice (the header, then the frames), a pipe would lose what the first read took.
+  std::string piped;
+  EXPECT_EQ(test::run_command("cat " + demo + " | " + test::gaitmon_binary().string() +
+                                  " segment /dev/stdin --out " + (dir / "g").string(),
+                              &piped),
+            2)
+      << piped;
+  EXPECT_NE(piped.find("session: /dev/stdin is not a regular file; this command reads a session "
+                       "twice"),
+            std::string::npos)
+      << piped;
   int status = -1;
   const std::string out = run(simulate + "--stride 3 --seed 18446744073709551615", &status);
   EXPECT_EQ(status, 0) << out;

@@ -147,6 +147,14 @@ TEST(FakeInsole, BadOptionsAreExitCodeTwoAndSayWhy) {
            Case{"--pty --reopen-after nan", "--reopen-after: 'nan' is not in [0, 86400]"},
            Case{"--speed 1e-12",
                 "--speed: must be a number >= 0.001 (x real time) or max, got 1e-12"},
+           Case{"--seed -1", "--seed: '-1' is not a whole number"},
+           Case{"--garbage-rate nan", "--garbage-rate: 'nan' is not in [0, 1]"},
+           Case{"--crc-rate 1.5", "--crc-rate: '1.5' is not in [0, 1]"},
+           // Refused before the playback, not after it.
+           Case{"--summary /proc/no-such/s.json",
+                "--summary: the folder /proc/no-such does not exist"},
+           Case{"--pty --link " + test::demo_session().string(),
+                "--link: " + test::demo_session().string() + " exists and is not a symlink"},
        }) {
     SCOPED_TRACE(c.args);
     std::string out;
