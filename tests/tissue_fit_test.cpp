@@ -805,8 +805,8 @@ TEST(TissueFit, OnACoverageRasterTheFootprintOverReadsAndTheStiffnessExponentIsB
 }
 
 // The footprint of averaging cells (footprint_area_cell_mean_mm2, AreaSource::FootprintMean) on
-// the same sessions as the test above: on the coverage raster it takes out most of the bias in n
-// and kbar; on the cell-centre raster, whose cells do not average, it is the biased one.
+// the same sessions as the test above: on the coverage raster it takes out the bias in n and
+// kbar; on the cell-centre raster, whose cells do not average, it is the biased one.
 TEST(TissueFit, OnACoverageRasterTheCellMeanFootprintRecoversTheStiffnessExponent) {
   struct Ratios {
     double n = 0.0, kbar = 0.0, cbar = 0.0, nrmse = 0.0;
@@ -837,12 +837,18 @@ TEST(TissueFit, OnACoverageRasterTheCellMeanFootprintRecoversTheStiffnessExponen
           std::string(area_source_name(area)).c_str(), n.size(), r.n, r.kbar, r.cbar, r.nrmse);
     }
   }
+  // Measured: n 0.99, kbar 0.98, cbar 1.05, NRMSE 2.2 % against 2.14, 1.91, 1.24 and 5.5 % with
+  // the footprint; on the centre raster n 0.07 against 0.95.
   const Ratios& biased = measured[{Rasterisation::Coverage, AreaSource::Footprint}];
   const Ratios& mean = measured[{Rasterisation::Coverage, AreaSource::FootprintMean}];
   EXPECT_GT(biased.n, 1.5);
-  EXPECT_NEAR(mean.n, 1.0, MEAN_N_BOUND);
-  EXPECT_LT(std::abs(std::log(mean.kbar)), std::abs(std::log(biased.kbar)));
-  EXPECT_LT(mean.nrmse, NRMSE_BOUND);
+  EXPECT_NEAR(mean.n, 1.0, 0.15);
+  EXPECT_NEAR(mean.kbar, 1.0, 0.15);
+  EXPECT_NEAR(mean.cbar, 1.0, 0.25);
+  EXPECT_LT(mean.nrmse, 3.0);
+  EXPECT_LT(mean.nrmse, biased.nrmse);
+  const Ratios& on_centres = measured[{Rasterisation::CellCentre, AreaSource::FootprintMean}];
+  EXPECT_LT(on_centres.n, 0.5);
 }
 
 TEST(TissueFit, NoContactAndTooFewFrames) {
