@@ -375,7 +375,7 @@ TEST(Footprint, OnAveragingCellsTheCellMeanFitRecoversTheArea) {
         "four-term %.3f, four-term with the rim %.3f of it\n",
         truth, c.cx, c.cy, loaded.size(), *mean / truth, centre ? *centre / truth : std::nan(""),
         rim ? *rim / truth : std::nan(""));
-    EXPECT_NEAR(*mean / truth, 1.0, 0.03) << truth;
+    EXPECT_NEAR(*mean / truth, 1.0, 0.01) << truth;
     const double error = std::abs(*mean / truth - 1.0);
     EXPECT_GT(std::abs(*centre / truth - 1.0), error) << truth;
     EXPECT_GT(std::abs(*rim / truth - 1.0), error) << truth;
