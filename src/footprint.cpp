@@ -149,6 +149,9 @@ void require_aspect(double aspect) {
 // (tests/footprint_test.cpp).
 constexpr int kColumns = 8;
 
+/// The clipped paraboloid p = pmax max(0, 1 - u^2 - v^2), u = (x - x0) / rA, v = (y - y0) / rB,
+/// rB = rA / aspect, averaged over each region cell, against the cells' readings: the residuals
+/// and their Jacobian in pmax, x0, y0, rA for ceres::TinySolver.
 class CellMeanCap {
  public:
   using Scalar = double;
