@@ -23,12 +23,21 @@ double median_of(std::vector<double> values) {
 }  // namespace
 
 std::string_view area_source_name(AreaSource source) {
-  return source == AreaSource::Ellipse ? "ellipse" : "footprint";
+  switch (source) {
+    case AreaSource::Ellipse:
+      return "ellipse";
+    case AreaSource::Footprint:
+      return "footprint";
+    case AreaSource::FootprintMean:
+      return "footprint-mean";
+  }
+  return "footprint";
 }
 
 std::optional<AreaSource> parse_area_source(std::string_view text) {
   if (text == "ellipse") return AreaSource::Ellipse;
   if (text == "footprint") return AreaSource::Footprint;
+  if (text == "footprint-mean") return AreaSource::FootprintMean;
   return std::nullopt;
 }
 
@@ -40,13 +49,15 @@ std::pair<std::vector<double>, AreaSource> fit_areas_mm2(const StanceSeries& sta
   for (std::size_t f = 0; f < stance.size(); ++f) {
     const RegionSample& s = stance.at(f, region);
     ellipse[f] = s.ellipse.area_mm2;
-    if (ellipse[f] > 0.0 && s.footprint_area_mm2) {
-      footprint[f] = *s.footprint_area_mm2;
+    const auto& area =
+        source == AreaSource::FootprintMean ? s.footprint_cell_mean_area_mm2 : s.footprint_area_mm2;
+    if (ellipse[f] > 0.0 && area) {
+      footprint[f] = *area;
       ++determined;
     }
   }
-  if (source == AreaSource::Footprint && determined >= kMinFootprintFrames) {
-    return {std::move(footprint), AreaSource::Footprint};
+  if (source != AreaSource::Ellipse && determined >= kMinFootprintFrames) {
+    return {std::move(footprint), source};
   }
   return {std::move(ellipse), AreaSource::Ellipse};
 }
@@ -81,7 +92,10 @@ EllipsoidParams declared_params(const SeedTissueStats& seed, double aspect) {
 
 StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Config& config,
                           const AnalysisSettings& settings, ContactEllipseCache* cache) {
-  const StanceSeries stance = measure_stance(step, layout, config.calibration, cache);
+  const StanceSeries stance =
+      measure_stance(step, layout, config.calibration, cache,
+                     settings.area == AreaSource::FootprintMean ? CellMeanFootprint::Fit
+                                                                : CellMeanFootprint::Skip);
   const std::size_t frames = stance.size();
   StepAnalysis out;
   out.foot = step.foot;
@@ -141,7 +155,7 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
     const RegionAnalysis& ra = steps[si].at(region);
     if (ra.frames == 0) continue;
     ++r.steps_with_contact;
-    if (settings.area == AreaSource::Footprint && ra.area == AreaSource::Ellipse) {
+    if (settings.area != AreaSource::Ellipse && ra.area == AreaSource::Ellipse) {
       ++r.steps_on_ellipse;
     }
     stances.push_back(ra.series);

@@ -729,8 +729,7 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
   bool footprints = false;
   for (const DiscrepancyStep& ds : input.steps) {
     for (const RegionAnalysis& ra : ds.analysis.regions) {
-      footprints =
-          footprints || (ra.fit.status == FitStatus::Ok && ra.area == AreaSource::Footprint);
+      footprints = footprints || (ra.fit.status == FitStatus::Ok && ra.area != AreaSource::Ellipse);
     }
   }
   for (std::size_t o = 0; o < order.size(); ++o) {

@@ -1,8 +1,11 @@
 // The paraboloid footprint fitted to a region's cell loads (see footprint.hpp for the derivation).
 #include "gaitmon/footprint.hpp"
 
+#include <ceres/tiny_solver.h>
+
 #include <Eigen/Core>
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -141,6 +144,129 @@ void require_aspect(double aspect) {
   }
 }
 
+// Columns of the midpoint rule across a cell the rim crosses; along each column the mean is
+// exact. 8 puts the rule's error in the cell's mean well under the noise of half a bit
+// (tests/footprint_test.cpp).
+constexpr int kColumns = 8;
+
+/// The clipped paraboloid p = pmax max(0, 1 - u^2 - v^2), u = (x - x0) / rA, v = (y - y0) / rB,
+/// rB = rA / aspect, averaged over each region cell, against the cells' readings: the residuals
+/// and their Jacobian in pmax, x0, y0, rA for ceres::TinySolver.
+class CellMeanCap {
+ public:
+  using Scalar = double;
+  enum { NUM_RESIDUALS = Eigen::Dynamic, NUM_PARAMETERS = 4 };
+
+  CellMeanCap(std::span<const LoadedCell> cells, CellSize size, double aspect)
+      : cells_(cells), size_(size), aspect_(aspect) {}
+
+  int NumResiduals() const { return static_cast<int>(cells_.size()); }
+
+  bool operator()(const double* parameters, double* residuals, double* jacobian) const {
+    const double pmax = parameters[0];
+    const double x0 = parameters[1];
+    const double y0 = parameters[2];
+    const double rA = parameters[3];
+    const double rB = rA / aspect_;
+    if (!(std::abs(rA) > 0.0) || !std::isfinite(rA)) return false;
+    const std::size_t n = cells_.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Mean m = cell_mean(cells_[i], x0, y0, rA, rB);
+      residuals[i] = pmax * m.value - cells_[i].load;
+      if (jacobian != nullptr) {
+        jacobian[i] = m.value;
+        jacobian[n + i] = pmax * m.d_x0;
+        jacobian[2 * n + i] = pmax * m.d_y0;
+        jacobian[3 * n + i] = pmax * m.d_rA;
+      }
+    }
+    return true;
+  }
+
+ private:
+  /// The cell's mean of max(0, 1 - u^2 - v^2) and its derivatives in x0, y0, rA.
+  struct Mean {
+    double value = 0.0, d_x0 = 0.0, d_y0 = 0.0, d_rA = 0.0;
+  };
+
+  Mean cell_mean(const LoadedCell& c, double x0, double y0, double rA, double rB) const {
+    const double half_u = 0.5 * size_.width_mm / std::abs(rA);
+    const double half_v = 0.5 * size_.height_mm / std::abs(rB);
+    const double uc = (c.x_mm - x0) / rA;
+    const double vc = (c.y_mm - y0) / rB;
+    // In (u, v) the cell is a rectangle and the contact the unit disc.
+    const double near_u = std::max(0.0, std::abs(uc) - half_u);
+    const double near_v = std::max(0.0, std::abs(vc) - half_v);
+    if (near_u * near_u + near_v * near_v >= 1.0) return {};
+    const double far_u = std::abs(uc) + half_u;
+    const double far_v = std::abs(vc) + half_v;
+    if (far_u * far_u + far_v * far_v <= 1.0) {
+      // Wholly covered: a quadratic's mean over a rectangle is its value at the centre plus its
+      // second derivatives times the side squared over 24, which the rule could only approach.
+      const double s = uc * uc + vc * vc + (half_u * half_u + half_v * half_v) / 3.0;
+      return {1.0 - s, 2.0 * uc / rA, 2.0 * vc / rB, 2.0 * s / rA};
+    }
+    // Along a column at u the cap is 1 - u^2 - v^2 between v = +-sqrt(1 - u^2), and its integral
+    // over the cell's span [va, vb] and those of its derivatives are closed forms; the rim adds
+    // nothing to the derivatives, as the cap is zero there.
+    Mean m;
+    const double v_lo = vc - half_v;
+    const double v_hi = vc + half_v;
+    for (int a = 0; a < kColumns; ++a) {
+      const double u = uc + 2.0 * half_u * ((a + 0.5) / kColumns - 0.5);
+      const double reach2 = 1.0 - u * u;
+      if (reach2 <= 0.0) continue;
+      const double reach = std::sqrt(reach2);
+      const double va = std::max(v_lo, -reach);
+      const double vb = std::min(v_hi, reach);
+      if (vb <= va) continue;
+      const double span = vb - va;
+      const double cubes = (vb * vb * vb - va * va * va) / 3.0;
+      m.value += reach2 * span - cubes;
+      m.d_x0 += 2.0 * u / rA * span;
+      m.d_y0 += (vb * vb - va * va) / rB;
+      m.d_rA += 2.0 / rA * (u * u * span + cubes);
+    }
+    // Each column's integral is in v; the cell's mean divides by its height in v, 2 half_v.
+    const double per_column = 1.0 / (kColumns * 2.0 * half_v);
+    m.value *= per_column;
+    m.d_x0 *= per_column;
+    m.d_y0 *= per_column;
+    m.d_rA *= per_column;
+    return m;
+  }
+
+  std::span<const LoadedCell> cells_;
+  CellSize size_;
+  double aspect_;
+};
+
+/// pmax, x0, y0, rA to start the cell-mean fit from: the four-term fit's cap over the cells at
+/// or above the threshold, or where that is no cap, their load-weighted centroid and an ellipse
+/// of their area.
+Eigen::Vector4d cell_mean_start(std::span<const LoadedCell> active, CellSize size, double aspect) {
+  if (const auto fit = cap_at_aspect(active, size, aspect)) {
+    const Quadratic& q = fit->cap;
+    const double peak = q.q3 < 0.0 && q.q4 < 0.0
+                            ? q.q0 - q.q1 * q.q1 / (4.0 * q.q3) - q.q2 * q.q2 / (4.0 * q.q4)
+                            : 0.0;
+    if (peak > 0.0) {
+      return {peak, fit->mean_x - q.q1 / (2.0 * q.q3) * size.width_mm,
+              fit->mean_y - q.q2 / (2.0 * q.q4) * size.height_mm,
+              std::sqrt(-peak / q.q3) * size.width_mm};
+    }
+  }
+  double sum = 0.0, x = 0.0, y = 0.0, peak = 0.0;
+  for (const LoadedCell& c : active) {
+    sum += c.load;
+    x += c.load * c.x_mm;
+    y += c.load * c.y_mm;
+    peak = std::max(peak, c.load);
+  }
+  const double area = static_cast<double>(active.size()) * size.width_mm * size.height_mm;
+  return {peak, x / sum, y / sum, std::sqrt(area * aspect / std::numbers::pi)};
+}
+
 }  // namespace
 
 std::optional<Footprint> free_footprint(std::span<const LoadedCell> cells, CellSize size,
@@ -193,6 +319,36 @@ std::optional<double> footprint_area_unthresholded_mm2(std::span<const LoadedCel
       covered[i] = inside;
     }
     if (settled) break;
+  }
+  return area;
+}
+
+std::optional<double> footprint_area_cell_mean_mm2(std::span<const LoadedCell> region_cells,
+                                                   CellSize size, double aspect,
+                                                   double threshold_bits) {
+  require_cell_size(size);
+  require_aspect(aspect);
+  if (!centroid(region_cells)) return std::nullopt;
+  std::vector<LoadedCell> active;
+  for (const LoadedCell& c : region_cells) {
+    if (c.load >= threshold_bits && c.load > 0.0) active.push_back(c);
+  }
+  if (active.size() < 4) return std::nullopt;
+  Eigen::Vector4d x = cell_mean_start(active, size, aspect);
+  const CellMeanCap cap(region_cells, size, aspect);
+  ceres::TinySolver<CellMeanCap> solver;
+  solver.options.max_num_iterations = 100;
+  // Millimetre-scale geometry: these stop well below a micrometre of change in the centre and rA.
+  solver.options.gradient_tolerance = 1e-10;
+  solver.options.parameter_tolerance = 1e-9;
+  solver.options.function_tolerance = 1e-10;
+  const auto& summary = solver.Solve(cap, &x);
+  if (summary.status == ceres::TinySolver<CellMeanCap>::HIT_MAX_ITERATIONS) return std::nullopt;
+  if (!x.allFinite() || !(x[0] > 0.0)) return std::nullopt;
+  const double area = std::numbers::pi * x[3] * x[3] / aspect;
+  const double sensor_area = static_cast<double>(active.size()) * size.width_mm * size.height_mm;
+  if (!(area >= kMinAreaOfSensorArea * sensor_area && area <= kMaxAreaOfSensorArea * sensor_area)) {
+    return std::nullopt;
   }
   return area;
 }

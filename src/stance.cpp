@@ -71,9 +71,10 @@ std::array<RegionSample, kRegionCount> measure_frame(
 namespace {
 
 /// Fits every frame's footprint of each region again: at the aspect the stance's free fits share
-/// (the region's box where none has one), and then over the cells under the threshold too.
+/// (the region's box where none has one), and then over the cells under the threshold too; and,
+/// where asked, the footprint of averaging cells at that aspect.
 void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries& series,
-                      FrameScratch& scratch) {
+                      FrameScratch& scratch, CellMeanFootprint cell_mean) {
   const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
   std::array<double, kRegionCount> aspect{};
   std::vector<Footprint> fits;
@@ -104,6 +105,10 @@ void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries
             {s.grid_x_mm, s.grid_y_mm, static_cast<double>(raw[i]) - step.sensor_zero_bits[i]});
       }
       const double a = aspect[index_of(region)];
+      if (cell_mean == CellMeanFootprint::Fit) {
+        sample.footprint_cell_mean_area_mm2 =
+            footprint_area_cell_mean_mm2(scratch.region, cell, a, step.adaptive_threshold_bits);
+      }
       const auto thresholded =
           footprint_area_at_aspect_mm2(scratch.loaded, cell, a, scratch.unloaded);
       const auto unthresholded = thresholded
@@ -124,7 +129,8 @@ void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries
 }  // namespace
 
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
-                            const Calibration& calibration, ContactEllipseCache* cache) {
+                            const Calibration& calibration, ContactEllipseCache* cache,
+                            CellMeanFootprint cell_mean) {
   const std::size_t sensors = layout.sensor_count();
   if (step.sensor_zero_bits.size() != sensors) {
     throw std::invalid_argument("measure_stance: the step's zero has " +
@@ -152,7 +158,7 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
     series.frames.push_back(samples);
     series.total_force_n.push_back(total);
   }
-  refit_footprints(step, layout, series, scratch);
+  refit_footprints(step, layout, series, scratch, cell_mean);
   return series;
 }
 

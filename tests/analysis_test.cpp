@@ -113,6 +113,27 @@ TEST(FitAreas, OneAreaPerRegionStepNeverTheTwoMixed) {
   EXPECT_EQ(none, std::vector<double>(14, 0.0));
 }
 
+// The footprint of averaging cells takes its own frames by the same rule; the footprint's do not
+// stand in for it.
+TEST(FitAreas, TheCellMeanFootprintHasItsOwnFramesAndTheSameFallback) {
+  const std::vector<std::size_t> eight{3, 4, 5, 6, 7, 8, 9, 10, 13};
+  StanceSeries stance = heel_stance(eight);
+  const auto [fallback, fallback_used] =
+      fit_areas_mm2(stance, Region::Heel, AreaSource::FootprintMean);
+  EXPECT_EQ(fallback_used, AreaSource::Ellipse);
+  EXPECT_EQ(fallback[3], 300.0);
+  for (std::size_t f = 2; f <= 9; ++f) {
+    stance.frames[f][index_of(Region::Heel)].footprint_cell_mean_area_mm2 =
+        100.0 * static_cast<double>(f) + 3.0;
+  }
+  const auto [areas, used] = fit_areas_mm2(stance, Region::Heel, AreaSource::FootprintMean);
+  EXPECT_EQ(used, AreaSource::FootprintMean);
+  const std::vector<double> want{0, 0, 203, 303, 403, 503, 603, 703, 803, 903, 0, 0, 0, 0};
+  EXPECT_EQ(areas, want);
+  EXPECT_EQ(area_source_name(AreaSource::FootprintMean), "footprint-mean");
+  EXPECT_EQ(parse_area_source("footprint-mean"), AreaSource::FootprintMean);
+}
+
 TEST(DeclaredParams, KeepsAppendixIScaleAndCAndD0AndSplitsByAspect) {
   SeedTissueStats seed;
   seed.mean = {80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};

@@ -325,6 +325,98 @@ TEST(Footprint, WithTheRimALowPressureFootprintScattersLess) {
   }
 }
 
+/// Every cell of a cols x rows grid reading the mean over its area of p = peak max(0, 1 - rho^2),
+/// by a 200 x 200 midpoint rule, as cells that average the pressure read it.
+std::vector<LoadedCell> mean_raster(double cx, double cy, double rA, double rB, double peak,
+                                    int cols, int rows) {
+  constexpr int kFine = 200;
+  std::vector<LoadedCell> cells;
+  for (int j = 0; j < rows; ++j) {
+    for (int i = 0; i < cols; ++i) {
+      double sum = 0.0;
+      for (int a = 0; a < kFine; ++a) {
+        const double x = i * kW + kW * ((a + 0.5) / kFine - 0.5);
+        for (int b = 0; b < kFine; ++b) {
+          const double y = j * kH + kH * ((b + 0.5) / kFine - 0.5);
+          const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
+          sum += std::max(0.0, 1.0 - rho2);
+        }
+      }
+      cells.push_back({i * kW, j * kH, peak * sum / (kFine * kFine)});
+    }
+  }
+  return cells;
+}
+
+// On cells that read the mean pressure over their area, the cell-mean footprint recovers the
+// contact's area, small or large, wherever it sits against the lattice; the four-term fits that
+// take each reading as the pressure at the cell's centre do not (the bias behind the coverage
+// raster's n, README).
+TEST(Footprint, OnAveragingCellsTheCellMeanFitRecoversTheArea) {
+  const struct {
+    double cx, cy, rA, rB;
+  } caps[] = {{31.1, 52.4, 12.0, 20.0}, {28.0, 45.0, 12.0, 20.0}, {33.7, 41.3, 18.0, 30.0},
+              {30.0, 37.5, 18.0, 30.0}, {32.2, 44.0, 25.0, 41.7}, {29.4, 48.8, 22.0, 36.7}};
+  const double peak = 60.0;
+  for (const auto& c : caps) {
+    const double truth = kPi * c.rA * c.rB;
+    const double aspect = c.rA / c.rB;
+    const auto cells = mean_raster(c.cx, c.cy, c.rA, c.rB, peak, 9, 7);
+    const double threshold = 0.05 * peak;
+    std::vector<LoadedCell> loaded;
+    std::vector<CellCentre> unloaded;
+    split(cells, threshold, loaded, unloaded);
+    const auto mean = footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, aspect, threshold);
+    const auto centre = footprint_area_at_aspect_mm2(loaded, CellSize{kW, kH}, aspect);
+    const auto rim = footprint_area_unthresholded_mm2(cells, CellSize{kW, kH}, aspect, threshold);
+    ASSERT_TRUE(mean && centre && rim) << truth;
+    std::printf(
+        "contact %4.0f mm2 at (%.1f, %.1f), %2zu cells over 5 %% of the peak: cell-mean fit %.3f, "
+        "four-term %.3f, four-term with the rim %.3f of it\n",
+        truth, c.cx, c.cy, loaded.size(), *mean / truth, centre ? *centre / truth : std::nan(""),
+        rim ? *rim / truth : std::nan(""));
+    EXPECT_NEAR(*mean / truth, 1.0, 0.01) << truth;
+    const double error = std::abs(*mean / truth - 1.0);
+    EXPECT_GT(std::abs(*centre / truth - 1.0), error) << truth;
+    EXPECT_GT(std::abs(*rim / truth - 1.0), error) << truth;
+  }
+}
+
+// Through 0.5-bit noise and rounding to whole bits, the cells under the threshold included.
+TEST(Footprint, TheCellMeanFitHoldsThroughNoiseAndRounding) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.5);
+  std::vector<double> ratio;
+  for (int k = 0; k < 40; ++k) {
+    const double rA = 14.0 + 0.25 * k;
+    const double rB = rA / 0.6;
+    auto cells = mean_raster(28.0 + 0.13 * k, 42.0 + 0.29 * k, rA, rB, 40.0, 9, 7);
+    for (LoadedCell& c : cells) c.load = std::round(c.load + noise(rng));
+    const auto area = footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 0.6, 4.0);
+    ASSERT_TRUE(area.has_value()) << k;
+    ratio.push_back(*area / (kPi * rA * rB));
+  }
+  double mean = 0.0, sd = 0.0;
+  for (double r : ratio) mean += r / static_cast<double>(ratio.size());
+  for (double r : ratio) sd += (r - mean) * (r - mean) / static_cast<double>(ratio.size() - 1);
+  sd = std::sqrt(sd);
+  std::printf("cell-mean fit through noise: area / true %.4f +- %.4f\n", mean, sd);
+  EXPECT_NEAR(mean, 1.0, 0.01);
+  EXPECT_LT(sd, 0.03);
+}
+
+// Too few cells over the threshold, or none: nothing; a bad cell size or aspect throws.
+TEST(Footprint, TheCellMeanFitNeedsFourLoadedCells) {
+  const auto cells = mean_raster(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
+  EXPECT_TRUE(footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 20.0 / 35.0, 5.0));
+  EXPECT_FALSE(footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 20.0 / 35.0, 1000.0));
+  EXPECT_FALSE(footprint_area_cell_mean_mm2({}, CellSize{kW, kH}, 1.0, 5.0));
+  EXPECT_THROW((void)footprint_area_cell_mean_mm2(cells, CellSize{kW, 0.0}, 1.0, 5.0),
+               std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 0.0, 5.0),
+               std::invalid_argument);
+}
+
 TEST(Footprint, OneRowOrTooFewCellsDoNotDetermineIt) {
   EXPECT_FALSE(footprint_area_at_aspect_mm2(sampled_cap(31.0, 0.0, 40.0, 12.0, 60.0, 9, 1),
                                             CellSize{kW, kH}, 40.0 / 12.0)

@@ -112,6 +112,39 @@ TEST_F(StanceTest, AnEllipseCacheChangesNothing) {
   EXPECT_GE(cache.hits(), 2u);
 }
 
+// The footprint of averaging cells is fitted only where asked, and asking changes nothing else.
+TEST_F(StanceTest, TheCellMeanFootprintIsFittedOnlyWhereAsked) {
+  const auto& heel = layout_->region_sensors(Region::Heel);
+  double cx = 0.0, cy = 0.0;
+  for (std::size_t i : heel) {
+    cx += layout_->sensor(i).grid_x_mm / static_cast<double>(heel.size());
+    cy += layout_->sensor(i).grid_y_mm / static_cast<double>(heel.size());
+  }
+  std::vector<std::uint8_t> bits(layout_->sensor_count(), 2);
+  for (std::size_t i : heel) {
+    const Sensor& s = layout_->sensor(i);
+    const double rho2 =
+        std::pow((s.grid_x_mm - cx) / 17.0, 2) + std::pow((s.grid_y_mm - cy) / 28.0, 2);
+    if (rho2 < 1.0) bits[i] = static_cast<std::uint8_t>(2.0 + std::round(150.0 * (1 - rho2)));
+  }
+  const Step step = make_step({bits, bits});
+  const StanceSeries skipped = measure_stance(step, *layout_, config_.calibration);
+  const StanceSeries fitted =
+      measure_stance(step, *layout_, config_.calibration, nullptr, CellMeanFootprint::Fit);
+  ASSERT_EQ(fitted.size(), 2u);
+  for (std::size_t f = 0; f < 2; ++f) {
+    for (Region region : kRegions) {
+      EXPECT_FALSE(skipped.at(f, region).footprint_cell_mean_area_mm2.has_value());
+      EXPECT_EQ(skipped.at(f, region).footprint_area_mm2, fitted.at(f, region).footprint_area_mm2);
+    }
+    const auto& area = fitted.at(f, Region::Heel).footprint_cell_mean_area_mm2;
+    ASSERT_TRUE(area.has_value());
+    // Read at their centres, the cells are not what the fit assumes, but it is a contact of
+    // about the cap's size.
+    EXPECT_NEAR(*area / (std::numbers::pi * 17.0 * 28.0), 1.0, 0.3);
+  }
+}
+
 // Two full heel footprints of aspect 0.6 give the stance its aspect; a third frame loads two
 // rows only, so its own cells cannot give it, and the heel's box (52.5 x 60 mm, 0.875) would
 // give a wrong area. Measured at the shared aspect it has its true area.

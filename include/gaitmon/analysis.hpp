@@ -26,11 +26,17 @@ namespace gaitmon {
 /// it is fitted on those frames alone, and one with fewer on its contact ellipse throughout. It
 /// recovers simulated truths better (README, "How the fit works"), so it is the default.
 ///
+/// `FootprintMean` is the footprint of cells that average the pressure over their area
+/// (footprint_area_cell_mean_mm2), with the same rule for its frames and fallback: on such cells
+/// (the simulator's coverage raster; real insoles) the footprint is biased and n comes out about
+/// twice the truth (README); it costs a nonlinear fit per region and frame.
+///
 /// Why not the footprint where determined and the ellipse elsewhere: the two disagree by up to a
 /// cell's area where they meet, early and late in the contact, and that step in the area is a
 /// spike in its rate, which the fit took for damping and the discrepancy workflow for physics.
-enum class AreaSource { Ellipse, Footprint };
-std::string_view area_source_name(AreaSource source);  ///< "ellipse", "footprint"
+enum class AreaSource { Ellipse, Footprint, FootprintMean };
+/// "ellipse", "footprint", "footprint-mean"
+std::string_view area_source_name(AreaSource source);
 std::optional<AreaSource> parse_area_source(std::string_view text);
 
 /// Twice the four free parameters of the default fit.
@@ -106,7 +112,7 @@ struct RegionSessionAnalysis {
   Region region = Region::Heel;
   int steps_with_contact = 0;
   int steps_fitted = 0;  ///< per-step fits with status Ok
-  /// Steps with contact given the contact ellipse although the settings ask for the footprint:
+  /// Steps with contact given the contact ellipse although the settings ask for a footprint:
   /// the region's cells determined a footprint in fewer than kMinFootprintFrames frames (the toes'
   /// one to four active cells). Their fits rest on an area that moves in whole cells.
   int steps_on_ellipse = 0;

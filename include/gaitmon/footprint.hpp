@@ -39,6 +39,13 @@
 // margin. Without that last rule a frame whose loads are nearly flat now and then extrapolated
 // to twice its neighbours' area, a spike the fit and the discrepancy workflow took for physics.
 // The caller then leaves the frame without a footprint.
+//
+// All of this assumes a cell reads the pressure at its centre. Cells that average it over their
+// area (the simulator's coverage raster; real insoles) read the concave cap low inside and high
+// on the partly covered rim, the quadratic through those readings is flatter and wider, and the
+// fitted n comes out about twice the truth (README). footprint_area_cell_mean_mm2 fits a forward
+// model of such cells instead: each cell's mean of the clipped paraboloid p_max max(0, 1 - rho^2)
+// over its area, by nonlinear least squares over every cell of the region.
 #pragma once
 
 #include <optional>
@@ -99,6 +106,23 @@ std::optional<double> footprint_area_at_aspect_mm2(std::span<const LoadedCell> c
 std::optional<double> footprint_area_unthresholded_mm2(std::span<const LoadedCell> region_cells,
                                                        CellSize size, double aspect,
                                                        double threshold_bits);
+
+/// The area of the clipped paraboloid p_max max(0, 1 - rho^2) at `aspect` whose means over the
+/// cells best match their readings: least squares over every cell of `region_cells` (zeroed, not
+/// thresholded: a cell reading about nothing says the cap does not reach it), free p_max, centre
+/// and rA. Why: where a cell averages the pressure over its area, the four-term fit, which takes
+/// each reading as the pressure at the cell's centre, is biased (see above); on such readings
+/// this one recovers the area to within a few per cent (tests/footprint_test.cpp). On cells that
+/// do read at their centres it is the biased one. It starts from the four-term fit's cap over
+/// the cells at or above `threshold_bits` (or, where that is no cap, from their centroid and
+/// area). nullopt when fewer than four cells reach the threshold, when the fit does not converge
+/// or is not a cap, or when its area is outside 0.5-2 times those cells' sensor area. It does not
+/// check the low readings against the thresholded fit as footprint_area_unthresholded_mm2's
+/// caller does, so a sensor still reading after its load has gone (creep) widens it. Throws
+/// std::invalid_argument as footprint_area_at_aspect_mm2 does.
+std::optional<double> footprint_area_cell_mean_mm2(std::span<const LoadedCell> region_cells,
+                                                   CellSize size, double aspect,
+                                                   double threshold_bits);
 
 /// The aspect shared by a stance's footprints of one region: the mean of their log aspects
 /// weighted by their peak squared, or nullopt if there is none. Why: the ellipsoid's contact

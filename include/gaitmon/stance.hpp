@@ -31,7 +31,14 @@ struct RegionSample {
   std::optional<double> footprint_area_mm2;
   /// The free fit of this frame alone (bits), where it is a plausible cap.
   std::optional<Footprint> free_footprint;
+  /// The footprint of averaging cells (footprint_area_cell_mean_mm2) at the stance's shared
+  /// aspect, where measure_stance was asked for it and the cells determine it.
+  std::optional<double> footprint_cell_mean_area_mm2;
 };
+
+/// Whether measure_stance also fits the footprint of averaging cells: a nonlinear fit per region
+/// and frame, so only where the analysis will use it.
+enum class CellMeanFootprint { Skip, Fit };
 
 /// Every frame of one stance, heel strike to toe off inclusive.
 struct StanceSeries {
@@ -69,9 +76,12 @@ std::array<RegionSample, kRegionCount> measure_frame(
 /// (shared_aspect; the region's box where no frame had one), and once more over all its cells
 /// without the threshold (footprint_area_unthresholded_mm2), which is kept where it is within
 /// 15 % of the thresholded fit; where the two differ by more, the frame has no footprint.
+/// With CellMeanFootprint::Fit, each region-frame with active cells also gets the footprint of
+/// averaging cells at the same shared aspect.
 /// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
 /// steps passes one cache for all of them (results are identical with or without it).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
-                            const Calibration& calibration, ContactEllipseCache* cache = nullptr);
+                            const Calibration& calibration, ContactEllipseCache* cache = nullptr,
+                            CellMeanFootprint cell_mean = CellMeanFootprint::Skip);
 
 }  // namespace gaitmon

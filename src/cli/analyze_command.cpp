@@ -564,10 +564,13 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_option("--area", args->area,
                   "Contact area given to the fit: footprint (default: a paraboloid fitted to the "
-                  "active cells' loads where they determine it, else the contact ellipse) or "
+                  "active cells' loads where they determine it, else the contact ellipse), "
+                  "footprint-mean (the same for cells that read the mean pressure over their "
+                  "area, as real insoles and simulate --rasterisation coverage do, where the "
+                  "footprint over-reads and n comes out about twice the truth; slower) or "
                   "ellipse (the seed's contact ellipse of the active cells; the default with "
                   "--fit seed8)")
-      ->check(CLI::IsMember({"footprint", "ellipse"}));
+      ->check(CLI::IsMember({"footprint", "footprint-mean", "ellipse"}));
   sub->add_option("--end-rate", args->end_rate,
                   "Area rate at each contact's first and last frame: two-frame (default: the "
                   "difference to its neighbour, best for single steps) or second-order (three "

@@ -287,6 +287,29 @@ TEST(AnalyzeCommand, AreaEllipseUsesTheContactEllipse) {
   EXPECT_NE(status, 0) << bad_status_out;
 }
 
+// --area footprint-mean gives the fit the footprint of averaging cells: the heel's peak contact
+// areas differ from the footprint's, each heel row names it, and the setting is recorded.
+TEST(AnalyzeCommand, AreaFootprintMeanUsesTheCellMeanFootprint) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  int status = -1;
+  const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                  (a.dir / "mean").string() + " --area footprint-mean",
+                              &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("area footprint-mean"), std::string::npos) << out;
+  const auto j = nlohmann::json::parse(read_all(a.dir / "mean" / "session.json"));
+  EXPECT_EQ(j.at("settings").at("area"), "footprint-mean");
+  const auto footprint = heel_column(a.dir / "out" / "regions.csv", 6);  // peak_area_mm2
+  const auto mean = heel_column(a.dir / "mean" / "regions.csv", 6);
+  ASSERT_EQ(footprint.size(), mean.size());
+  ASSERT_FALSE(footprint.empty());
+  EXPECT_NE(footprint, mean);
+  for (const std::string& area : heel_column(a.dir / "mean" / "regions.csv", 24)) {
+    EXPECT_EQ(area, "footprint-mean");
+  }
+}
+
 TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
