@@ -2,16 +2,13 @@
 #include "gaitmon/analysis.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <exception>
-#include <mutex>
 #include <numbers>
 #include <stdexcept>
-#include <thread>
 #include <tuple>
 
 #include "gaitmon/stance.hpp"
+#include "parallel_for.hpp"
 
 namespace gaitmon {
 namespace {
@@ -211,28 +208,9 @@ SessionAnalysis analyse_session(std::span<const StepAnalysis> steps, const Confi
   out.nrmse_total_pct = spread_of(std::move(totals));
 
   // The regions' session fits are independent and each takes seconds on a long session.
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failure_mutex;
-  const auto work = [&] {
-    try {
-      for (std::size_t i = next++; i < kRegionCount; i = next++) {
-        out.regions[i] = analyse_region(steps, kRegions[i], config, size, settings);
-      }
-    } catch (...) {
-      const std::lock_guard lock(failure_mutex);
-      if (!failure) failure = std::current_exception();
-      next = kRegionCount;
-    }
-  };
-  const unsigned threads =
-      std::clamp(std::thread::hardware_concurrency(), 1u, static_cast<unsigned>(kRegionCount));
-  {
-    std::vector<std::jthread> workers;
-    for (unsigned i = 1; i < threads; ++i) workers.emplace_back(work);
-    work();
-  }
-  if (failure) std::rethrow_exception(failure);
+  detail::parallel_for(kRegionCount, [&](std::size_t i) {
+    out.regions[i] = analyse_region(steps, kRegions[i], config, size, settings);
+  });
   return out;
 }
 

@@ -6,21 +6,18 @@
 #include <fmt/ranges.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <exception>
 #include <functional>
 #include <limits>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <stdexcept>
 #include <stop_token>
-#include <thread>
 #include <utility>
 
 #include "discrepancy_diagnostics.hpp"
 #include "discrepancy_effects.hpp"
+#include "parallel_for.hpp"
 
 namespace gaitmon {
 namespace {
@@ -29,6 +26,7 @@ constexpr double kMaxAreaFraction = 0.999;  // as tissue_fit: g stays finite at 
 constexpr int kMinContactFrames = 5;
 constexpr std::array<double, 9> kExponentGrid{0.01, 0.12, 0.25, 0.38, 0.5, 0.62, 0.75, 0.88, 0.98};
 
+using detail::parallel_for;
 using discrepancy_detail::Applied;
 using discrepancy_detail::candidate_specs;
 using discrepancy_detail::CandidateSpec;
@@ -300,31 +298,6 @@ double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& 
     *pred = w.f;
   }
   return best.sse;
-}
-
-// Runs `work(i)` for i in [0, count) on every core; results go to fixed slots, so the outcome
-// does not depend on the threads.
-void parallel_for(std::size_t count, const std::function<void(std::size_t)>& work) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failure_mutex;
-  const auto run = [&] {
-    try {
-      for (std::size_t i = next++; i < count; i = next++) work(i);
-    } catch (...) {
-      const std::lock_guard lock(failure_mutex);
-      if (!failure) failure = std::current_exception();
-      next = count;
-    }
-  };
-  const unsigned threads = std::clamp(std::thread::hardware_concurrency(), 1u,
-                                      static_cast<unsigned>(std::max<std::size_t>(count, 1)));
-  {
-    std::vector<std::jthread> workers;
-    for (unsigned i = 1; i < threads; ++i) workers.emplace_back(run);
-    run();
-  }
-  if (failure) std::rethrow_exception(failure);
 }
 
 // Per-unit SSE of the chain `fixed` followed by one candidate at theta, in physical order.

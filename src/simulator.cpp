@@ -14,13 +14,13 @@
 
 #include "gaitmon/json.hpp"
 #include "gaitmon/session.hpp"
-#include "gaitmon/units.hpp"
 
 namespace gaitmon {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
 constexpr int kCoverageSubsamples = 8;  // per cell side
+constexpr double kStandardGravity_m_per_s2 = 9.80665;
 constexpr double kMinSwingFractionOfStride = 0.2;
 constexpr double kJitterTruncationSd = 3.0;
 

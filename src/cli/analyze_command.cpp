@@ -3,19 +3,15 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <exception>
 #include <functional>
 #include <iterator>
 #include <memory>
-#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "commands.hpp"
@@ -30,6 +26,7 @@
 #include "output_file.hpp"
 #include "progress.hpp"
 #include "report_html.hpp"
+#include "src/parallel_for.hpp"
 
 namespace gaitmon::cli {
 namespace {
@@ -387,30 +384,15 @@ std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const In
                                         const Config& config, const AnalysisSettings& settings,
                                         const std::function<void(double)>& on_progress) {
   std::vector<StepAnalysis> out(steps.size());
-  std::atomic<std::size_t> next{0};
-  std::atomic<std::size_t> done{0};
-  std::exception_ptr failure;
-  std::mutex failure_mutex;
-  const auto work = [&](bool report) {
-    ContactEllipseCache ellipses;
-    try {
-      for (std::size_t i = next++; i < steps.size(); i = next++) {
-        out[i] = analyse_step(steps[i], layout, config, settings, &ellipses);
-        const std::size_t finished = ++done;
-        if (report) on_progress(static_cast<double>(finished) / static_cast<double>(steps.size()));
-      }
-    } catch (...) {
-      const std::lock_guard lock(failure_mutex);
-      if (!failure) failure = std::current_exception();
-      next = steps.size();
-    }
-  };
-  const unsigned extra = std::max(1u, std::thread::hardware_concurrency()) - 1;
-  std::vector<std::jthread> workers;
-  for (unsigned i = 0; i < extra; ++i) workers.emplace_back(work, false);
-  work(true);
-  workers.clear();
-  if (failure) std::rethrow_exception(failure);
+  std::vector<ContactEllipseCache> caches(detail::parallel_workers(steps.size()));
+  detail::parallel_for_workers(
+      steps.size(),
+      [&](std::size_t i, std::size_t worker) {
+        out[i] = analyse_step(steps[i], layout, config, settings, &caches[worker]);
+      },
+      [&](std::size_t done) {
+        on_progress(static_cast<double>(done) / static_cast<double>(steps.size()));
+      });
   return out;
 }
 
