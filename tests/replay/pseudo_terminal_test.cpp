@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <system_error>
@@ -118,65 +119,56 @@ TEST(PseudoTerminal, WritesMoreThanThePtyHoldsThroughPartialWrites) {
 
 extern "C" void interrupt_only(int) {}
 
+// Starts write_all of far more than `fd` holds on a thread, sets the stop flag once it waits,
+// calls `nudge` (with the writer's thread) until it returns, and drains `reader` if it never
+// does, so that the test can end. Returns whether it returned, having written nothing more.
+bool gives_up_on_stop(
+    int fd, int reader, const std::function<void(std::thread&)>& nudge = [](std::thread&) {}) {
+  std::atomic<bool> stop{false};
+  std::atomic<int> result{-1};
+  const std::vector<std::uint8_t> bytes(1 << 20, 1);
+  std::thread writer([&] { result = write_all(fd, bytes, &stop) ? 1 : 0; });
+  std::this_thread::sleep_for(100ms);
+  EXPECT_EQ(result.load(), -1) << "nobody reads, so the write waits";
+  stop = true;
+  const auto give_up = std::chrono::steady_clock::now() + 20s;
+  while (result.load() == -1 && std::chrono::steady_clock::now() < give_up) {
+    nudge(writer);
+    std::this_thread::sleep_for(10ms);
+  }
+  const bool returned = result.load() != -1;
+  if (!returned) read_exactly(reader, bytes.size());
+  writer.join();
+  return returned && result.load() == 0;
+}
+
 // fake-insole takes its signals on a watcher thread (StopOnSignal), so no signal interrupts the
 // writer: with nobody reading, the pty's own non-blocking master lets it see the stop request
 // (within 100 ms) without one.
 TEST(PseudoTerminal, AWriteToAPtyNobodyReadsGivesUpOnStopWithoutASignal) {
   PseudoTerminal pty;
-  std::atomic<bool> stop{false};
-  std::atomic<int> result{-1};
-  const std::vector<std::uint8_t> bytes(1 << 20, 1);  // far more than a pty holds
-  std::thread writer([&] { result = write_all(pty.fd(), bytes, &stop) ? 1 : 0; });
-  std::this_thread::sleep_for(100ms);
-  EXPECT_EQ(result.load(), -1) << "nobody reads, so the write waits";
-  stop = true;
-  const auto give_up = std::chrono::steady_clock::now() + 10s;
-  while (result.load() == -1 && std::chrono::steady_clock::now() < give_up) {
-    std::this_thread::sleep_for(10ms);
-  }
-  const bool returned = result.load() != -1;
-  if (!returned) {  // unblock the writer so that the test can end
-    const int reader = open_reader(pty);
-    read_exactly(reader, bytes.size());
-    ::close(reader);
-  }
-  writer.join();
-  EXPECT_TRUE(returned);
-  EXPECT_EQ(result.load(), 0);
+  const int reader = open_reader(pty);
+  EXPECT_TRUE(gives_up_on_stop(pty.fd(), reader));
+  ::close(reader);
 }
 
-// fake-insole's stop signals have no SA_RESTART, so a write blocked on a full pty returns EINTR;
-// with the stop flag set, write_all gives up instead of writing on. A signal that arrives once
-// some bytes went through ends that write short instead, and the next write blocks again, so
-// the signal is repeated until the writer returns.
+// A blocking descriptor (stdout, when fake-insole writes there) is woken by a signal without
+// SA_RESTART: the write returns EINTR, and with the stop flag set write_all gives up instead of
+// writing on. A signal that arrives once some bytes went through ends that write short instead,
+// and the next write blocks again, so the signal is repeated until the writer returns.
 TEST(PseudoTerminal, AWriteInterruptedOnceStopIsSetGivesUp) {
-  PseudoTerminal pty;
+  int pipe_fds[2];
+  ASSERT_EQ(::pipe(pipe_fds), 0);
   struct sigaction action {};
   action.sa_handler = interrupt_only;
   struct sigaction saved {};
   ASSERT_EQ(sigaction(SIGUSR1, &action, &saved), 0);
-  std::atomic<bool> stop{false};
-  std::atomic<int> result{-1};
-  const std::vector<std::uint8_t> bytes(1 << 20, 1);  // far more than a pty holds
-  std::thread writer([&] { result = write_all(pty.fd(), bytes, &stop) ? 1 : 0; });
-  std::this_thread::sleep_for(100ms);
-  EXPECT_EQ(result.load(), -1) << "nobody reads, so the write blocks";
-  stop = true;
-  const auto give_up = std::chrono::steady_clock::now() + 20s;
-  while (result.load() == -1 && std::chrono::steady_clock::now() < give_up) {
+  EXPECT_TRUE(gives_up_on_stop(pipe_fds[1], pipe_fds[0], [](std::thread& writer) {
     pthread_kill(writer.native_handle(), SIGUSR1);
-    std::this_thread::sleep_for(20ms);
-  }
-  const bool returned = result.load() != -1;
-  if (!returned) {  // unblock the writer so that the test can end
-    const int reader = open_reader(pty);
-    read_exactly(reader, bytes.size());
-    ::close(reader);
-  }
-  writer.join();
+  }));
   sigaction(SIGUSR1, &saved, nullptr);
-  ASSERT_TRUE(returned) << "write_all did not give up within 20 s of the stop";
-  EXPECT_EQ(result.load(), 0);
+  ::close(pipe_fds[0]);
+  ::close(pipe_fds[1]);
 }
 
 // A read blocked at that moment fails with EIO instead; which of the two a reader meets depends
