@@ -124,7 +124,7 @@ std::pair<double, double> nnls2(std::span<const double> y, std::span<const doubl
 using Chain = std::vector<const Applied*>;
 
 struct Workspace {
-  std::vector<double> F, a, f, f0, fk, fd, off, at_zero, target, tv;
+  std::vector<double> F, a, f, f0, fk, fd, lin, slope, zeros, off, at_zero, target, tv;
   std::vector<std::vector<double>> te;
   std::vector<Gram2> gram;
 };
@@ -158,38 +158,108 @@ struct UnitSolution {
   }
 };
 
-// Every effect of the chain is affine in F: the measured force is T(0) + K L(E) + D L(V), with
-// L(x) = T(x) - T(0) the chain's linear part, and K, D >= 0 solve exactly. An effect that only
-// adds to F is all in T(0), so L is computed without it; where such effects alone vary with the
-// step's choice (impact's onset), L is the same for every choice and is computed once: it took
-// 12 runs of the chain per choice, and impact has 21.
-void solve_affine(const Chain& chain, std::size_t ui, const Unit& u, std::size_t choices,
-                  Workspace& w, UnitSolution& best) {
+// Gauss-Newton on K, D >= 0 for the model force off + K te + D tv (w's) through `rest`, from
+// (K, D); returns the sum of squared residuals there. Where `rest` affects the unit with one
+// effect (`sole`) that gives its slope, the derivatives are exact and each step runs it once;
+// otherwise forward differences.
+double refine(const Chain& rest, const Applied* sole, std::size_t ui, const Unit& u, std::size_t c,
+              const std::vector<double>& te, Workspace& w, double& K, double& D) {
   const std::size_t n = u.y.size();
+  w.slope.resize(n);
+  w.fk.resize(n);
+  w.fd.resize(n);
+  // Returns whether w.slope holds the slope at the point.
+  const auto model = [&](double K_, double D_) {
+    for (std::size_t i = 0; i < n; ++i) w.F[i] = w.off[i] + K_ * te[i] + D_ * w.tv[i];
+    if (sole != nullptr && sole->apply_with_slope(ui, u, w.F, w.f, w.slope)) return true;
+    run_chain(rest, ui, u, w.F, w.f, w, c);
+    return false;
+  };
+  bool exact = model(K, D);
+  double value = sse_of(u.y, w.f);
+  // w.f (and w.slope) hold the model at (K, D) at the top of every iteration: the line search
+  // ends on the point it accepts.
+  for (int it = 0; it < 6; ++it) {
+    w.f0 = w.f;
+    if (exact) {
+      for (std::size_t i = 0; i < n; ++i) {
+        w.fk[i] = w.slope[i] * te[i];
+        w.fd[i] = w.slope[i] * w.tv[i];
+      }
+    } else {
+      const double hK = std::max(1e-9, 1e-4 * std::abs(K));
+      const double hD = std::max(1e-9, 1e-4 * std::abs(D));
+      model(K + hK, D);
+      w.fk = w.f;
+      model(K, D + hD);
+      w.fd = w.f;
+      for (std::size_t i = 0; i < n; ++i) {
+        w.fk[i] = (w.fk[i] - w.f0[i]) / hK;
+        w.fd[i] = (w.fd[i] - w.f0[i]) / hD;
+      }
+    }
+    for (std::size_t i = 0; i < n; ++i)
+      w.lin[i] = u.y[i] - w.f0[i] + K * w.fk[i] + D * w.fd[i];  // the linearised target
+    const auto [K1, D1] = nnls2(w.lin, w.fk, w.fd);
+    double step = 1.0;
+    double after = value;
+    for (int halving = 0; halving < 6; ++halving, step *= 0.5) {
+      exact = model(K + step * (K1 - K), D + step * (D1 - D));
+      after = sse_of(u.y, w.f);
+      if (after <= value) break;
+    }
+    if (after > value) break;
+    K += step * (K1 - K);
+    D += step * (D1 - D);
+    const bool done = value - after <= 1e-9 * value;
+    value = after;
+    if (done) break;
+  }
+  return value;
+}
+
+// The chain up to its first effect that is not affine in F (saturation) is affine: there the
+// force is T(0) + K L(E) + D L(V), with L(x) = T(x) - T(0) the prefix's linear part. So L(E) per
+// exponent and L(V) are computed once per choice, and K, D >= 0 solve exactly when nothing
+// follows; what does follow is refined by Gauss-Newton from that solution, which then only runs
+// the rest of the chain. An effect that only adds to F is all in T(0), so L is computed without
+// it; where such effects alone vary with the step's choice (impact's onset), L is the same for
+// every choice and is computed once: it took 12 runs of the chain per choice, and impact has 21.
+void solve_chain(const Chain& chain, std::size_t ui, const Unit& u, std::size_t choices,
+                 Workspace& w, UnitSolution& best) {
+  const std::size_t n = u.y.size();
+  const auto first_nonlinear = std::find_if(
+      chain.begin(), chain.end(), [&](const Applied* e) { return e->affects(u) && !e->affine(); });
+  const Chain prefix(chain.begin(), first_nonlinear);
+  const Chain rest(first_nonlinear, chain.end());
+  const auto rest_active =
+      std::count_if(rest.begin(), rest.end(), [&](const Applied* e) { return e->affects(u); });
+  const Applied* sole = rest_active == 1 ? *first_nonlinear : nullptr;
   bool adds = false;
   bool linear_varies = false;
-  for (const Applied* e : chain) {
+  for (const Applied* e : prefix) {
     if (!e->affects(u)) continue;
     adds = adds || e->additive();
     linear_varies = linear_varies || (!e->additive() && e->choices(u) > 1);
   }
+  w.zeros.assign(n, 0.0);
   w.off.resize(n);
   w.at_zero.resize(n);
   w.target.resize(n);
+  w.lin.resize(n);
   w.tv.resize(n);
   w.te.resize(u.En.size());
   w.gram.resize(u.En.size());
-  std::fill(w.F.begin(), w.F.end(), 0.0);
   const auto linear = [&](std::span<const double> x, std::vector<double>& out, std::size_t c) {
     out.resize(n);
-    run_chain(chain, ui, u, x, out, w, c, true);
+    run_chain(prefix, ui, u, x, out, w, c, true);
     for (std::size_t i = 0; i < n; ++i) out[i] -= w.at_zero[i];
   };
   for (std::size_t c = 0; c < choices; ++c) {
-    run_chain(chain, ui, u, w.F, w.off, w, c);
+    run_chain(prefix, ui, u, w.zeros, w.off, w, c);
     if (c == 0 || linear_varies) {
       if (adds) {
-        run_chain(chain, ui, u, w.F, w.at_zero, w, c, true);
+        run_chain(prefix, ui, u, w.zeros, w.at_zero, w, c, true);
       } else {
         w.at_zero = w.off;
       }
@@ -202,64 +272,19 @@ void solve_affine(const Chain& chain, std::size_t ui, const Unit& u, std::size_t
     for (std::size_t i = 0; i < n; ++i) w.target[i] = u.y[i] - w.off[i];
     for (std::size_t k = 0; k < u.En.size(); ++k) {
       const std::vector<double>& te = w.te[k];
-      const auto [K, D] = nnls2(w.target, te, w.tv, w.gram[k]);
-      double s = 0;
-      for (std::size_t i = 0; i < n; ++i) {
-        const double r = w.target[i] - K * te[i] - D * w.tv[i];
-        s += r * r;
+      auto [K, D] = nnls2(w.target, te, w.tv, w.gram[k]);
+      if (rest.empty()) {
+        double s = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+          const double r = w.target[i] - K * te[i] - D * w.tv[i];
+          s += r * r;
+        }
+        best.offer(s, k, c, K, D);
+        continue;
       }
-      best.offer(s, k, c, K, D);
+      const double value = refine(rest, sole, ui, u, c, te, w, K, D);
+      best.offer(value, k, c, K, D);
     }
-  }
-}
-
-// An effect is not affine in F (saturation): Gauss-Newton on K, D >= 0 from the plain solution.
-void solve_nonlinear(const Chain& chain, std::size_t ui, const Unit& u, std::size_t choice,
-                     Workspace& w, UnitSolution& best) {
-  const std::size_t n = u.y.size();
-  std::vector<double> target(n);
-  w.fk.resize(n);
-  w.fd.resize(n);
-  for (std::size_t k = 0; k < u.En.size(); ++k) {
-    const std::vector<double>& E = u.En[k];
-    const auto model = [&](double K, double D) {
-      for (std::size_t i = 0; i < n; ++i) w.F[i] = K * E[i] + D * u.V[i];
-      run_chain(chain, ui, u, w.F, w.f, w, choice);
-    };
-    auto [K, D] = nnls2(u.y, E, u.V);
-    model(K, D);
-    double value = sse_of(u.y, w.f);
-    // w.f holds the model at (K, D) at the top of every iteration: the line search ends on the
-    // point it accepts.
-    for (int it = 0; it < 6; ++it) {
-      const double hK = std::max(1e-9, 1e-4 * std::abs(K));
-      const double hD = std::max(1e-9, 1e-4 * std::abs(D));
-      w.f0 = w.f;
-      model(K + hK, D);
-      w.fk = w.f;
-      model(K, D + hD);
-      w.fd = w.f;
-      for (std::size_t i = 0; i < n; ++i) {
-        w.fk[i] = (w.fk[i] - w.f0[i]) / hK;
-        w.fd[i] = (w.fd[i] - w.f0[i]) / hD;
-        target[i] = u.y[i] - w.f0[i] + K * w.fk[i] + D * w.fd[i];  // the linearised target
-      }
-      const auto [K1, D1] = nnls2(target, w.fk, w.fd);
-      double step = 1.0;
-      double after = value;
-      for (int halving = 0; halving < 6; ++halving, step *= 0.5) {
-        model(K + step * (K1 - K), D + step * (D1 - D));
-        after = sse_of(u.y, w.f);
-        if (after <= value) break;
-      }
-      if (after > value) break;
-      K += step * (K1 - K);
-      D += step * (D1 - D);
-      const bool done = value - after <= 1e-9 * value;
-      value = after;
-      if (done) break;
-    }
-    best.offer(value, k, choice, K, D);
   }
 }
 
@@ -269,12 +294,10 @@ void solve_nonlinear(const Chain& chain, std::size_t ui, const Unit& u, std::siz
 double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& w,
                   std::vector<double>* pred = nullptr, bool baseline = false) {
   bool active = false;
-  bool affine = true;
   std::size_t choices = 1;
   for (const Applied* e : chain) {
     if (e->affects(u)) {
       active = true;
-      affine = affine && e->affine();
       choices = std::max(choices, e->choices(u));
     }
   }
@@ -285,11 +308,7 @@ double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& 
   w.F.resize(u.y.size());
   w.f.resize(u.y.size());
   UnitSolution best;
-  if (affine) {
-    solve_affine(chain, ui, u, choices, w, best);
-  } else {
-    for (std::size_t c = 0; c < choices; ++c) solve_nonlinear(chain, ui, u, c, w, best);
-  }
+  solve_chain(chain, ui, u, choices, w, best);
   if (pred != nullptr) {
     for (std::size_t i = 0; i < u.y.size(); ++i) {
       w.F[i] = best.K * u.En[best.k][i] + best.D * u.V[i];

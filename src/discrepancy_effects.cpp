@@ -198,20 +198,39 @@ class SaturationEffect final : public Applied {
     for (std::size_t i = 0; i < F.size(); ++i) {
       out[i] = F[i];
       if (!(u.area[i] > 0.0) || !(F[i] > 0.0)) continue;
-      out[i] = F[i] * measured_fraction(table, q_scale_ * u.area[i] / F[i]);
+      out[i] = F[i] * measured_fraction(table, q_scale_ * u.area[i] / F[i]).value;
     }
+  }
+  // With f the fraction and q = q_scale area / F: d(F f(q))/dF = f - q f'(q).
+  bool apply_with_slope(std::size_t, const Unit& u, std::span<const double> F,
+                        std::span<double> out, std::span<double> slope) const override {
+    const std::vector<double>& table = fraction_table();
+    for (std::size_t i = 0; i < F.size(); ++i) {
+      out[i] = F[i];
+      slope[i] = 1.0;
+      if (!(u.area[i] > 0.0) || !(F[i] > 0.0)) continue;
+      const double q = q_scale_ * u.area[i] / F[i];
+      const Fraction f = measured_fraction(table, q);
+      out[i] = F[i] * f.value;
+      slope[i] = f.value - q * f.per_q;
+    }
+    return true;
   }
 
  private:
+  struct Fraction {
+    double value = 1.0, per_q = 0.0;
+  };
   /// The force the cells read over the model's force at the measured footprint, given
   /// q = c / p_m: phi^-(2 + n) (1 - L^2) with L = 1 - q phi(L)^(1 + n), 1 where q >= 1;
-  /// interpolated in a table of q in [0, 1].
-  static double measured_fraction(const std::vector<double>& table, double q) {
-    if (!(q < 1.0)) return 1.0;
-    const double x = std::max(q, 0.0) * static_cast<double>(kTablePoints - 1);
+  /// interpolated linearly in a table of q in [0, 1], with that segment's slope.
+  static Fraction measured_fraction(const std::vector<double>& table, double q) {
+    if (!(q < 1.0)) return {};
+    const double scale = static_cast<double>(kTablePoints - 1);
+    const double x = std::max(q, 0.0) * scale;
     const auto k = std::min(static_cast<std::size_t>(x), kTablePoints - 2);
     const double w = x - static_cast<double>(k);
-    return (1.0 - w) * table[k] + w * table[k + 1];
+    return {(1.0 - w) * table[k] + w * table[k + 1], (table[k + 1] - table[k]) * scale};
   }
   static const std::vector<double>& fraction_table() {
     static const std::vector<double> table = [] {

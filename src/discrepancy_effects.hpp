@@ -59,6 +59,14 @@ class Applied {
   /// fits it best, as it takes its n (impact's onset between two frames). 1 for none.
   virtual std::size_t choices(const Unit& /*u*/) const { return 1; }
   virtual bool affine() const { return true; }
+  /// An effect that maps each frame's force on its own, out_i = s(F_i), also writes ds/dF per
+  /// frame and returns true, so Gauss-Newton through it needs no differences; any other returns
+  /// false and writes nothing.
+  virtual bool apply_with_slope(std::size_t /*ui*/, const Unit& /*u*/,
+                                std::span<const double> /*F*/, std::span<double> /*out*/,
+                                std::span<double> /*slope*/) const {
+    return false;
+  }
   /// out = F + something that does not depend on F: the chain's linear part is the same with
   /// and without it, whatever the choice.
   virtual bool additive() const { return false; }

@@ -1,7 +1,8 @@
 // The candidate effects keep the promises the workflow's solver relies on: one that says it is
 // affine in the model force is, and one that says it only adds to the force does. The solver
 // solves K and D in closed form for the first and computes the chain's linear part once for the
-// second, so a false promise would give wrong fits without any error.
+// second, so a false promise would give wrong fits without any error. The same goes for the
+// slope an effect gives Gauss-Newton.
 #include "src/discrepancy_effects.hpp"
 
 #include <gtest/gtest.h>
@@ -172,6 +173,48 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {
     }
   }
   EXPECT_EQ(additive, std::vector<std::string>{"impact_transient"});
+}
+
+// Gauss-Newton takes an effect's slope in place of differences, so a slope that is off would
+// steer the fits without an error. Each frame's slope is checked against differences of `apply`
+// over that frame alone (forward or backward: the fraction is interpolated linearly in a table,
+// so a central difference may straddle a knot), and no other frame may move with it.
+TEST(DiscrepancyEffects, ThoseThatGiveTheirSlopeGiveApplysSlopeFrameByFrame) {
+  const std::vector<Unit> units = two_steps();
+  std::vector<std::string> with_slope;
+  for (const Made& m : every_candidate(units)) {
+    const Unit& u = units[0];
+    const std::vector<double> F = force(300.0, 1.0);
+    std::vector<double> out(kFrames), slope(kFrames);
+    if (!m.effect->apply_with_slope(0, u, F, out, slope)) continue;
+    with_slope.push_back(m.name);
+    const std::vector<double> plain = apply(*m.effect, 0, u, F, 0);
+    int moved = 0;
+    for (std::size_t i = 0; i < kFrames; ++i) {
+      EXPECT_DOUBLE_EQ(out[i], plain[i]) << m.name << " frame " << i;
+      const double h = 1e-6 * F[i];
+      std::vector<double> up = F, down = F;
+      up[i] += h;
+      down[i] -= h;
+      const std::vector<double> at_up = apply(*m.effect, 0, u, up, 0);
+      const std::vector<double> at_down = apply(*m.effect, 0, u, down, 0);
+      const double forward = (at_up[i] - plain[i]) / h;
+      const double backward = (plain[i] - at_down[i]) / h;
+      const double off = std::min(std::abs(slope[i] - forward), std::abs(slope[i] - backward));
+      EXPECT_LT(off, 1e-6 * std::max(1.0, std::abs(slope[i])))
+          << m.name << " frame " << i << ": slope " << slope[i] << ", differences " << forward
+          << " and " << backward;
+      for (std::size_t j = 0; j < kFrames; ++j) {
+        if (j != i) {
+          EXPECT_EQ(at_up[j], plain[j]) << m.name << " frame " << j << " moved with " << i;
+        }
+      }
+      if (std::abs(slope[i] - 1.0) > 0.01) ++moved;
+    }
+    // The ceiling is below every frame's peak here, so the slope is not the identity's.
+    EXPECT_EQ(moved, static_cast<int>(kFrames)) << m.name;
+  }
+  EXPECT_EQ(with_slope, std::vector<std::string>{"sensor_saturation"});
 }
 
 }  // namespace
