@@ -91,7 +91,14 @@ void point_link(const std::filesystem::path& link, const std::string& target) {
   const std::filesystem::path tmp = link.string() + ".tmp";
   std::filesystem::remove(tmp);
   std::filesystem::create_symlink(target, tmp);
-  std::filesystem::rename(tmp, link);
+  try {
+    std::filesystem::rename(tmp, link);
+  } catch (...) {
+    // A folder that took the link's place since fake-insole checked it, for one.
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    throw;
+  }
 }
 
 }  // namespace gaitmon::replay

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "gaitmon/error.hpp"
+
 namespace gaitmon::replay {
 
 SessionEncoder::SessionEncoder(const drivers::WireFormat& format, InsoleSize size)
@@ -34,8 +36,17 @@ void SessionEncoder::append_wire(std::vector<std::uint8_t>& out) const {
 
 SessionByteSource::SessionByteSource(const std::filesystem::path& session,
                                      const drivers::WireFormat& format, double speed)
-    : reader_(std::make_unique<SessionReader>(session)), format_(format), speed_(speed) {
+    : format_(format), speed_(speed) {
   if (!(speed > 0.0)) throw std::invalid_argument("SessionByteSource: speed must be > 0");
+  // A bad line found while playing would come after the frames before it were delivered (and
+  // published by a replay): the whole file is read once first, one line at a time.
+  SessionReader check(session);
+  Frame frame;
+  std::uint64_t frames = 0;
+  while (check.next(frame)) ++frames;
+  if (frames == 0) throw InputError(session.string(), 0, "no frames");
+  warn_on_rate_mismatch(check);
+  reader_ = std::make_unique<SessionReader>(session);
 }
 
 SessionByteSource::~SessionByteSource() = default;

@@ -33,20 +33,24 @@ class SessionEncoder {
   std::array<std::uint32_t, 2> next_sequence_{};
 };
 
-/// Reads a session CSV v1 as it plays (one frame in memory at a time) and delivers its frames
-/// in the wire format at real time x speed, or as fast as possible (kMaxSpeed), never skipping
-/// one. States: Connecting, Connected, then Disconnected ("end of session" or "stopped").
+/// Checks a whole session CSV v1 first, then reads it again as it plays (one frame in memory at a
+/// time) and delivers its frames in the wire format at real time x speed, or as fast as possible
+/// (kMaxSpeed), never skipping one. States: Connecting, Connected, then Disconnected ("end of
+/// session" or "stopped").
 ///
 /// Threading: run() on one thread, once per object; stop() and frames_sent() from any thread.
 class SessionByteSource final : public drivers::ByteSource {
  public:
-  /// Opens the session and reads its header: throws InputError for a bad file. speed > 0.
+  /// Reads the whole session once: throws InputError for a bad line or a file without frames,
+  /// before anything is played, and warns of a header rate the times disagree with
+  /// (warn_on_rate_mismatch). speed > 0.
   SessionByteSource(const std::filesystem::path& session, const drivers::WireFormat& format,
                     double speed);
   ~SessionByteSource() override;
 
   /// Returns at the end of the session or soon after stop(). Throws InputError (on the
-  /// calling thread) for a bad line; the frames before it have been delivered.
+  /// calling thread) for a bad line of a file changed since the check; the frames before it
+  /// have been delivered.
   void run(const BytesHandler& on_bytes, const StateHandler& on_state) override;
   void stop() override;
 

@@ -71,6 +71,11 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
       on_progress(std::min(1.0, static_cast<double>(reader.bytes_read()) / file_bytes));
     }
   }
+  // A header alone would pass as a session in which nobody walked, with outputs of nothing.
+  if (info.frames_per_foot[0] + info.frames_per_foot[1] == 0) {
+    throw InputError(path.string(), 0, "no frames");
+  }
+  warn_on_rate_mismatch(reader);
   for (Foot foot : kFeet) {
     StepSegmenter& segmenter = *segmenters[static_cast<std::size_t>(foot)];
     segmenter.finish(finalised);

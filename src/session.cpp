@@ -2,6 +2,7 @@
 #include "gaitmon/session.hpp"
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <array>
@@ -260,6 +261,10 @@ struct SessionReader::Impl {
   SessionHeader header;
   std::array<double, 2> last_t{kNoTime, kNoTime};
   std::uint64_t frame_line = 0;
+  // Between a foot's successive frames, the first ones only; a fixed array, as next() must not
+  // allocate.
+  std::array<double, kRateSpacings> spacings_s{};
+  std::size_t spacing_count = 0;
 
   explicit Impl(LineSource source) : path(source.name()), lines(std::move(source)) {
     read_header();
@@ -407,6 +412,12 @@ void SessionReader::Impl::parse_frame(std::string_view line, Frame& frame) {
   if (!parse_finite(std::string_view(p, static_cast<std::size_t>(comma - p)), t)) {
     fail_field(line, 0);
   }
+  if (std::abs(t) > kMaxSessionTimeS) {
+    fail(lines.line_number(),
+         fmt::format("t_s {} is more than a day ({} s) from the start of the recording, longer "
+                     "than any session: the time is corrupt",
+                     format_double(t), kMaxSessionTimeS));
+  }
   p = comma + 1;
 
   if (end - p < 2 || (p[0] != 'L' && p[0] != 'R') || p[1] != ',') fail_field(line, 1);
@@ -437,6 +448,9 @@ void SessionReader::Impl::parse_frame(std::string_view line, Frame& frame) {
     fail(lines.line_number(), "t_s " + format_double(t) + " does not increase for foot " +
                                   (foot == 0 ? "L" : "R") + " (previous " +
                                   format_double(last_t[foot]) + ")");
+  }
+  if (last_t[foot] != kNoTime && spacing_count < kRateSpacings) {
+    spacings_s[spacing_count++] = t - last_t[foot];
   }
   last_t[foot] = t;
   frame.t_s = t;
@@ -506,8 +520,40 @@ std::uint64_t SessionReader::bytes_read() const {
   return impl_->lines.bytes_consumed();
 }
 
+std::optional<double> SessionReader::timestamp_rate_hz() const {
+  if (impl_->spacing_count < 10) return std::nullopt;
+  std::vector<double> sorted(
+      impl_->spacings_s.begin(),
+      impl_->spacings_s.begin() + static_cast<std::ptrdiff_t>(impl_->spacing_count));
+  const auto middle = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+  std::nth_element(sorted.begin(), middle, sorted.end());
+  return 1.0 / *middle;
+}
+
+void warn_on_rate_mismatch(const SessionReader& reader) {
+  const double header_hz = reader.header().sample_rate_hz;
+  if (const auto rate = reader.timestamp_rate_hz();
+      rate && std::abs(*rate / header_hz - 1.0) > 0.1) {
+    spdlog::warn(
+        "{}: the header says sample_rate_hz {}, but the times show {:.4g} Hz per foot (the median "
+        "spacing of a foot's frames): the step detector's windows are in frames, so correct the "
+        "header if the times are right",
+        reader.path().string(), header_hz, *rate);
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Writer
+
+std::string header_value_problem(std::string_view value) {
+  // The reader trims blanks around a value and ends it at a line break, so these would not
+  // read back as written.
+  if (value.find_first_of("\r\n") != std::string_view::npos) return "contains a line break";
+  if (!value.empty() && (is_blank(value.front()) || is_blank(value.back()))) {
+    return "starts or ends with a blank";
+  }
+  return {};
+}
 
 namespace {
 
@@ -544,14 +590,8 @@ constexpr ValueTexts make_value_texts() {
 constexpr ValueTexts kValueTexts = make_value_texts();
 
 void check_text_value(std::string_view key, std::string_view value) {
-  // The reader trims blanks around a value and ends it at a line break, so these would not
-  // read back as written.
-  if (value.find_first_of("\r\n") != std::string_view::npos) {
-    throw std::invalid_argument("session header '" + std::string(key) + "' contains a line break");
-  }
-  if (!value.empty() && (is_blank(value.front()) || is_blank(value.back()))) {
-    throw std::invalid_argument("session header '" + std::string(key) +
-                                "' starts or ends with a blank");
+  if (const std::string why = header_value_problem(value); !why.empty()) {
+    throw std::invalid_argument("session header '" + std::string(key) + "' " + why);
   }
 }
 
@@ -665,6 +705,11 @@ void SessionWriter::write(const Frame& frame) {
                                 std::to_string(w.sensors));
   }
   const std::size_t foot = frame.foot == Foot::Left ? 0 : 1;
+  if (std::abs(frame.t_s) > kMaxSessionTimeS) {
+    throw std::invalid_argument(fmt::format(
+        "session {}: t_s {} is more than a day ({} s) from the start, which the reader refuses",
+        w.name, format_double(frame.t_s), kMaxSessionTimeS));
+  }
   if (!std::isfinite(frame.t_s) || !(frame.t_s > w.last_t[foot])) {
     throw std::invalid_argument(
         "session " + w.name + ": t_s " + format_double(frame.t_s) + " does not increase for foot " +

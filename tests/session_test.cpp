@@ -539,6 +539,12 @@ std::vector<BadLine> bad_lines() {
        "t_s 0.4 does not increase for foot L (previous 0.5)"},
       {"TimeGoesBackForTheRightFoot", frame_line("0.25", "R", zeros()),
        "t_s 0.25 does not increase for foot R (previous 0.5)"},
+      {"TimeHuge", frame_line("1e308", "L", zeros()),
+       "t_s 1e+308 is more than a day (86400 s) from the start of the recording"},
+      {"TimeJustOverADay", frame_line("86400.01", "L", zeros()),
+       "t_s 86400.01 is more than a day (86400 s) from the start of the recording"},
+      {"TimeADayBeforeTheStart", frame_line("-1e9", "R", zeros()),
+       "t_s -1e+09 is more than a day (86400 s) from the start of the recording"},
   };
 }
 
@@ -554,6 +560,25 @@ TEST_P(SessionReaderBadLine, IsRejectedWithItsLineAndReason) {
 
 INSTANTIATE_TEST_SUITE_P(Rules, SessionReaderBadLine, ::testing::ValuesIn(bad_lines()),
                          [](const auto& info) { return std::string(info.param.name); });
+
+// The rate the times show, for warn_on_rate_mismatch: a header's 100 Hz against frames 20 ms
+// apart. A gap and the other foot's frames in between do not move it.
+TEST(SessionReader, TimestampRateIsOneOverTheMedianSpacingOfAFootsFrames) {
+  std::string text = meta() + columns();
+  for (int k = 0; k < 12; ++k) {
+    const double t = 0.02 * k + (k >= 8 ? 5.0 : 0.0);
+    text +=
+        frame_line(std::to_string(t), "L", zeros()) + frame_line(std::to_string(t), "R", zeros());
+  }
+  SessionReader reader(write_file("rate.csv", text));
+  Frame frame;
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(reader.next(frame));
+  EXPECT_FALSE(reader.timestamp_rate_hz()) << "8 spacings are too few for a rate";
+  while (reader.next(frame)) {
+  }
+  ASSERT_TRUE(reader.timestamp_rate_hz());
+  EXPECT_NEAR(*reader.timestamp_rate_hz(), 50.0, 1e-6);
+}
 
 TEST(SessionReaderBadFrames, EmptyLineInTheMiddle) {
   const std::string text =
@@ -631,8 +656,8 @@ TEST(SessionWriter, WritesTheExactLayout) {
 TEST(SessionWriter, RoundTripsHeaderAndFramesExactly) {
   const SessionHeader h = full_header();
   // Times that need all 17 digits, exponents and a negative start, interleaved feet.
-  const std::vector<double> times{-0.25, 1e-5, 0.1 + 0.2, 1.0 / 3.0, 2.0 / 3.0, 123456.789012345,
-                                  1e7};
+  const std::vector<double> times{
+      -0.25, 1e-5, 0.1 + 0.2, 1.0 / 3.0, 2.0 / 3.0, 12345.6789012345, kMaxSessionTimeS - 0.5};
   std::vector<Frame> frames;
   for (std::size_t i = 0; i < times.size(); ++i) {
     for (Foot foot : kFeet) {
@@ -739,6 +764,20 @@ TEST(SessionWriter, RejectsATimeThatDoesNotIncreaseForItsFoot) {
                std::invalid_argument);
   writer.close();
   EXPECT_EQ(test::file_frames(path).size(), 2u);
+}
+
+TEST(SessionWriter, RejectsATimeBeyondADayWhichTheReaderWouldRefuse) {
+  SessionWriter writer(write_file("w-day.csv", ""), SessionHeader{});
+  const std::vector<std::uint8_t> bits(107);
+  EXPECT_THROW(writer.write(Frame{-kMaxSessionTimeS - 1.0, Foot::Left, bits}),
+               std::invalid_argument);
+  writer.write(Frame{kMaxSessionTimeS, Foot::Left, bits});
+  try {
+    writer.write(Frame{1e308, Foot::Left, bits});
+    ADD_FAILURE() << "no invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("t_s 1e+308 is more than a day (86400 s) from the start"));
+  }
 }
 
 TEST(SessionWriter, RejectsAHeaderThatWouldNotReadBack) {

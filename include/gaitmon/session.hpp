@@ -12,6 +12,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -31,6 +32,11 @@ struct SessionHeader {
   /// Every other `# key: value` line, in file order; kept and otherwise ignored.
   std::vector<std::pair<std::string, std::string>> extra;
 };
+
+/// The largest |t_s| the reader accepts: a day, longer than any walking session (simulate's
+/// --duration stops there too). A time beyond it is corrupt (1e308 would overflow the wire
+/// format's microseconds), not a recording.
+inline constexpr double kMaxSessionTimeS = 86400.0;
 
 /// One frame of one foot: raw readings 0..255, sensor i at bits[i].
 struct Frame {
@@ -64,10 +70,25 @@ class SessionReader {
   /// Bytes of the file consumed so far, through the end of the last line read (for progress).
   std::uint64_t bytes_read() const;
 
+  /// The frame rate per foot the times show so far: one over the median spacing of a foot's
+  /// successive frames, over the first kRateSpacings spacings (a lost frame or a gap does not
+  /// move a median); nullopt before 10 spacings.
+  std::optional<double> timestamp_rate_hz() const;
+  static constexpr std::size_t kRateSpacings = 2000;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// Logs a warning naming the file and both rates when the header's sample_rate_hz and the
+/// reader's timestamp_rate_hz() are more than 10 % apart: the windows of the step detector are in
+/// frames, so a wrong header rate misjudges every one of them.
+void warn_on_rate_mismatch(const SessionReader& reader);
+
+/// Why `value` cannot be a header value that reads back as written (a line break, or a blank at
+/// either end, which the reader trims), or an empty string if it can.
+std::string header_value_problem(std::string_view value);
 
 class SessionWriter {
  public:
@@ -79,7 +100,8 @@ class SessionWriter {
   SessionWriter& operator=(const SessionWriter&) = delete;
 
   /// Appends one frame. Throws std::invalid_argument for a wrong sensor count or a time that
-  /// does not increase for its foot, std::runtime_error on an I/O failure.
+  /// does not increase for its foot or is beyond kMaxSessionTimeS, std::runtime_error on an I/O
+  /// failure.
   void write(const Frame& frame);
 
   /// Flushes and closes; throws std::runtime_error on failure. Called by the destructor if

@@ -399,6 +399,8 @@ std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const In
 void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   const Config config = load_global_config(global);
   const AnalysisSettings settings = settings_from(args);
+  check_output_dir(args.out_dir, "--out");
+  remove_earlier_outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"});
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
 
@@ -483,8 +485,6 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     input.analyses = analyses;
     input.session = &session;
     outputs.add("report.html", render_report_html(input));
-  } else {
-    outputs.drop("report.html");
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
   print_summary(args, header, settings, steps, analyses, session, written);

@@ -184,6 +184,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
 
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const Config config = load_global_config(global);
+  check_output_dir(args.out_dir, "--out");
+  remove_earlier_outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"});
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
   std::vector<Step> steps;
@@ -214,8 +216,6 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   if (args.report) {
     outputs.add("discrepancy.html",
                 render_discrepancy_html(args.session.filename().string(), result));
-  } else {
-    outputs.drop("discrepancy.html");
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
 

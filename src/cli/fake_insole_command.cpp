@@ -203,8 +203,12 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--summary", args->summary,
                   "Write what was sent and injected as JSON (a fault summary also goes to "
                   "stderr)");
-  sub->callback([&global, args] {
-    // Checked before the playback, which can take as long as the session.
+  sub->callback([&global, args, sub] {
+    // Checked before the playback, which can take as long as the session. An empty path given
+    // would otherwise read as the option left out.
+    if (sub->count("--link") > 0 && args->link.empty()) {
+      throw CLI::ValidationError("--link", "the path is empty");
+    }
     if (!args->link.empty()) {
       const auto status = std::filesystem::symlink_status(args->link);
       if (std::filesystem::exists(status) && !std::filesystem::is_symlink(status)) {
@@ -213,7 +217,7 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
                                                  "would replace");
       }
     }
-    if (!args->summary.empty()) {
+    if (sub->count("--summary") > 0) {
       check_output_path(args->summary, "--summary");
       const fs::path folder = fs::absolute(args->summary).parent_path();
       if (!fs::is_directory(folder)) {

@@ -1,6 +1,7 @@
 // Write-then-rename output files.
 #include "output_file.hpp"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -28,6 +29,37 @@ void check_output_path(const std::filesystem::path& path, const std::string& opt
     throw CLI::ValidationError(option, path.string() +
                                            " exists and is not a regular file (a device, pipe, "
                                            "socket or link), which writing it would replace");
+  }
+}
+
+void check_output_dir(const std::filesystem::path& dir, const std::string& option) {
+  // create_directories("") fails only after the work, with a message that names no option.
+  if (dir.empty()) throw CLI::ValidationError(option, "the path is empty");
+  std::error_code ec;
+  const auto status = std::filesystem::status(dir, ec);
+  if (!ec && std::filesystem::exists(status) && !std::filesystem::is_directory(status)) {
+    throw CLI::ValidationError(option, dir.string() + " exists and is not a folder");
+  }
+}
+
+void remove_earlier_outputs(const std::filesystem::path& dir,
+                            std::initializer_list<std::string_view> names) {
+  std::vector<std::string> removed;
+  for (const std::string_view name : names) {
+    const std::filesystem::path path = dir / name;
+    std::error_code ec;
+    if (std::filesystem::remove(path, ec)) {
+      removed.emplace_back(name);
+    } else if (ec) {
+      throw std::runtime_error(path.string() +
+                               ": cannot remove an earlier run's output: " + ec.message());
+    }
+  }
+  if (!removed.empty()) {
+    spdlog::info(
+        "removed an earlier run's outputs from {}: {} (this run writes its own, or none "
+        "if it fails)",
+        dir.string(), fmt::join(removed, ", "));
   }
 }
 
@@ -87,21 +119,7 @@ void OutputSet::add(std::string_view name, std::string_view text) {
   files_.back()->write(text);
 }
 
-void OutputSet::drop(std::string_view name) {
-  dropped_.push_back(dir_ / name);
-}
-
 std::vector<std::filesystem::path> OutputSet::commit() {
-  for (const std::filesystem::path& path : dropped_) {
-    std::error_code ec;
-    if (std::filesystem::remove(path, ec)) {
-      spdlog::info("removed {}: an earlier run's output, which this run does not write",
-                   path.string());
-    } else if (ec) {
-      throw std::runtime_error(path.string() +
-                               ": cannot remove an earlier run's output: " + ec.message());
-    }
-  }
   std::vector<OutputFile*> files;
   std::vector<std::filesystem::path> paths;
   for (const auto& file : files_) {

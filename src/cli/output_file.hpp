@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <initializer_list>
 #include <memory>
 #include <span>
 #include <string>
@@ -17,6 +18,17 @@ namespace gaitmon::cli {
 /// socket or a symlink, which the final rename would replace with a regular file). Throws
 /// CLI::ValidationError naming `option` (a usage error, exit 2).
 void check_output_path(const std::filesystem::path& path, const std::string& option);
+
+/// Refuses, before any work, an output folder that cannot be one: an empty path, or an existing
+/// node that is not a folder. Throws CLI::ValidationError naming `option` (a usage error, exit 2).
+void check_output_dir(const std::filesystem::path& dir, const std::string& option);
+
+/// Removes the files `names` (a command's whole set of outputs) that an earlier run left in `dir`,
+/// before this run starts: a run that fails then leaves none of them, where the earlier run's
+/// complete set would look like its own. Logs what it removed. Throws std::runtime_error naming
+/// a file that cannot be removed.
+void remove_earlier_outputs(const std::filesystem::path& dir,
+                            std::initializer_list<std::string_view> names);
 
 class OutputFile {
  public:
@@ -55,17 +67,13 @@ class OutputSet {
   explicit OutputSet(std::filesystem::path dir) : dir_(std::move(dir)) {}
   /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file.
   void add(std::string_view name, std::string_view text);
-  /// This run does not write `name`, which an earlier run into the same folder may have left:
-  /// commit() removes it first, so that the folder never holds two runs' outputs side by side.
-  void drop(std::string_view name);
-  /// Removes the dropped files, then OutputFile::commit_all over the files added; returns their
-  /// final paths. Throws std::runtime_error naming a file that cannot be removed or committed.
+  /// OutputFile::commit_all over the files added; returns their final paths. Throws
+  /// std::runtime_error naming a file that cannot be committed.
   std::vector<std::filesystem::path> commit();
 
  private:
   std::filesystem::path dir_;
   std::vector<std::unique_ptr<OutputFile>> files_;
-  std::vector<std::filesystem::path> dropped_;
 };
 
 }  // namespace gaitmon::cli

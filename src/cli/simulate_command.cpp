@@ -8,8 +8,12 @@
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
+#include "gaitmon/session.hpp"
 #include "gaitmon/simulator.hpp"
 #include "output_file.hpp"
 
@@ -23,6 +27,7 @@ struct SimulateArgs {
   std::string rasterisation = "centre";
   std::vector<std::string> params;
   std::string effect_params;
+  bool effect_params_given = false;
   std::filesystem::path out;
   std::filesystem::path truth;
 };
@@ -77,13 +82,28 @@ void apply_param(const std::string& text, const Config& config, SimulationOption
 /// such objects keyed by effect name when there are several. Names and ranges are checked by
 /// the simulator (resolve_effect_params).
 void apply_effect_params(const std::string& text, SimulationOptions& options) {
-  if (text.empty()) return;
   const auto bad = [](const std::string& why) {
     return CLI::ValidationError("--effect-params", why);
   };
+  if (text.empty()) {
+    throw bad("is empty: give a JSON object, or leave the option out for the defaults");
+  }
+  // nlohmann::json keeps the last of two equal keys without a word, so that the value meant
+  // may be the one dropped. The keys of each object open at the moment, outermost first.
+  std::vector<std::set<std::string>> open_objects;
+  const auto refuse_duplicates = [&](int, nlohmann::json::parse_event_t event,
+                                     nlohmann::json& parsed) {
+    using Event = nlohmann::json::parse_event_t;
+    if (event == Event::object_start) open_objects.emplace_back();
+    if (event == Event::object_end) open_objects.pop_back();
+    if (event == Event::key && !open_objects.back().insert(parsed.get<std::string>()).second) {
+      throw bad("key '" + parsed.get<std::string>() + "' is given twice");
+    }
+    return true;
+  };
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(text);
+    j = nlohmann::json::parse(text, refuse_duplicates);
   } catch (const nlohmann::json::exception& e) {
     // A syntax error, or a number beyond a double's range (1e999).
     throw bad("not valid JSON (" + std::string(e.what()) + ")");
@@ -129,6 +149,10 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   options.model = *parse_model_variant(args.model);
   options.rasterisation = *parse_rasterisation(args.rasterisation);
   for (const auto& p : args.params) apply_param(p, config, options);
+  if (const std::string why = header_value_problem(options.subject); !why.empty()) {
+    // Not quoted: a line break would split the message.
+    throw CLI::ValidationError("--subject", why + ", which the session header cannot hold");
+  }
   for (auto it = options.effects.begin(); it != options.effects.end(); ++it) {
     try {
       simulation_effect_params(*it);  // known names only
@@ -140,7 +164,7 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
       throw CLI::ValidationError("--effect", "'" + *it + "' is given twice");
     }
   }
-  apply_effect_params(args.effect_params, options);
+  if (args.effect_params_given) apply_effect_params(args.effect_params, options);
   if (args.truth.empty()) {
     args.truth = args.out;
     args.truth.replace_extension(".truth.json");
@@ -245,7 +269,10 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   R"(README's table of effects lists each one's parameters, defaults and ranges))");
   sub->add_option("--subject", args->options.subject, "Subject label in the session metadata")
       ->capture_default_str();
-  sub->callback([&global, args] { run_simulate(global, *args); });
+  sub->callback([&global, args, sub] {
+    args->effect_params_given = sub->count("--effect-params") > 0;
+    run_simulate(global, *args);
+  });
 }
 
 }  // namespace gaitmon::cli

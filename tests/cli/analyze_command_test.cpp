@@ -462,21 +462,27 @@ TEST(AnalyzeCommand, WithoutReportAnEarlierRunsReportIsRemoved) {
   EXPECT_EQ(status, 0) << out;
   EXPECT_FALSE(fs::exists(dir / "o" / "report.html"));
   EXPECT_TRUE(fs::exists(dir / "o" / "regions.csv"));
-  EXPECT_NE(out.find("report.html: an earlier run's output, which this run does not write"),
+  EXPECT_NE(out.find("removed an earlier run's outputs from " + (dir / "o").string() +
+                     ": report.html (this run writes its own, or none if it fails)"),
             std::string::npos)
       << out;
 }
 
-// The outputs appear together or not at all: when one cannot take its final name (here a
-// directory already sits there), the ones renamed before it are removed again.
-TEST(AnalyzeCommand, AFailedRenameLeavesNoOutputAtAll) {
+// A folder in an output's place, which made the last rename fail after all the work, now stops
+// the run before it, when the earlier run's outputs are removed. (A rename that fails, which
+// takes back the files already renamed, is tested on OutputFile itself.)
+TEST(AnalyzeCommand, AFolderInAnOutputsPlaceFailsBeforeTheWorkAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-rename");
   fs::create_directories(dir / "o" / "session.json" / "occupied");
   int status = -1;
   const std::string out = run(
       "analyze " + (analysed().dir / "s.csv").string() + " --out " + (dir / "o").string(), &status);
   EXPECT_NE(status, 0) << out;
-  EXPECT_NE(out.find("session.json: cannot rename"), std::string::npos) << out;
+  EXPECT_NE(
+      out.find((dir / "o" / "session.json").string() + ": cannot remove an earlier run's output"),
+      std::string::npos)
+      << out;
+  EXPECT_TRUE(fs::exists(dir / "o" / "session.json" / "occupied"));
   for (const char* name : {"steps.csv", "regions.csv", "steps.csv.partial", "regions.csv.partial",
                            "session.json.partial"}) {
     EXPECT_FALSE(fs::exists(dir / "o" / name)) << name;

@@ -4,6 +4,8 @@
 
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "test_support.hpp"
 
@@ -176,6 +178,100 @@ TEST(Cli, ASessionWithoutACompleteStepIsRefusedByAnalyzeAndDiscrepancy) {
             std::string::npos)
       << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "d"));
+}
+
+// A header alone passed segment and replay as a session in which nobody walked.
+TEST(Cli, ASessionWithoutFramesIsBadInputForEveryCommandThatReadsOne) {
+  const auto dir = test::scratch_dir("cli-no-frames");
+  const std::string session = test::write_text(dir / "empty.csv", test::session_head()).string();
+  for (const std::string command : {"segment", "analyze", "discrepancy"}) {
+    int status = -1;
+    const std::string out =
+        run(command + " " + session + " --out " + (dir / command).string(), &status);
+    EXPECT_EQ(status, 2) << command << "\n" << out;
+    EXPECT_NE(out.find("gaitmon: bad input: " + session + ": no frames"), std::string::npos)
+        << command << "\n"
+        << out;
+    EXPECT_FALSE(std::filesystem::exists(dir / command)) << command;
+  }
+  int status = -1;
+  const std::string out = run(
+      "replay " + session + " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
+      &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("gaitmon: bad input: " + session + ": no frames"), std::string::npos) << out;
+}
+
+// An empty --out made the folder commands fail after all the work, with a bare filesystem error
+// and exit 1.
+TEST(Cli, AnOutFolderThatCannotBeOneIsAUsageErrorBeforeAnyWork) {
+  const auto dir = test::scratch_dir("cli-out-folder");
+  const std::string demo = test::demo_session().string();
+  const std::string file = test::write_text(dir / "file.txt", "mine\n").string();
+  for (const std::string command : {"segment", "analyze", "discrepancy"}) {
+    int status = -1;
+    std::string out = run(command + " " + demo + " --out ''", &status);
+    EXPECT_EQ(status, 2) << command << "\n" << out;
+    EXPECT_NE(out.find("--out: the path is empty"), std::string::npos) << command << "\n" << out;
+    out = run(command + " " + demo + " --out " + file, &status);
+    EXPECT_EQ(status, 2) << command << "\n" << out;
+    EXPECT_NE(out.find("--out: " + file + " exists and is not a folder"), std::string::npos)
+        << command << "\n"
+        << out;
+    EXPECT_EQ(read_all(file), "mine\n");
+  }
+}
+
+// A failed rerun into the folder of a successful run left that run's files, which looked like
+// this run's: now none of the command's outputs is left, and other files are kept.
+TEST(Cli, AFailedRerunLeavesNoneOfTheCommandsEarlierOutputs) {
+  const auto dir = test::scratch_dir("cli-rerun");
+  int status = -1;
+  std::string out =
+      run("simulate --duration 4 --seed 2 --out " + (dir / "s.csv").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  out = run("segment " + (dir / "s.csv").string() + " --out " + (dir / "o").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  ASSERT_TRUE(std::filesystem::exists(dir / "o" / "steps.csv"));
+  test::write_text(dir / "o" / "notes.txt", "mine\n");
+  const std::string bad =
+      test::write_text(dir / "bad.csv", test::session_head() + test::session_row("0.0,X")).string();
+
+  const struct {
+    std::string command;
+    std::vector<std::string> outputs;
+  } commands[] = {
+      {"segment", {"steps.csv", "frames.csv"}},
+      {"analyze", {"steps.csv", "regions.csv", "session.json", "report.html"}},
+      {"discrepancy", {"discrepancy.json", "discrepancy.html"}},
+  };
+  for (const auto& c : commands) {
+    for (const std::string& name : c.outputs) test::write_text(dir / "o" / name, "earlier\n");
+    out = run(c.command + " " + bad + " --out " + (dir / "o").string(), &status);
+    EXPECT_EQ(status, 2) << c.command << "\n" << out;
+    for (const std::string& name : c.outputs) {
+      EXPECT_FALSE(std::filesystem::exists(dir / "o" / name)) << c.command << ": " << name;
+    }
+    EXPECT_EQ(read_all(dir / "o" / "notes.txt"), "mine\n") << c.command;
+  }
+}
+
+// Times 20 ms apart under a header of 100 Hz: every window of the step detector is twice as long
+// as meant. The frames are valid, so it is a warning naming the file and both rates.
+TEST(Cli, AHeaderRateTheTimesDisagreeWithIsWarnedOf) {
+  const auto dir = test::scratch_dir("cli-rate");
+  std::string text = test::session_head();
+  for (int k = 0; k < 100; ++k) {
+    for (const char* foot : {",L", ",R"})
+      text += test::session_row(std::to_string(0.02 * k) + foot);
+  }
+  const std::string session = test::write_text(dir / "slow.csv", text).string();
+  int status = -1;
+  const std::string out = run("segment " + session + " --out " + (dir / "o").string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find(session + ": the header says sample_rate_hz 100, but the times show 50 Hz"),
+            std::string::npos)
+      << out;
 }
 
 // A wrong command line is exit code 2, as a bad file is, and its message names what is wrong;

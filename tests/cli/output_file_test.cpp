@@ -1,9 +1,11 @@
 // The analyze and discrepancy outputs: files appear under their final names only together and
-// only when complete; a failed publication takes back what it had already renamed.
+// only when complete; a failed publication takes back what it had already renamed; an earlier
+// run's outputs go before a rerun.
 #include "src/cli/output_file.hpp"
 
 #include <gtest/gtest.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -95,40 +97,39 @@ TEST(OutputFile, AFileHandedOverToAnotherWriterIsCommittedOrRemovedAsItsOwn) {
   EXPECT_EQ(read(dir / "b.csv"), "written by path\n");
 }
 
-// analyze without --report into a folder of an earlier run with it: the old report.html beside
-// the new CSVs would show another run's fits.
-TEST(OutputFile, ADroppedFileOfAnEarlierRunIsRemovedAtCommitOnly) {
-  const fs::path dir = test::scratch_dir("output_dropped");
+// A rerun into the folder of an earlier run: the command's whole set goes before the work, so
+// that a run that fails leaves none of it (the earlier set would look like this run's).
+TEST(OutputFile, AnEarlierRunsOutputsAreRemovedAndOtherFilesKept) {
+  const fs::path dir = test::scratch_dir("output_earlier");
   test::write_text(dir / "report.html", "old\n");
   test::write_text(dir / "steps.csv", "old\n");
-  OutputSet set(dir);
-  set.add("steps.csv", "new\n");
-  set.drop("report.html");
-  set.drop("never_written.html");
-  EXPECT_TRUE(fs::exists(dir / "report.html"));
-  set.commit();
-  EXPECT_EQ(names_in(dir), std::vector<std::string>{"steps.csv"});
-  EXPECT_EQ(read(dir / "steps.csv"), "new\n");
+  test::write_text(dir / "notes.txt", "mine\n");
+  remove_earlier_outputs(dir, {"steps.csv", "report.html", "never_written.html"});
+  EXPECT_EQ(names_in(dir), std::vector<std::string>{"notes.txt"});
+  remove_earlier_outputs(dir / "not_there", {"steps.csv"});
 }
 
-TEST(OutputFile, ADroppedFileThatCannotBeRemovedStopsTheCommitBeforeAnyRename) {
-  const fs::path dir = test::scratch_dir("output_drop_fails");
+TEST(OutputFile, AnEarlierOutputThatCannotBeRemovedIsNamedInTheError) {
+  const fs::path dir = test::scratch_dir("output_earlier_stays");
   test::write_text(dir / "report.html" / "keep", "x");
-  {
-    OutputSet set(dir);
-    set.add("steps.csv", "new\n");
-    set.drop("report.html");
-    try {
-      set.commit();
-      FAIL() << "commit removed a folder that is not empty";
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find((dir / "report.html").string() +
-                                           ": cannot remove an earlier run's output"),
-                std::string::npos)
-          << e.what();
-    }
+  try {
+    remove_earlier_outputs(dir, {"report.html"});
+    FAIL() << "removed a folder that is not empty";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find((dir / "report.html").string() +
+                                         ": cannot remove an earlier run's output"),
+              std::string::npos)
+        << e.what();
   }
-  EXPECT_EQ(names_in(dir), std::vector<std::string>{"report.html"});
+}
+
+TEST(OutputFile, AnOutputFolderMustBeAFolderOrNotExistYet) {
+  const fs::path dir = test::scratch_dir("output_dir_check");
+  EXPECT_NO_THROW(check_output_dir(dir, "--out"));
+  EXPECT_NO_THROW(check_output_dir(dir / "new", "--out"));
+  EXPECT_THROW(check_output_dir("", "--out"), CLI::ValidationError);
+  EXPECT_THROW(check_output_dir(test::write_text(dir / "file", "x"), "--out"),
+               CLI::ValidationError);
 }
 
 TEST(OutputFile, AFolderThatCannotBeWrittenIsNamedInTheError) {

@@ -233,9 +233,9 @@ TEST(ReplayCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
   }
 }
 
-// The session is read while it is replayed: a bad line halfway is an input error (exit 2, the
-// file and line named) raised on the driver thread, which unwinds the monitor and the signal
-// watcher without a crash.
+// A bad line halfway is an input error (exit 2, the file and line named), found by the check of
+// the whole file before the first frame is played: nothing is published (it used to come after
+// the fits of the steps before it).
 TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
   const fs::path dir = test::scratch_dir("replay-bad-line");
   const fs::path good = test::cut_session(test::demo_session(), dir / "good.csv", 10.0);
@@ -251,6 +251,7 @@ TEST(ReplayCommand, ABadLineHalfwayIsAnInputErrorNamingTheLine) {
   std::string out;
   EXPECT_EQ(replay_at_max_speed(session, dir, &out), 2) << out;
   EXPECT_NE(out.find("bad.csv:" + std::to_string(bad + 1)), std::string::npos) << out;
+  EXPECT_TRUE(!fs::exists(dir / "log") || test::read_lcm_log(dir / "log").empty()) << out;
 }
 
 // The default config's max_gap_s (0.055 s) is under 1.5 periods at 20 Hz: the session cannot

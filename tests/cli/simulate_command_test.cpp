@@ -177,5 +177,32 @@ TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
   EXPECT_EQ(effects[0]["params"]["strength"], 0.12);  // the default
 }
 
+// An empty --effect-params was taken for the defaults, and of two equal keys nlohmann::json kept
+// the last without a word; a subject the session header cannot hold failed only at the writing.
+TEST(SimulateCommand, EmptyOrDuplicateEffectParamsAndAMultiLineSubjectAreUsageErrors) {
+  const auto dir = test::scratch_dir("simulate-bad-text");
+  const struct {
+    const char* args;
+    const char* says;
+  } bad[] = {
+      {"--effect hysteresis --effect-params ''", "--effect-params: is empty"},
+      {R"(--effect hysteresis --effect-params '{"strength":0.1,"strength":0.2}')",
+       "--effect-params: key 'strength' is given twice"},
+      {R"(--effect hysteresis --effect sensor_creep --effect-params '{"sensor_creep":{"gain":0.1,"tau_s":1,"gain":0.2}}')",
+       "--effect-params: key 'gain' is given twice"},
+      {R"(--effect hysteresis --effect sensor_creep --effect-params '{"hysteresis":{},"hysteresis":{}}')",
+       "--effect-params: key 'hysteresis' is given twice"},
+      {"--subject 'two\nlines'", "--subject: contains a line break"},
+      {"--subject ' padded'", "--subject: starts or ends with a blank"},
+  };
+  for (const auto& c : bad) {
+    int status = -1;
+    const std::string out = simulate(dir / "bad.csv", c.args, &status);
+    EXPECT_EQ(status, 2) << c.args << "\n" << out;
+    EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
+    EXPECT_FALSE(fs::exists(dir / "bad.csv")) << c.args;
+  }
+}
+
 }  // namespace
 }  // namespace gaitmon

@@ -155,6 +155,9 @@ TEST(FakeInsole, BadOptionsAreExitCodeTwoAndSayWhy) {
                 "--summary: the folder /proc/no-such does not exist"},
            Case{"--pty --link " + test::demo_session().string(),
                 "--link: " + test::demo_session().string() + " exists and is not a symlink"},
+           // Empty paths used to be taken for the options left out.
+           Case{"--summary ''", "--summary: the path is empty"},
+           Case{"--pty --link ''", "--link: the path is empty"},
        }) {
     SCOPED_TRACE(c.args);
     std::string out;

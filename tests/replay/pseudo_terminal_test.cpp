@@ -233,5 +233,16 @@ TEST(PointLink, ReplacesTheLinkAndLeavesNoTemporary) {
   EXPECT_FALSE(fs::exists(fs::symlink_status(link.string() + ".tmp")));
 }
 
+// fake-insole refuses a folder as --link up front; one that takes the link's place later (at a
+// reopen) fails the rename, which must not leave the new link behind under the temporary name.
+TEST(PointLink, AFolderInTheLinksPlaceIsAnErrorThatLeavesNoTemporary) {
+  const fs::path dir = test::scratch_dir("point-link-folder");
+  const fs::path link = dir / "insole";
+  fs::create_directories(link);
+  EXPECT_THROW(point_link(link, "/dev/pts/998"), fs::filesystem_error);
+  EXPECT_TRUE(fs::is_directory(link));
+  EXPECT_FALSE(fs::exists(fs::symlink_status(link.string() + ".tmp")));
+}
+
 }  // namespace
 }  // namespace gaitmon::replay

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -137,6 +139,31 @@ TEST(SessionByteSource, RefusesABadSessionAndSpeed) {
   const fs::path bad = test::write_text(test::scratch_dir("bad") / "bad.csv", "t_s,foot\n");
   EXPECT_THROW(SessionByteSource(bad, WireFormat(), 1.0), InputError);
   EXPECT_THROW(SessionByteSource(test::demo_session(), WireFormat(), 0.0), std::invalid_argument);
+}
+
+// A replay publishes what it plays: a bad line near the end found while playing would come after
+// the frames before it were out. The whole file is checked first; a header alone is no session.
+TEST(SessionByteSource, ABadLastLineOrNoFrameIsFoundBeforeAnythingIsPlayed) {
+  const fs::path good = small_session("bad-last-line", 0.5);
+  std::ifstream in(good);
+  std::string text;
+  std::uint64_t lines = 0;
+  for (std::string line; std::getline(in, line); ++lines) text += line + "\n";
+  const fs::path bad =
+      test::write_text(good.parent_path() / "bad.csv", text + "0.5,L,not-a-number\n");
+  try {
+    SessionByteSource source(bad, WireFormat(), kMaxSpeed);
+    ADD_FAILURE() << "played " << play(source).frames.size() << " frames of a bad file";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), lines + 1) << e.what();
+  }
+  const fs::path empty = test::write_text(good.parent_path() / "empty.csv", test::session_head());
+  try {
+    SessionByteSource source(empty, WireFormat(), kMaxSpeed);
+    ADD_FAILURE() << "a session without frames was accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), empty.string() + ": no frames");
+  }
 }
 
 TEST(FaultInjector, EveryInjectedFaultIsCountedByTheDecoder) {
