@@ -678,6 +678,20 @@ std::optional<ContactEllipse> fit_irregular_ellipse(std::span<const ActiveCell> 
   return place({kase, *e}, origin, s.cells.size(), size);
 }
 
+namespace detail {
+
+ContactEllipse moment_ellipse(std::span<const ActiveCell> cells, CellSize size) {
+  check_size(size);
+  Scratch& s = scratch();
+  const auto anchor = snap_cells(cells, size, s);
+  if (!anchor) return {};
+  const Anchor origin = normalise(s.cells, *anchor, size);
+  return place({EllipseCase::Boundary, canonical(cell_moments(s.cells, size, s))}, origin,
+               s.cells.size(), size);
+}
+
+}  // namespace detail
+
 std::size_t ContactEllipseCache::KeyHash::operator()(const std::vector<std::int64_t>& key) const {
   // FNV-1a over the words.
   std::uint64_t h = 1469598103934665603ULL;

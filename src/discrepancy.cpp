@@ -33,6 +33,7 @@ using discrepancy_detail::CandidateSpec;
 using discrepancy_detail::diagnose;
 using discrepancy_detail::ParamSpec;
 using discrepancy_detail::residual_map;
+using discrepancy_detail::savgol_noise_sd;
 using discrepancy_detail::Unit;
 
 double g_of(double area, double P) {
@@ -687,21 +688,6 @@ struct Prepared {
   int left_out = 0;  // region-steps fitted on the contact ellipse while others had a footprint
   std::vector<std::pair<Foot, int>> step_ids;  // by ordinal
 };
-
-double savgol_noise_sd(std::span<const double> y) {
-  // Residual of the 5-point quadratic smoother; for white noise its SD is 0.717 of the noise's.
-  if (y.size() < 7) return 0.0;
-  std::vector<double> res;
-  for (std::size_t i = 2; i + 2 < y.size(); ++i) {
-    const double s =
-        (-3 * y[i - 2] + 12 * y[i - 1] + 17 * y[i] + 12 * y[i + 1] - 3 * y[i + 2]) / 35;
-    res.push_back(std::abs(y[i] - s));
-  }
-  std::nth_element(res.begin(), res.begin() + static_cast<std::ptrdiff_t>(res.size() / 2),
-                   res.end());
-  const double mad = res[res.size() / 2];
-  return 1.4826 * mad / std::sqrt(630.0 / 1225.0);
-}
 
 Prepared prepare(const DiscrepancyInput& input, int folds) {
   Prepared out;

@@ -35,6 +35,24 @@ int phase_bin(double phase, int bins) {
 
 }  // namespace
 
+double savgol_noise_sd(std::span<const double> y) {
+  // Residual of the 5-point quadratic smoother; for white noise its SD is 0.717 of the noise's.
+  if (y.size() < 7) return 0.0;
+  std::vector<double> res;
+  for (std::size_t i = 2; i + 2 < y.size(); ++i) {
+    const double s =
+        (-3 * y[i - 2] + 12 * y[i - 1] + 17 * y[i] + 12 * y[i + 1] - 3 * y[i + 2]) / 35;
+    res.push_back(std::abs(y[i] - s));
+  }
+  const auto mid = static_cast<std::ptrdiff_t>(res.size() / 2);
+  std::nth_element(res.begin(), res.begin() + mid, res.end());
+  double mad = res[static_cast<std::size_t>(mid)];
+  // An even count's median is the mean of its two middle values: the upper one alone read 2 %
+  // high over a stance's 60 frames.
+  if (res.size() % 2 == 0) mad = 0.5 * (mad + *std::max_element(res.begin(), res.begin() + mid));
+  return 1.4826 * mad / std::sqrt(630.0 / 1225.0);
+}
+
 ResidualMap residual_map(std::span<const Unit> units, const std::vector<std::vector<double>>& preds,
                          int bins) {
   ResidualMap map;

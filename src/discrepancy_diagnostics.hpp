@@ -10,6 +10,11 @@
 
 namespace gaitmon::discrepancy_detail {
 
+/// The SD of white noise on a smooth series, from the scatter of its samples about the 5-point
+/// quadratic (Savitzky-Golay) smoother, robust to outliers (MAD); 0 for fewer than 7 samples.
+/// The MAD's factor is the Gaussian's: uniform noise (one channel's rounding) reads 5.5 % high.
+double savgol_noise_sd(std::span<const double> y);
+
 /// Residual y - pred per region and stance-phase bin (`bins` of normalised stance time): RMS,
 /// mean and the noise floor's RMS, in newtons. Every region has `bins` cells, empty ones too.
 ResidualMap residual_map(std::span<const Unit> units, const std::vector<std::vector<double>>& preds,

@@ -31,7 +31,9 @@
 // for a smoothly changing one it leads by half a sample, as a lag shorter by that much would (5 ms
 // at 100 Hz, against time constants of 20 ms to 10 s; the discrepancy workflow's candidates use
 // the same update, so its fitted tau carries the same half sample).
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -93,6 +95,13 @@ class Hysteresis final : public SimulationEffect {
     const std::size_t key = tissue_key(s);
     if (key >= state_.size()) state_.resize(key + 1);
     State& st = state_[key];
+    if (st.contact_start_s != s.t_contact_start_s) {
+      // This is called in contact only: the swing before a contact, unsampled, unloads the
+      // tissue to d = 0.
+      st.z = -1.0 + (st.z + 1.0) * std::exp(-std::max(st.d_mm, 0.0) / transition_mm_);
+      st.d_mm = 0.0;
+      st.contact_start_s = s.t_contact_start_s;
+    }
     const double step_mm = s.d_mm - st.d_mm;
     if (step_mm != 0.0) {
       // The exact solution of dz/dd = (sign - z) / d_s over a monotone step.
@@ -106,7 +115,8 @@ class Hysteresis final : public SimulationEffect {
  private:
   struct State {
     double d_mm = 0.0;
-    double z = 0.0;
+    double z = -1.0;  ///< unloaded tissue has recovered
+    double contact_start_s = std::numeric_limits<double>::quiet_NaN();
   };
   double h_;
   double transition_mm_;

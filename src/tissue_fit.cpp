@@ -1039,6 +1039,29 @@ void check_series(const RegionSeries& s) {
 
 }  // namespace
 
+namespace detail {
+
+SeparableResiduals separable_residuals(const RegionSeries& series, const EllipsoidParams& declared,
+                                       const FitSettings& settings,
+                                       const std::array<double, 4>& theta) {
+  check_series(series);
+  std::vector<FitFrame> frames;
+  append_frames(series, settings.smoothing, settings.end_rate, 0, frames);
+  Layout layout;
+  layout.declared = phys_values(declared);
+  Residuals res;
+  evaluate(separable_data(frames, layout, settings.model),
+           Eigen::Vector4d(theta[0], theta[1], theta[2], theta[3]), res);
+  SeparableResiduals out;
+  out.residual.assign(res.r.begin(), res.r.end());
+  for (Eigen::Index row = 0; row < res.J.rows(); ++row) {
+    out.jacobian.push_back({res.J(row, 0), res.J(row, 1), res.J(row, 2), res.J(row, 3)});
+  }
+  return out;
+}
+
+}  // namespace detail
+
 RegionFit fit_region(const RegionSeries& series, const EllipsoidParams& declared,
                      const FitBounds& bounds, const FitSettings& settings) {
   return fit_region_session(std::span<const RegionSeries>(&series, 1), declared, bounds, settings);

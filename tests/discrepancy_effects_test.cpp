@@ -8,12 +8,17 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdio>
 #include <memory>
 #include <numbers>
 #include <string>
 #include <vector>
+
+#include "gaitmon/simulator.hpp"
+#include "gaitmon/tissue_model.hpp"
 
 namespace gaitmon::discrepancy_detail {
 namespace {
@@ -215,6 +220,248 @@ TEST(DiscrepancyEffects, ThoseThatGiveTheirSlopeGiveApplysSlopeFrameByFrame) {
     EXPECT_EQ(moved, static_cast<int>(kFrames)) << m.name;
   }
   EXPECT_EQ(with_slope, std::vector<std::string>{"sensor_saturation"});
+}
+
+// ---- The candidates against the simulator's effects and their closed forms ----
+
+constexpr double kFrameS = 0.01;
+constexpr double kStanceS = 0.6;
+const EllipsoidParams kHeelTissue{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
+
+double frame_time(int k) {
+  return static_cast<double>(k) / 100.0;
+}
+
+// One foot's heel over `contacts` stances 1.1 s apart that start between frames: the frames in
+// contact, with the model's exact force over a half-sine of deformation. The zero windows are
+// read 20 frames before the first and after the last frame of each stance.
+std::vector<Unit> heel_contacts(int contacts) {
+  std::vector<Unit> units;
+  for (int c = 0; c < contacts; ++c) {
+    const double start = 0.503 + 1.1 * c;
+    Unit u;
+    u.step = c;
+    u.dt_s = kFrameS;
+    u.t_contact_s = start;
+    u.prev = c - 1;
+    u.chain = 0;
+    int first = -1;
+    int last = -1;
+    for (int k = 0; k < 400 * contacts; ++k) {
+      const double x = (frame_time(k) - start) / kStanceS;
+      if (!(x > 0.0 && x < 1.0)) continue;
+      if (first < 0) first = k;
+      last = k;
+      const double d = 6.0 * std::sin(kPi * x);
+      const double ddot = 6.0 * kPi / kStanceS * std::cos(kPi * x);
+      u.t.push_back(frame_time(k));
+      u.d_mm.push_back(d);
+      u.area.push_back(contact_area_mm2(kHeelTissue, d));
+      u.y.push_back(force_n(kHeelTissue, d, ddot, ModelVariant::Correct));
+    }
+    u.t_pre_zero_s = frame_time(first - 20);
+    u.t_post_zero_s = frame_time(last + 20);
+    u.peak_n = *std::max_element(u.y.begin(), u.y.end());
+    units.push_back(u);
+  }
+  return units;
+}
+
+std::unique_ptr<Applied> candidate(const std::string& name, const std::vector<Unit>& units,
+                                   const std::vector<double>& theta, double cell_area_mm2 = 112.5,
+                                   double newtons_per_bit = 0.2824) {
+  for (const CandidateSpec& spec : candidate_specs(cell_area_mm2, newtons_per_bit)) {
+    if (spec.name == name) return spec.make(units, theta);
+  }
+  ADD_FAILURE() << "no candidate " << name;
+  return nullptr;
+}
+
+struct Agreement {
+  double force = 0.0;   ///< the largest |candidate - simulator| over the contact frames / peak
+  double swing = 0.0;   ///< the same for the reading in the zero windows, summed over a unit's two
+  double effect = 0.0;  ///< the largest |simulator - model| over the contact frames / peak
+};
+
+// The candidate is applied to the exact model force (each unit's y). The simulator's tissue
+// effect sees the contact frames only, as simulate_session calls it, and its sensor effect every
+// frame of three cells that share the region's force (in bits; swing frames read 0).
+Agreement against_simulator(const std::string& name, const EffectParams& params,
+                            const std::vector<double>& theta, bool sensor) {
+  const std::vector<Unit> units = heel_contacts(2);
+  const auto effect = make_simulation_effect(name, params);
+  const auto applied = candidate(name, units, theta);
+  const double newtons_per_bit = 0.2824;
+  const std::array<double, 3> share{0.5, 0.3, 0.2};
+  std::vector<double> window_sum(units.size(), 0.0);
+  Agreement worst;
+  std::size_t ui = 0;
+  std::size_t i = 0;
+  for (int k = 0; k < 400 * static_cast<int>(units.size()); ++k) {
+    const double t = frame_time(k);
+    const bool in_contact = ui < units.size() && i < units[ui].t.size() && units[ui].t[i] == t;
+    const double model = in_contact ? units[ui].y[i] : 0.0;
+    double simulated = model;
+    if (sensor) {
+      simulated = 0.0;
+      for (std::size_t cell = 0; cell < share.size(); ++cell) {
+        simulated += newtons_per_bit * effect->sensor_bits({Foot::Left, cell, t},
+                                                           share[cell] * model / newtons_per_bit);
+      }
+      for (std::size_t w = 0; w < units.size(); ++w) {
+        if (t == units[w].t_pre_zero_s || t == units[w].t_post_zero_s) window_sum[w] += simulated;
+      }
+    } else if (in_contact) {
+      TissueSample sample;
+      sample.t_s = t;
+      sample.t_contact_start_s = units[ui].t_contact_s;
+      sample.d_mm = units[ui].d_mm[i];
+      sample.area_mm2 = units[ui].area[i];
+      simulated = effect->tissue_force_n(sample, model);
+    }
+    if (!in_contact) continue;
+    const Unit& u = units[ui];
+    std::vector<double> out(u.y.size());
+    applied->apply(ui, u, u.y, out, 0);
+    worst.force = std::max(worst.force, std::abs(out[i] - simulated) / u.peak_n);
+    worst.effect = std::max(worst.effect, std::abs(simulated - model) / u.peak_n);
+    if (++i == u.t.size()) {
+      ++ui;
+      i = 0;
+    }
+  }
+  for (std::size_t w = 0; w < units.size(); ++w) {
+    // swing_reading is the mean over the two windows.
+    worst.swing = std::max(
+        worst.swing, std::abs(2.0 * applied->swing_reading(w) - window_sum[w]) / units[w].peak_n);
+  }
+  return worst;
+}
+
+// Hysteresis, creep, relaxation and the impact are meant to be the simulator's effects in the
+// workflow's terms (README, "The simulator's effects"): at the simulator's parameters, applied
+// to the exact model force, each candidate reproduces the simulated force, on the foot's first
+// contact and on the next one, whose state comes through the swing. The reference is the
+// simulator's own effect (src/simulation_effects.cpp), driven frame by frame as the simulator
+// drives it. Exact but for relaxation: the simulator's lag, stepped in contact only, takes the
+// whole swing before a contact as loaded with the contact's first force (known, README), where
+// the candidate's decays without input to the frame before it, so they differ by up to strength
+// times that force.
+TEST(DiscrepancyEffects, CandidatesReproduceTheSimulatorsEffectsAtItsParameters) {
+  const Agreement hysteresis = against_simulator(
+      "hysteresis", {{"strength", 0.12}, {"transition_mm", 0.3}}, {0.12, 0.3}, false);
+  const Agreement relaxation = against_simulator(
+      "stress_relaxation", {{"strength", 0.3}, {"tau_s", 0.15}}, {0.3, 0.15}, false);
+  const Agreement impact = against_simulator(
+      "impact_transient", {{"amplitude_n", 80.0}, {"duration_s", 0.04}}, {80.0, 0.04}, false);
+  const Agreement creep =
+      against_simulator("sensor_creep", {{"gain", 0.15}, {"tau_s", 1.5}}, {0.15, 1.5}, true);
+  double first_share = 0.0;
+  for (const Unit& u : heel_contacts(2))
+    first_share = std::max(first_share, u.y.front() / u.peak_n);
+  const double relaxation_bound = 0.3 * first_share;
+  std::printf(
+      "candidate - simulator, share of the peak: hysteresis %.2e relaxation %.2e (bound %.2e) "
+      "impact %.2e creep %.2e, creep in the zero windows %.2e\n",
+      hysteresis.force, relaxation.force, relaxation_bound, impact.force, creep.force, creep.swing);
+  // Each effect changes the force by far more than the agreement asserted.
+  for (const Agreement* a : {&hysteresis, &relaxation, &impact, &creep}) EXPECT_GT(a->effect, 0.01);
+  EXPECT_LT(hysteresis.force, 1e-11);
+  EXPECT_LT(relaxation.force, relaxation_bound);
+  EXPECT_LT(impact.force, 1e-12);
+  EXPECT_LT(creep.force, 1e-12);
+  EXPECT_LT(creep.swing, 1e-12);
+}
+
+// Closed forms on simple inputs, whatever the simulator does. Hysteresis on a triangle of
+// deformation (0.1 mm steps up to 3 mm and back) under a constant 100 N, from the unloaded state
+// z = -1: dz/dd = (sign(dd) - z) / d_s gives z = 1 - 2 exp(-d / d_s) while loading and
+// z = -1 + (1 + z(3)) exp(-(3 - d) / d_s) while unloading. Creep and relaxation under a
+// constant 200 N held from the frame before the first: the continuous first-order lag of that
+// step, 1 - exp(-(t - t0 + dt) / tau), times +gain or -strength.
+TEST(DiscrepancyEffects, HysteresisCreepAndRelaxationFollowTheirClosedForms) {
+  Unit triangle;
+  std::vector<double> expected;
+  const double h = 0.12;
+  const double ds = 0.3;
+  const double z_top = 1.0 - 2.0 * std::exp(-3.0 / ds);
+  for (int i = 1; i <= 59; ++i) {
+    const double d = 0.1 * (i <= 30 ? i : 60 - i);
+    const double z =
+        i <= 30 ? 1.0 - 2.0 * std::exp(-d / ds) : -1.0 + (1.0 + z_top) * std::exp(-(3.0 - d) / ds);
+    triangle.t.push_back(kFrameS * i);
+    triangle.d_mm.push_back(d);
+    expected.push_back(100.0 * (1.0 + h * z));
+  }
+  const std::vector<Unit> one{triangle};
+  const std::vector<double> hysteresis = apply(*candidate("hysteresis", one, {h, ds}), 0, triangle,
+                                               std::vector<double>(expected.size(), 100.0), 0);
+  for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_NEAR(hysteresis[i], expected[i], 1e-10);
+
+  Unit held;
+  held.dt_s = kFrameS;
+  for (int i = 0; i < 300; ++i) {
+    held.t.push_back(2.0 + kFrameS * i);
+    held.y.push_back(200.0);
+  }
+  const std::vector<Unit> alone{held};
+  const std::vector<double> creep =
+      apply(*candidate("sensor_creep", alone, {0.15, 1.5}), 0, held, held.y, 0);
+  const std::vector<double> relaxed =
+      apply(*candidate("stress_relaxation", alone, {0.3, 0.15}), 0, held, held.y, 0);
+  for (std::size_t i = 0; i < held.t.size(); ++i) {
+    const double since = held.t[i] - held.t.front() + kFrameS;
+    EXPECT_NEAR(creep[i], 200.0 * (1.0 + 0.15 * (1.0 - std::exp(-since / 1.5))), 1e-9);
+    EXPECT_NEAR(relaxed[i], 200.0 * (1.0 - 0.3 * (1.0 - std::exp(-since / 0.15))), 1e-9);
+  }
+  EXPECT_NEAR(relaxed.back(), 140.0, 1e-6);  // a held load relaxes to (1 - strength)
+}
+
+// The ceiling's candidate against the capped raster it stands for. A paraboloid pressure
+// p0 (1 - rho^2) over a heel-sized ellipse (30 x 45 mm) is read by cells of a fifth of the
+// insole's size (1.5 x 3 mm, 255 counts = 64 N/cm^2) capped at 255 counts. Reference: the
+// integral of the capped field, F0 (1 - L^2) with L = 1 - 255 / p0 (the capped share of the
+// squared radius), which the raster's sum must follow to within its midpoint rule's error.
+// The candidate sees the model force at the footprint the capped cells give, phi(L) times the
+// contact's area (README, "Saturation and the footprint"), where a shallow contact's force is
+// F0 phi^(2 + n) (n = 0.3, the candidate's), and must return the capped force.
+TEST(DiscrepancyEffects, SaturationMatchesTheCappedIntegralOfAParaboloid) {
+  const double a = 30.0;
+  const double b = 45.0;
+  const double w = 1.5;
+  const double hgt = 3.0;
+  const double cell_area = w * hgt;
+  const double n_per_count = 0.64 / 255.0 * cell_area;  // 64 N/cm^2 = 0.64 N/mm^2
+  const double contact_area = kPi * a * b;
+  double worst_raster = 0.0;
+  double worst_candidate = 0.0;
+  for (double p0 : {300.0, 400.0, 600.0, 1000.0}) {
+    const double F0 = p0 * n_per_count / cell_area * contact_area / 2.0;
+    const double L = 1.0 - 255.0 / p0;
+    const double capped = F0 * (1.0 - L * L);
+    double raster = 0.0;
+    for (int j = -20; j <= 20; ++j) {
+      for (int i = -25; i <= 25; ++i) {
+        const double x = (i + 0.25) * w;
+        const double y = (j + 0.4) * hgt;
+        const double rho2 = x * x / (a * a) + y * y / (b * b);
+        if (rho2 < 1.0) raster += std::min(p0 * (1.0 - rho2), 255.0) * n_per_count;
+      }
+    }
+    const double phi = (1.0 + L + L * L) / (1.0 + L);
+    Unit u;
+    u.area = {phi * contact_area};
+    u.t = {0.0};
+    const std::vector<Unit> units{u};
+    const auto ceiling = candidate("sensor_saturation", units, {255.0}, cell_area, n_per_count);
+    const double read = apply(*ceiling, 0, u, {F0 * std::pow(phi, 2.3)}, 0)[0];
+    std::printf("p0 %4.0f counts: capped / uncapped force %.4f, raster %.4f, candidate %.4f\n", p0,
+                capped / F0, raster / F0, read / F0);
+    worst_raster = std::max(worst_raster, std::abs(raster - capped) / F0);
+    worst_candidate = std::max(worst_candidate, std::abs(read - capped) / F0);
+  }
+  EXPECT_LT(worst_raster, 5e-3);
+  EXPECT_LT(worst_candidate, 1e-4);
 }
 
 }  // namespace

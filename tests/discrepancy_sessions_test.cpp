@@ -249,7 +249,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   // cells, rounding), so an extension that models only the effect cannot shrink the gap by more
   // than 1 - floor / baseline (hysteresis also takes a little of the floor: two of its sessions
   // ended below it). When measured, that ceiling was under the 40 % in one session
-  // (hysteresis, size 45-46: 28.3 %, where the named effect reached the floor), and the named
+  // (hysteresis, size 45-46: 27.9 %, where the named effect reached the floor), and the named
   // effects removed 50-116 % of the squared excess over the floor (the least, 50-60 %, for
   // stress relaxation; 89 % or more for every other effect). With the floor in newtons the
   // ceilings move with the peaks: relaxation 35 / 33 / 43 %, hysteresis 45-46 44 %. The effect

@@ -45,15 +45,35 @@ TEST(SimulationEffects, StressRelaxationRelaxesAHeldLoadTowardOneMinusStrength) 
 
 TEST(SimulationEffects, HysteresisRaisesLoadingAndLowersUnloadingRateIndependently) {
   auto e = make_simulation_effect("hysteresis", {{"strength", 0.1}, {"transition_mm", 0.25}});
-  // From z = 0, compressing by 1 mm drives z to 1 - exp(-4) whatever the time step.
+  // From the unloaded state z = -1, compressing by 1 mm drives z to 1 - 2 exp(-4) whatever the
+  // time step.
   const double up = e->tissue_force_n(tissue(Region::Heel, 0.01, 1.0), 200.0);
-  EXPECT_NEAR(up, 200.0 * (1.0 + 0.1 * (1.0 - std::exp(-4.0))), 1e-9);
+  EXPECT_NEAR(up, 200.0 * (1.0 + 0.1 * (1.0 - 2.0 * std::exp(-4.0))), 1e-9);
   // Holding the deformation keeps the state.
   EXPECT_DOUBLE_EQ(e->tissue_force_n(tissue(Region::Heel, 5.0, 1.0), 200.0), up);
   // Recovering by 2 mm: z = -1 + (z0 + 1) exp(-8).
-  const double z0 = 1.0 - std::exp(-4.0);
+  const double z0 = 1.0 - 2.0 * std::exp(-4.0);
   EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 5.01, -1.0), 200.0),
               200.0 * (1.0 + 0.1 * (-1.0 + (z0 + 1.0) * std::exp(-8.0))), 1e-9);
+}
+
+// The simulator calls its tissue effects in contact only, but the swing between two contacts
+// unloads the tissue to d = 0. Reference: the closed forms of dz/dd = (sign(dd) - z) / d_s
+// through the swing. Loading by 1 mm from the unloaded state (z = -1) gives
+// z1 = 1 - 2 exp(-1 / d_s), unloading by 0.8 mm z2 = -1 + (z1 + 1) exp(-0.8 / d_s), by the last
+// 0.2 mm in the swing z3 = -1 + (z2 + 1) exp(-0.2 / d_s), and loading from 0 to 0.5 mm in the
+// next contact z = 1 - (1 - z3) exp(-0.5 / d_s).
+TEST(SimulationEffects, HysteresisUnloadsThroughTheSwingBetweenContacts) {
+  const double ds = 0.25;
+  auto e = make_simulation_effect("hysteresis", {{"strength", 0.1}, {"transition_mm", ds}});
+  e->tissue_force_n(tissue(Region::Heel, 0.01, 1.0, 0.0), 200.0);
+  e->tissue_force_n(tissue(Region::Heel, 0.02, 0.2, 0.0), 200.0);
+  const double z1 = 1.0 - 2.0 * std::exp(-1.0 / ds);
+  const double z2 = -1.0 + (z1 + 1.0) * std::exp(-0.8 / ds);
+  const double z3 = -1.0 + (z2 + 1.0) * std::exp(-0.2 / ds);
+  const double z = 1.0 - (1.0 - z3) * std::exp(-0.5 / ds);
+  EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 1.01, 0.5, 1.005), 200.0),
+              200.0 * (1.0 + 0.1 * z), 1e-9);
 }
 
 TEST(SimulationEffects, ImpactTransientAddsAHalfSineAtHeelContactOnly) {

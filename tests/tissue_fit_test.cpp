@@ -565,6 +565,134 @@ FitSettings raw(ModelVariant model = ModelVariant::Correct) {
   return settings;
 }
 
+// theta = (ln kbar, n, ln cbar, m), the default fit's variables.
+std::array<double, 4> material_theta(double kbar, double n, double cbar, double m) {
+  return {std::log(kbar), n, std::log(cbar), m};
+}
+
+// The Levenberg-Marquardt steps of the default fit rest on its analytic Jacobian, data rows and
+// non-negativity penalty rows alike. Reference: central differences of the residuals in each
+// variable (h = 1e-5), whose truncation error is O(h^2). Checked for every model variant at the
+// truth, at a point across the box, and at a damping strong enough that the model pulls while
+// unloading, so that the penalty rows are active. A row whose penalty switches on or off between
+// the two difference points sits on its kink and has no derivative there; such rows are skipped
+// and counted.
+TEST(TissueFit, AnalyticJacobianMatchesCentralDifferences) {
+  const std::array<std::array<double, 4>, 3> points{material_theta(0.117, 0.294, 0.011, 1.18),
+                                                    material_theta(0.05, 0.7, 0.03, 0.9),
+                                                    material_theta(0.117, 0.294, 0.5, 0.2)};
+  double worst = 0.0;
+  for (ModelVariant variant :
+       {ModelVariant::Correct, ModelVariant::SeedEq25, ModelVariant::MaterialRate}) {
+    const RegionSeries s = model_series(kHeel, variant, 60);
+    for (std::size_t p = 0; p < points.size(); ++p) {
+      const auto at = detail::separable_residuals(s, kHeel, raw(variant), points[p]);
+      const std::size_t rows = at.residual.size();
+      ASSERT_EQ(rows, 2 * s.t_s.size());
+      ASSERT_EQ(at.jacobian.size(), rows);
+      // The penalty as documented (README): 1000 x max(0, -F_model), F_model = residual + F.
+      std::size_t penalised = 0;
+      for (std::size_t i = 0; i < rows / 2; ++i) {
+        const double model = at.residual[i] + s.force_n[i];
+        EXPECT_NEAR(at.residual[rows / 2 + i], 1e3 * std::max(0.0, -model),
+                    1e-9 * (1.0 + s.force_n[i]));
+        penalised += model < 0.0 ? 1 : 0;
+      }
+      // The last point's damping outweighs the stiffness over several frames: while unloading,
+      // or under SeedEq25, which subtracts it, while loading.
+      if (p == 2) {
+        EXPECT_GE(penalised, 5U) << model_variant_name(variant);
+      }
+      int kinks = 0;
+      for (std::size_t k = 0; k < 4; ++k) {
+        const double h = 1e-5;
+        std::array<double, 4> up = points[p];
+        std::array<double, 4> down = points[p];
+        up[k] += h;
+        down[k] -= h;
+        const auto plus = detail::separable_residuals(s, kHeel, raw(variant), up);
+        const auto minus = detail::separable_residuals(s, kHeel, raw(variant), down);
+        double column = 0.0;
+        for (std::size_t i = 0; i < rows; ++i)
+          column = std::max(column, std::abs(at.jacobian[i][k]));
+        ASSERT_GT(column, 0.0);
+        for (std::size_t i = 0; i < rows; ++i) {
+          if (i >= rows / 2 && (plus.residual[i] > 0.0) != (minus.residual[i] > 0.0)) {
+            ++kinks;
+            continue;
+          }
+          const double fd = (plus.residual[i] - minus.residual[i]) / (2.0 * h);
+          const double error = std::abs(at.jacobian[i][k] - fd) / column;
+          worst = std::max(worst, error);
+          EXPECT_LT(error, 1e-6) << model_variant_name(variant) << " point " << p << " row " << i
+                                 << " variable " << k << ": analytic " << at.jacobian[i][k]
+                                 << " central difference " << fd;
+        }
+      }
+      EXPECT_LE(kinks, 4) << model_variant_name(variant) << " point " << p;
+    }
+  }
+  std::printf("analytic Jacobian against central differences: worst error %.2e of the column\n",
+              worst);
+}
+
+// The reported standard errors are sigma^2 (J^T J)^-1 with J the data rows' Jacobian at the
+// optimum and sigma^2 = SSR / (frames - 4). Reference: J by central differences of the data
+// residuals at the reported optimum, and SSR from the reported model forces, inverted here by
+// Eigen. The series is the model's own with 2 N of Gaussian noise, so that every parameter is
+// determined and off its bounds.
+TEST(TissueFit, StandardErrorsFollowTheDataJacobianAtTheOptimum) {
+  RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  for (double& f : s.force_n) f += noise(rng);
+  const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, raw());
+  ASSERT_EQ(fit.status, FitStatus::Ok) << fit.reason;
+  ASSERT_TRUE(fit.material_covariance.has_value());
+  for (const Estimate* e : {&fit.kbar_n_per_mm3, &fit.n, &fit.cbar_ns_per_mm3, &fit.m}) {
+    ASSERT_FALSE(e->at_bound);
+  }
+  const std::array<double, 4> theta =
+      material_theta(fit.kbar_n_per_mm3.value, fit.n.value, fit.cbar_ns_per_mm3.value, fit.m.value);
+  const Eigen::Index frames = static_cast<Eigen::Index>(s.t_s.size());
+  Eigen::MatrixXd J(frames, 4);
+  for (Eigen::Index k = 0; k < 4; ++k) {
+    const double h = 1e-5;
+    std::array<double, 4> up = theta;
+    std::array<double, 4> down = theta;
+    up[static_cast<std::size_t>(k)] += h;
+    down[static_cast<std::size_t>(k)] -= h;
+    const auto plus = detail::separable_residuals(s, kHeel, raw(), up);
+    const auto minus = detail::separable_residuals(s, kHeel, raw(), down);
+    for (Eigen::Index i = 0; i < frames; ++i) {
+      const auto row = static_cast<std::size_t>(i);
+      J(i, k) = (plus.residual[row] - minus.residual[row]) / (2.0 * h);
+    }
+  }
+  double ssr = 0.0;
+  for (std::size_t i = 0; i < s.t_s.size(); ++i) {
+    ssr += (fit.model_force_n[i] - s.force_n[i]) * (fit.model_force_n[i] - s.force_n[i]);
+  }
+  const Eigen::Matrix4d cov = ssr / static_cast<double>(frames - 4) * (J.transpose() * J).inverse();
+  const std::array<double, 4> se{fit.kbar_n_per_mm3.se / fit.kbar_n_per_mm3.value, fit.n.se,
+                                 fit.cbar_ns_per_mm3.se / fit.cbar_ns_per_mm3.value, fit.m.se};
+  double worst = 0.0;
+  for (std::size_t a = 0; a < 4; ++a) {
+    const auto ia = static_cast<Eigen::Index>(a);
+    const double expected = std::sqrt(cov(ia, ia));
+    worst = std::max(worst, std::abs(se[a] - expected) / expected);
+    EXPECT_NEAR(se[a], expected, 1e-4 * expected) << "parameter " << a;
+    for (std::size_t b = 0; b < 4; ++b) {
+      const auto ib = static_cast<Eigen::Index>(b);
+      const double scale = std::sqrt(cov(ia, ia) * cov(ib, ib));
+      EXPECT_NEAR((*fit.material_covariance)[a][b], cov(ia, ib), 1e-4 * scale)
+          << "covariance " << a << ", " << b;
+    }
+  }
+  std::printf("standard errors against sigma^2 (J^T J)^-1 by central differences: worst %.2e\n",
+              worst);
+}
+
 TEST(TissueFit, RecoversANoiseFreeModelSeries) {
   const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
   const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, raw());

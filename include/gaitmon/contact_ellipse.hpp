@@ -108,6 +108,15 @@ enum class BoundaryPoints { Neighbours, ConvexHull };
 std::optional<ContactEllipse> fit_irregular_ellipse(std::span<const ActiveCell> cells,
                                                     CellSize size, BoundaryPoints points);
 
+namespace detail {
+
+/// Rule 5's last fallback alone on cells snapped as rule 0 snaps them (no noise removal): the
+/// moment-equivalent ellipse, kase Boundary. Exposed for tests, which cannot reach it through a
+/// pattern whose Case 3 fits succeed. kase None for no finite cell. Internal.
+ContactEllipse moment_ellipse(std::span<const ActiveCell> cells, CellSize size);
+
+}  // namespace detail
+
 /// fit_contact_ellipse with the Case 3 fits memoised by the pattern left after Case 1, taken
 /// relative to its lowest row and leftmost half-column (a fit does not depend on where the
 /// pattern sits), and by the cell size. Patterns repeat from frame to frame and step to step, and

@@ -136,4 +136,21 @@ RegionFit fit_region_session(std::span<const RegionSeries> stances, const Ellips
 /// eq 58 for one series: RMS(measured - model) / max(measured) x 100.
 double nrmse_pct(std::span<const double> measured, std::span<const double> model);
 
+namespace detail {
+
+/// The default fit's residuals and their analytic Jacobian, so that tests can check the
+/// derivatives the Levenberg-Marquardt step relies on against finite differences. Internal.
+struct SeparableResiduals {
+  std::vector<double> residual;                 ///< N data rows, then N penalty rows
+  std::vector<std::array<double, 4>> jacobian;  ///< d residual / d (ln kbar, n, ln cbar, m)
+};
+
+/// At theta = (ln kbar, n, ln cbar, m), for `series` prepared as fit_region prepares it under
+/// `settings` (P, C and d0 from `declared`). Throws std::invalid_argument as fit_region does.
+SeparableResiduals separable_residuals(const RegionSeries& series, const EllipsoidParams& declared,
+                                       const FitSettings& settings,
+                                       const std::array<double, 4>& theta);
+
+}  // namespace detail
+
 }  // namespace gaitmon
