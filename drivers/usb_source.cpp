@@ -184,6 +184,9 @@ void UsbSource::run(const BytesHandler& on_bytes, const StateHandler& on_state) 
   const auto max_backoff = std::chrono::milliseconds(d.settings.reconnect_max_ms);
   LinkState state = LinkState::Connecting;
   on_state(state, name);
+  // A claim refused (another program holds the interface, no permission) says why once, not at
+  // every attempt; a new reason says it again.
+  std::string claim_error;
   while (!d.stopping.load()) {
     if (state == LinkState::Disconnected) {
       state = LinkState::Connecting;
@@ -193,7 +196,13 @@ void UsbSource::run(const BytesHandler& on_bytes, const StateHandler& on_state) 
         libusb_open_device_with_vid_pid(d.context, d.settings.vendor_id, d.settings.product_id);
     if (handle != nullptr) {
       libusb_set_auto_detach_kernel_driver(handle, 1);
-      if (libusb_claim_interface(handle, d.settings.interface) == 0) {
+      const int claimed = libusb_claim_interface(handle, d.settings.interface);
+      if (claimed != 0 && claim_error != libusb_error_name(claimed)) {
+        claim_error = libusb_error_name(claimed);
+        on_state(LinkState::Connecting, name + ": cannot claim the interface: " + claim_error);
+      }
+      if (claimed == 0) {
+        claim_error.clear();
         // A clear that fails leaves the endpoint stalling: the link is lost again and retried.
         if (d.halted && libusb_clear_halt(handle, d.settings.endpoint) == 0) d.halted = false;
         state = LinkState::Connected;
