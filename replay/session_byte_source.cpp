@@ -5,8 +5,6 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "gaitmon/error.hpp"
-
 namespace gaitmon::replay {
 
 SessionEncoder::SessionEncoder(const drivers::WireFormat& format, InsoleSize size)
@@ -38,14 +36,7 @@ SessionByteSource::SessionByteSource(const std::filesystem::path& session,
                                      const drivers::WireFormat& format, double speed)
     : format_(format), speed_(speed) {
   if (!(speed > 0.0)) throw std::invalid_argument("SessionByteSource: speed must be > 0");
-  // A bad line found while playing would come after the frames before it were delivered (and
-  // published by a replay): the whole file is read once first, one line at a time.
-  SessionReader check(session);
-  Frame frame;
-  std::uint64_t frames = 0;
-  while (check.next(frame)) ++frames;
-  if (frames == 0) throw InputError(session.string(), 0, "no frames");
-  warn_on_rate_mismatch(check);
+  check_whole_session(session);
   reader_ = std::make_unique<SessionReader>(session);
 }
 

@@ -542,6 +542,16 @@ void warn_on_rate_mismatch(const SessionReader& reader) {
   }
 }
 
+std::uint64_t check_whole_session(const std::filesystem::path& path) {
+  SessionReader reader(path);
+  Frame frame;
+  std::uint64_t frames = 0;
+  while (reader.next(frame)) ++frames;
+  if (frames == 0) throw InputError(path.string(), 0, "no frames");
+  warn_on_rate_mismatch(reader);
+  return frames;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Writer
 

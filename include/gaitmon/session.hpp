@@ -86,6 +86,12 @@ class SessionReader {
 /// frames, so a wrong header rate misjudges every one of them.
 void warn_on_rate_mismatch(const SessionReader& reader);
 
+/// Reads the whole session once, before anything is played from it: a bad line found while
+/// playing would come after the frames before it were sent. Throws InputError at the first bad
+/// line, or "no frames" for a header alone; warns as warn_on_rate_mismatch does. Returns the
+/// number of frames.
+std::uint64_t check_whole_session(const std::filesystem::path& path);
+
 /// Why `value` cannot be a header value that reads back as written (a line break, or a blank at
 /// either end, which the reader trims), or an empty string if it can.
 std::string header_value_problem(std::string_view value);

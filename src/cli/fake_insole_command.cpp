@@ -69,6 +69,7 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
     throw CLI::ValidationError("--link and --hold", "need --pty");
   }
   const drivers::WireFormat format(config.wire);
+  check_whole_session(args.session);
   SessionReader reader(args.session);
   replay::SessionEncoder encoder(format, reader.header().insole_size);
   replay::FaultInjector injector(args.faults, format);
@@ -163,7 +164,7 @@ void add_fake_insole_command(CLI::App& app, const GlobalOptions& global) {
       "through a pseudo-terminal (--pty; its path is the first line on stdout) or to stdout");
   sub->add_option("session", args->session, "Session CSV v1 to play")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(session_file_read_twice());
   sub->add_option("--speed", args->speed, "Playback speed: x real time (at least 0.001), or max")
       ->capture_default_str();
   sub->add_flag("--pty", args->pty, "Create a pseudo-terminal and print its path");

@@ -101,7 +101,7 @@ void add_replay_command(CLI::App& app, const GlobalOptions& global) {
       "Replays a session CSV through the live pipeline (fake driver, wire format, decoder, "
       "monitor, LCM); one line per fitted step. No argument: the bundled demo session");
   sub->add_option("session", args->session, "Session CSV v1 (default: the bundled demo)")
-      ->check(CLI::ExistingFile);
+      ->check(session_file_read_twice());
   sub->add_option("--speed", args->speed, "x real time (default 1, at least 0.001), or max");
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->callback([&global, args] { run_replay(global, *args); });

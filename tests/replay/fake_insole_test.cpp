@@ -2,6 +2,7 @@
 // the serial driver and decoder read it, and every frame (or every injected fault) is
 // accounted for against the session file.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <chrono>
@@ -167,6 +168,47 @@ TEST(FakeInsole, BadOptionsAreExitCodeTwoAndSayWhy) {
               2)
         << out;
     EXPECT_NE(out.find(c.message), std::string::npos) << out;
+  }
+}
+
+// A bad line late in the file used to be found after the frames before it were sent, as a
+// device that streams half a recording and then stops.
+TEST(FakeInsole, ABadLastLineIsFoundBeforeAnyFrameIsSent) {
+  const fs::path dir = test::scratch_dir("fake-bad-line");
+  const fs::path good = test::cut_session(test::demo_session(), dir / "good.csv", 5.0);
+  std::ifstream in(good);
+  std::string text;
+  std::size_t lines = 0;
+  for (std::string line; std::getline(in, line); ++lines) text += line + "\n";
+  text += "99.0,L,not-a-number\n";
+  const fs::path session = test::write_text(dir / "bad.csv", text);
+  const fs::path wire = dir / "wire.bin";
+  std::string out;
+  // The wire goes to a file, the messages to `out`.
+  EXPECT_EQ(test::run_command("(timeout 30 " + test::gaitmon_binary().string() + " fake-insole " +
+                                  session.string() + " --speed max > " + wire.string() + ")",
+                              &out),
+            2)
+      << out;
+  EXPECT_NE(out.find("bad.csv:" + std::to_string(lines + 1)), std::string::npos) << out;
+  EXPECT_EQ(fs::file_size(wire), 0u);
+}
+
+// Both read the session twice (checked whole, then played): a pipe gives its lines once.
+TEST(FakeInsole, APipeForASessionIsRefusedWithTheReason) {
+  const fs::path fifo = test::scratch_dir("fake-pipe") / "session.csv";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  for (const char* command : {"fake-insole", "replay"}) {
+    SCOPED_TRACE(command);
+    std::string out;
+    EXPECT_EQ(test::run_command("timeout 30 " + test::gaitmon_binary().string() + " " + command +
+                                    " " + fifo.string(),
+                                &out),
+              2)
+        << out;
+    EXPECT_NE(out.find("is not a regular file; this command reads a session twice"),
+              std::string::npos)
+        << out;
   }
 }
 
