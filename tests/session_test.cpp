@@ -101,15 +101,6 @@ void expect_input_error(const fs::path& path, std::uint64_t line, const std::str
                       "stream of " + path.filename().string(), line, reason);
 }
 
-TEST(SessionSensorCount, MatchesTheFormat) {
-  EXPECT_EQ(session_sensor_count(InsoleSize::S35_36), 93u);
-  EXPECT_EQ(session_sensor_count(InsoleSize::S37_38), 107u);
-  EXPECT_EQ(session_sensor_count(InsoleSize::S39_40), 116u);
-  EXPECT_EQ(session_sensor_count(InsoleSize::S41_42), 129u);
-  EXPECT_EQ(session_sensor_count(InsoleSize::S43_44), 151u);
-  EXPECT_EQ(session_sensor_count(InsoleSize::S45_46), 161u);
-}
-
 // ---------------------------------------------------------------------------------------------
 // Good input
 

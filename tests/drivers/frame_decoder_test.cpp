@@ -1,12 +1,11 @@
-// The wire format and frame decoder: checksum and frame test vectors, round trips for every
-// size and layout, any split of the stream, and every fault the decoder must survive and count.
+// The frame decoder: round trips for every size and layout, any split of the stream, and every
+// fault the decoder must survive and count (the wire format itself: wire_format_test.cpp).
 #include "drivers/frame_decoder.hpp"
 
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <random>
-#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -17,10 +16,6 @@ namespace gaitmon::drivers {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
-
-Bytes ascii(std::string_view text) {
-  return Bytes(text.begin(), text.end());
-}
 
 SensorFrame make_frame(Foot foot, InsoleSize size, std::uint32_t sequence, std::uint32_t seed) {
   SensorFrame frame;
@@ -71,85 +66,6 @@ std::vector<SensorFrame> decode(FrameDecoder& decoder, const Bytes& stream,
     at += n;
   }
   return frames;
-}
-
-TEST(WireFormat, ChecksumTestVectors) {
-  EXPECT_EQ(crc16_ccitt_false(ascii("123456789")), 0x29B1);
-  EXPECT_EQ(crc32_iso_hdlc(ascii("123456789")), 0xCBF43926U);
-  EXPECT_EQ(crc16_ccitt_false({}), 0xFFFF);
-}
-
-// Bit-at-a-time references, independent of the table-driven code under test.
-std::uint16_t crc16_bitwise(std::span<const std::uint8_t> data) {
-  std::uint32_t crc = 0xFFFF;
-  for (std::uint8_t byte : data) {
-    crc ^= static_cast<std::uint32_t>(byte) << 8;
-    for (int bit = 0; bit < 8; ++bit) crc = (crc & 0x8000U) != 0 ? (crc << 1) ^ 0x1021U : crc << 1;
-    crc &= 0xFFFFU;
-  }
-  return static_cast<std::uint16_t>(crc);
-}
-
-std::uint32_t crc32_bitwise(std::span<const std::uint8_t> data) {
-  std::uint32_t crc = 0xFFFFFFFFU;
-  for (std::uint8_t byte : data) {
-    crc ^= byte;
-    for (int bit = 0; bit < 8; ++bit) crc = (crc & 1U) != 0 ? (crc >> 1) ^ 0xEDB88320U : crc >> 1;
-  }
-  return ~crc;
-}
-
-TEST(WireFormat, ChecksumsEqualABitwiseReferenceForEveryLength) {
-  std::mt19937 rng(3);
-  for (std::size_t length = 0; length < 200; ++length) {
-    Bytes data(length);
-    for (auto& b : data) b = static_cast<std::uint8_t>(rng());
-    EXPECT_EQ(crc16_ccitt_false(data), crc16_bitwise(data)) << length;
-    EXPECT_EQ(crc32_iso_hdlc(data), crc32_bitwise(data)) << length;
-  }
-}
-
-// The test vector of drivers/PROTOCOL.md, worked out independently (bitwise CRC in Python).
-TEST(WireFormat, EncodesTheProtocolTestVector) {
-  SensorFrame frame;
-  frame.foot = Foot::Left;
-  frame.size = InsoleSize::S35_36;
-  frame.sensor_count = 93;
-  frame.sequence = 1;
-  frame.device_time_us = 10000;
-  for (std::size_t i = 0; i < 93; ++i) frame.bits[i] = static_cast<std::uint8_t>(i);
-  const Bytes bytes = encode(WireFormat(), frame);
-  ASSERT_EQ(bytes.size(), 109U);
-  const Bytes head{0xA5, 0x5A, 0x01, 0x00, 0x00, 0x5D, 0x01,
-                   0x00, 0x00, 0x00, 0x10, 0x27, 0x00, 0x00};
-  EXPECT_EQ(Bytes(bytes.begin(), bytes.begin() + 14), head);
-  for (std::size_t i = 0; i < 93; ++i) EXPECT_EQ(bytes[14 + i], i);
-  EXPECT_EQ(bytes[107], 0x01);
-  EXPECT_EQ(bytes[108], 0xD5);
-
-  WireSettings settings;
-  settings.crc = CrcKind::Crc32;
-  settings.crc_big_endian = true;
-  const Bytes crc32 = encode(WireFormat(settings), frame);
-  ASSERT_EQ(crc32.size(), 111U);
-  EXPECT_EQ(Bytes(crc32.end() - 4, crc32.end()), (Bytes{0xD9, 0x88, 0xA9, 0x55}));
-}
-
-TEST(WireFormat, RefusesBadInput) {
-  WireSettings settings;
-  settings.sync = {};
-  EXPECT_THROW(WireFormat{settings}, std::invalid_argument);
-  settings.sync = {1, 2, 3, 4, 5};
-  EXPECT_THROW(WireFormat{settings}, std::invalid_argument);
-
-  SensorFrame frame = make_frame(Foot::Left, InsoleSize::S37_38, 0, 0);
-  Bytes small(50);
-  EXPECT_THROW(encode_frame(WireFormat(), frame, small), std::invalid_argument);
-  Bytes big(kMaxFrameBytes);
-  frame.sensor_count = 106;
-  EXPECT_THROW(encode_frame(WireFormat(), frame, big), std::invalid_argument);
-  frame.sensor_count = 0;
-  EXPECT_THROW(encode_frame(WireFormat(), frame, big), std::invalid_argument);
 }
 
 TEST(FrameDecoder, RoundTripsEveryInsoleSizeAndFoot) {
