@@ -186,7 +186,6 @@ TEST(ReplayCommand, ConfiguredEffectsEqualAnalyzeOnTheSameSession) {
   }
 }
 
-// A URL LCM cannot open and a speed too slow for the pacer are command-line errors (exit 2).
 // A bus that refuses every message (an LCM log opened for reading): the replay runs to its
 // end, logs the loss and counts it in its closing line.
 TEST(ReplayCommand, MessagesTheBusRefusesAreLoggedAndCounted) {
@@ -213,6 +212,7 @@ TEST(ReplayCommand, MessagesTheBusRefusesAreLoggedAndCounted) {
   EXPECT_GE(lost, frames) << "every frame report at least: " << output;
 }
 
+// A URL LCM cannot open and a speed too slow for the pacer are command-line errors (exit 2).
 TEST(ReplayCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
   struct Case {
     std::string args;
