@@ -61,6 +61,21 @@ class Lag {
     return s.value;
   }
 
+  /// As step, for an input seen only while it is nonzero: frames not seen since the last one
+  /// (and before the first) are unloaded, so the lag decays without input to the frame before.
+  double step_after_rest(std::size_t key, double t_s, double frame_interval_s, double input) {
+    if (key >= state_.size()) state_.resize(key + 1);
+    State& s = state_[key];
+    const double rest_until_s = t_s - frame_interval_s;
+    if (!s.started) {
+      s = {true, rest_until_s, 0.0};
+    } else if (s.t_s < rest_until_s) {
+      s.value *= std::exp(-(rest_until_s - s.t_s) / tau_s_);
+      s.t_s = rest_until_s;
+    }
+    return step(key, t_s, input);
+  }
+
  private:
   struct State {
     bool started = false;
@@ -79,7 +94,7 @@ class StressRelaxation final : public SimulationEffect {
  public:
   explicit StressRelaxation(const EffectParams& p) : g_(p.at("strength")), lag_(p.at("tau_s")) {}
   double tissue_force_n(const TissueSample& s, double force_n) override {
-    return force_n - g_ * lag_.step(tissue_key(s), s.t_s, force_n);
+    return force_n - g_ * lag_.step_after_rest(tissue_key(s), s.t_s, s.frame_interval_s, force_n);
   }
 
  private:

@@ -545,8 +545,14 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
           params.kbar_n_per_mm3 *= tally.kbar_factor[ri];
           params.cbar_ns_per_mm3 *= tally.cbar_factor[ri];
           double force = force_n(params, contact->d_mm, contact->ddot_mm_per_s, options.model);
-          const TissueSample sample{
-              foot, r, t, stance.start_s, contact->area_mm2, contact->d_mm, contact->ddot_mm_per_s};
+          const TissueSample sample{foot,
+                                    r,
+                                    t,
+                                    stance.start_s,
+                                    contact->area_mm2,
+                                    contact->d_mm,
+                                    contact->ddot_mm_per_s,
+                                    1.0 / config.sample_rate_hz};
           for (auto& effect : effects) force = effect->tissue_force_n(sample, force);
           if (force < 0.0) {
             ++truth.negative_force_samples;

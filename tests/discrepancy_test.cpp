@@ -115,7 +115,7 @@ DiscrepancyInput clean_session(const CleanCase& c, int steps, unsigned seed) {
           const double d = deformation_mm(p, area);
           const double ddot = deformation_rate_mm_per_s(p, area, peak_area * rate);
           force = force_n(p, d, ddot, c.model);
-          const TissueSample sample{Foot::Left, region, t, contact_s, area, d, ddot};
+          const TissueSample sample{Foot::Left, region, t, contact_s, area, d, ddot, 0.01};
           if (effect) {
             force = effect->tissue_force_n(sample, force);
             force = effect->sensor_bits({Foot::Left, index_of(region), t}, force);

@@ -33,14 +33,29 @@ TissueSample tissue(Region region, double t_s, double d_mm = 1.0, double contact
 
 TEST(SimulationEffects, StressRelaxationRelaxesAHeldLoadTowardOneMinusStrength) {
   auto e = make_simulation_effect("stress_relaxation", {{"strength", 0.3}, {"tau_s", 0.2}});
-  // A load of 100 N held from t = 0, sampled every 10 ms: the lag reaches 1 - exp(-t / tau).
+  // A load of 100 N sampled every 10 ms from t = 0. The effect is called in contact only, so the
+  // load is held from the frame before the first: the lag reaches 1 - exp(-(t + 0.01) / tau).
   double out = 0.0;
-  for (int k = 0; k <= 20; ++k) out = e->tissue_force_n(tissue(Region::Heel, 0.01 * k), 100.0);
-  EXPECT_NEAR(out, 100.0 - 30.0 * (1.0 - std::exp(-1.0)), 1e-9);  // at t = tau: 81.04 N
-  for (int k = 21; k <= 400; ++k) out = e->tissue_force_n(tissue(Region::Heel, 0.01 * k), 100.0);
+  for (int k = 0; k <= 19; ++k) out = e->tissue_force_n(tissue(Region::Heel, 0.01 * k), 100.0);
+  EXPECT_NEAR(out, 100.0 - 30.0 * (1.0 - std::exp(-1.0)), 1e-9);  // at t + 0.01 = tau: 81.04 N
+  for (int k = 20; k <= 400; ++k) out = e->tissue_force_n(tissue(Region::Heel, 0.01 * k), 100.0);
   EXPECT_NEAR(out, 70.0, 1e-6);
-  // Another region has its own memory: unrelaxed at its first sample.
-  EXPECT_DOUBLE_EQ(e->tissue_force_n(tissue(Region::Met1_2, 4.0), 100.0), 100.0);
+  // Another region has its own memory: at its first sample, one frame's lag.
+  EXPECT_NEAR(e->tissue_force_n(tissue(Region::Met1_2, 4.0), 100.0),
+              100.0 - 30.0 * (1.0 - std::exp(-0.01 / 0.2)), 1e-12);
+}
+
+TEST(SimulationEffects, StressRelaxationRecoversThroughTheSwing) {
+  auto e = make_simulation_effect("stress_relaxation", {{"strength", 0.3}, {"tau_s", 0.2}});
+  // Relaxed under 100 N up to t = 4 s; the next contact's first frame is at 4.5 s and
+  // carries 50 N. The swing's frames are unloaded, so the lag decays from 100 N over the 0.49 s
+  // up to the frame before, then takes one frame of 50 N.
+  for (int k = 0; k <= 400; ++k) e->tissue_force_n(tissue(Region::Heel, 0.01 * k, 1.0, 0.0), 100.0);
+  const double keep = std::exp(-0.01 / 0.2);
+  const double held = 100.0 * (1.0 - std::exp(-4.01 / 0.2));
+  const double lag = held * std::exp(-0.49 / 0.2) * keep + 50.0 * (1.0 - keep);
+  EXPECT_NEAR(e->tissue_force_n(tissue(Region::Heel, 4.5, 1.0, 4.45), 50.0), 50.0 - 0.3 * lag,
+              1e-9);
 }
 
 TEST(SimulationEffects, HysteresisRaisesLoadingAndLowersUnloadingRateIndependently) {

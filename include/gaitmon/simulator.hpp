@@ -198,6 +198,7 @@ struct TissueSample {
   double area_mm2 = 0.0;
   double d_mm = 0.0;
   double ddot_mm_per_s = 0.0;
+  double frame_interval_s = 0.01;  ///< between frames; the effect is not called out of contact
 };
 
 /// One sensor of one foot at one frame, as a sensor-stage effect sees it.
