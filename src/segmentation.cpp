@@ -10,6 +10,15 @@
 
 namespace gaitmon {
 
+SegmenterLimits segmenter_limits(double sample_rate_hz) {
+  SegmenterLimits limits;
+  limits.max_stance_frames = static_cast<std::int64_t>(60.0 * sample_rate_hz);
+  limits.max_swing_half_frames = static_cast<std::int64_t>(1.5 * sample_rate_hz);
+  limits.min_first_swing_frames = static_cast<std::int64_t>(0.2 * sample_rate_hz);
+  limits.sample_period_s = 1.0 / sample_rate_hz;
+  return limits;
+}
+
 std::string_view step_status_name(StepStatus status) {
   return status == StepStatus::Ok ? "ok" : "incomplete";
 }

@@ -153,6 +153,21 @@ TEST(ZeroAndThreshold, SubtractsTheZeroAndDropsValuesBelowTheThreshold) {
   EXPECT_THROW(zero_and_threshold(raw, zero, -1.0, out), std::invalid_argument);
 }
 
+// 60 s of contact, 1.5 s from a swing midpoint to its step and a first swing of 0.2 s, in
+// frames of the session's rate.
+TEST(SegmenterLimits, FollowTheSampleRate) {
+  const SegmenterLimits at100 = segmenter_limits(100.0);
+  EXPECT_EQ(at100.max_stance_frames, 6000);
+  EXPECT_EQ(at100.max_swing_half_frames, 150);
+  EXPECT_EQ(at100.min_first_swing_frames, 20);
+  EXPECT_DOUBLE_EQ(at100.sample_period_s, 0.01);
+  const SegmenterLimits at50 = segmenter_limits(50.0);
+  EXPECT_EQ(at50.max_stance_frames, 3000);
+  EXPECT_EQ(at50.max_swing_half_frames, 75);
+  EXPECT_EQ(at50.min_first_swing_frames, 10);
+  EXPECT_DOUBLE_EQ(at50.sample_period_s, 0.02);
+}
+
 TEST(StepStatusName, IsOkOrIncomplete) {
   EXPECT_EQ(step_status_name(StepStatus::Ok), "ok");
   EXPECT_EQ(step_status_name(StepStatus::Incomplete), "incomplete");

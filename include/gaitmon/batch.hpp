@@ -20,11 +20,6 @@ struct SegmentedSessionInfo {
   std::array<std::int64_t, 2> gaps_per_foot{};
 };
 
-/// Segmenter memory bounds for a sample rate: contacts longer than 60 s are cut as incomplete,
-/// a swing midpoint sits at most 1.5 s from its step, and start-up ends only at a swing of at
-/// least 0.2 s.
-SegmenterLimits segmenter_limits(double sample_rate_hz);
-
 /// Throws InputError naming `path` when a session recorded at `sample_rate_hz` cannot be
 /// segmented with the config's [segmentation] (its windows in seconds become too few frames).
 void check_session_rate(const std::filesystem::path& path, double sample_rate_hz,

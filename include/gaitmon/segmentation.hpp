@@ -122,6 +122,11 @@ struct SegmenterLimits {
   double sample_period_s = 0.01;             ///< max_gap_s must be at least 1.5 of these
 };
 
+/// Segmenter memory bounds for a sample rate: contacts longer than 60 s are cut as incomplete,
+/// a swing midpoint sits at most 1.5 s from its step, and start-up ends only at a swing of at
+/// least 0.2 s.
+SegmenterLimits segmenter_limits(double sample_rate_hz);
+
 /// Segments the frames of one foot into steps. Not thread-safe; frames must come in time order.
 class StepSegmenter {
  public:
