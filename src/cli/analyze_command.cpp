@@ -400,7 +400,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   const Config config = load_global_config(global);
   const AnalysisSettings settings = settings_from(args);
   check_output_dir(args.out_dir, "--out");
-  remove_earlier_outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"});
+  OutputSet outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"});
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
 
@@ -469,7 +469,6 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   }
 
   std::filesystem::create_directories(args.out_dir);
-  OutputSet outputs(args.out_dir);
   outputs.add("steps.csv", steps_csv(steps));
   outputs.add("regions.csv", regions_csv(analyses, session));
   outputs.add("session.json",

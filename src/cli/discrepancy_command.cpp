@@ -185,7 +185,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const Config config = load_global_config(global);
   check_output_dir(args.out_dir, "--out");
-  remove_earlier_outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"});
+  OutputSet outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"});
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
   std::vector<Step> steps;
@@ -211,7 +211,6 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   }
 
   std::filesystem::create_directories(args.out_dir);
-  OutputSet outputs(args.out_dir);
   outputs.add("discrepancy.json", discrepancy_json(args, result));
   if (args.report) {
     outputs.add("discrepancy.html",

@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
@@ -114,7 +115,16 @@ void OutputFile::commit_all(std::span<OutputFile* const> files) {
   }
 }
 
+OutputSet::OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names)
+    : dir_(std::move(dir)), names_(names) {
+  remove_earlier_outputs(dir_, names);
+}
+
 void OutputSet::add(std::string_view name, std::string_view text) {
+  if (std::find(names_.begin(), names_.end(), name) == names_.end()) {
+    throw std::logic_error(
+        fmt::format("{}: not among the outputs this set was made with", (dir_ / name).string()));
+  }
   files_.push_back(std::make_unique<OutputFile>(dir_ / name));
   files_.back()->write(text);
 }

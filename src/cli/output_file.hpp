@@ -61,11 +61,15 @@ class OutputFile {
   bool published_ = false;
 };
 
-/// Whole files written in memory first and published together by commit().
+/// Whole files written in memory first and published together by commit(). A command makes
+/// its set before any work, naming every file it may write, so that the list of what a rerun
+/// removes and what it writes is one list.
 class OutputSet {
  public:
-  explicit OutputSet(std::filesystem::path dir) : dir_(std::move(dir)) {}
-  /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file.
+  /// remove_earlier_outputs(dir, names).
+  OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names);
+  /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file, and
+  /// std::logic_error for a name the set was not made with.
   void add(std::string_view name, std::string_view text);
   /// OutputFile::commit_all over the files added; returns their final paths. Throws
   /// std::runtime_error naming a file that cannot be committed.
@@ -73,6 +77,7 @@ class OutputSet {
 
  private:
   std::filesystem::path dir_;
+  std::vector<std::string_view> names_;
   std::vector<std::unique_ptr<OutputFile>> files_;
 };
 

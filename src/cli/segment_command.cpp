@@ -17,6 +17,10 @@
 namespace gaitmon::cli {
 namespace {
 
+// What a run writes, and so what a rerun removes first.
+constexpr std::string_view kStepsCsv = "steps.csv";
+constexpr std::string_view kFramesCsv = "frames.csv";
+
 struct SegmentArgs {
   std::filesystem::path session;
   std::filesystem::path out_dir;
@@ -99,13 +103,13 @@ void print_summary(const SegmentArgs& args, const SegmentedSessionInfo& info,
     }
     fmt::print("\n");
   }
-  fmt::print("\nwrote {} ({} steps) and {} ({} rows)\n", (args.out_dir / "steps.csv").string(),
-             steps.size(), (args.out_dir / "frames.csv").string(), frame_rows);
+  fmt::print("\nwrote {} ({} steps) and {} ({} rows)\n", (args.out_dir / kStepsCsv).string(),
+             steps.size(), (args.out_dir / kFramesCsv).string(), frame_rows);
 }
 
 void segment_into_out_dir(const SegmentArgs& args, const Config& config,
                           const InsoleLayout& layout) {
-  OutputFile frames_csv(args.out_dir / "frames.csv");
+  OutputFile frames_csv(args.out_dir / kFramesCsv);
   frames_csv.write(
       "foot,step,t_s,region,force_n,sensor_area_mm2,ellipse_area_mm2,case,cx_mm,cy_mm,ra_mm,"
       "rb_mm,angle_rad,pi\n");
@@ -144,7 +148,7 @@ void segment_into_out_dir(const SegmentArgs& args, const Config& config,
   std::sort(steps.begin(), steps.end(), [](const StepRow& a, const StepRow& b) {
     return std::pair(a.foot, a.index) < std::pair(b.foot, b.index);
   });
-  OutputFile steps_csv(args.out_dir / "steps.csv");
+  OutputFile steps_csv(args.out_dir / kStepsCsv);
   buffer = "foot,step,t_heel_strike_s,t_toe_off_s,stance_s,peak_force_n,status\n";
   for (const auto& s : steps) {
     fmt::format_to(std::back_inserter(buffer), "{},{},{},{},{:.4f},{:.2f},{}\n", foot_name(s.foot),
@@ -160,7 +164,7 @@ void segment_into_out_dir(const SegmentArgs& args, const Config& config,
 void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
   const Config config = load_global_config(global);
   check_output_dir(args.out_dir, "--out");
-  remove_earlier_outputs(args.out_dir, {"steps.csv", "frames.csv"});
+  remove_earlier_outputs(args.out_dir, {kStepsCsv, kFramesCsv});
   // The layout follows the session's insole size, so read its header first.
   const InsoleLayout layout(config.insole(SessionReader(args.session).header().insole_size),
                             config.sensor);

@@ -35,7 +35,7 @@ std::string read(const fs::path& path) {
 
 TEST(OutputFile, NothingHasItsFinalNameUntilTheSetIsCommitted) {
   const fs::path dir = test::scratch_dir("output_commit");
-  OutputSet set(dir);
+  OutputSet set(dir, {"steps.csv", "session.json"});
   set.add("steps.csv", "a,b\n1,2\n");
   set.add("session.json", "{}\n");
   EXPECT_EQ(names_in(dir), (std::vector<std::string>{"session.json.partial", "steps.csv.partial"}));
@@ -50,7 +50,7 @@ TEST(OutputFile, NothingHasItsFinalNameUntilTheSetIsCommitted) {
 TEST(OutputFile, ASetThatIsNeverCommittedLeavesNothingBehind) {
   const fs::path dir = test::scratch_dir("output_abandoned");
   {
-    OutputSet set(dir);
+    OutputSet set(dir, {"regions.csv"});
     set.add("regions.csv", "foot,step\n");
   }
   EXPECT_TRUE(names_in(dir).empty());
@@ -58,10 +58,10 @@ TEST(OutputFile, ASetThatIsNeverCommittedLeavesNothingBehind) {
 
 TEST(OutputFile, AFailedRenameTakesBackTheFilesAlreadyPublished) {
   const fs::path dir = test::scratch_dir("output_rename_fails");
-  // A folder that is not empty cannot be replaced by a file, so the second rename fails.
-  test::write_text(dir / "session.json" / "keep", "x");
   {
-    OutputSet set(dir);
+    OutputSet set(dir, {"steps.csv", "session.json"});
+    // A folder that is not empty cannot be replaced by a file, so the second rename fails.
+    test::write_text(dir / "session.json" / "keep", "x");
     set.add("steps.csv", "new\n");
     set.add("session.json", "{}\n");
     try {
@@ -123,6 +123,20 @@ TEST(OutputFile, AnEarlierOutputThatCannotBeRemovedIsNamedInTheError) {
   }
 }
 
+// A set removes an earlier run's files of the names it is made with, and writes no other.
+TEST(OutputFile, ASetRemovesTheEarlierRunsFilesOfItsNamesAndWritesNoOther) {
+  const fs::path dir = test::scratch_dir("output_set_names");
+  test::write_text(dir / "steps.csv", "earlier\n");
+  test::write_text(dir / "notes.txt", "mine\n");
+  OutputSet set(dir, {"steps.csv", "report.html"});
+  EXPECT_EQ(names_in(dir), std::vector<std::string>{"notes.txt"});
+  set.add("steps.csv", "new\n");
+  EXPECT_THROW(set.add("notes.txt", "overwritten\n"), std::logic_error);
+  set.commit();
+  EXPECT_EQ(read(dir / "steps.csv"), "new\n");
+  EXPECT_EQ(read(dir / "notes.txt"), "mine\n");
+}
+
 TEST(OutputFile, AnOutputFolderMustBeAFolderOrNotExistYet) {
   const fs::path dir = test::scratch_dir("output_dir_check");
   EXPECT_NO_THROW(check_output_dir(dir, "--out"));
@@ -134,7 +148,7 @@ TEST(OutputFile, AnOutputFolderMustBeAFolderOrNotExistYet) {
 
 TEST(OutputFile, AFolderThatCannotBeWrittenIsNamedInTheError) {
   const fs::path dir = test::scratch_dir("output_missing") / "not_there";
-  OutputSet set(dir);
+  OutputSet set(dir, {"steps.csv"});
   try {
     set.add("steps.csv", "x\n");
     FAIL() << "created a file in a folder that does not exist";
