@@ -1,7 +1,7 @@
 // The live monitor's speed: the frame ring between two threads (target >= 10 M frames/s), a
 // 10-minute two-foot session replayed through the monitor as fast as it goes, with fitting
-// (target >= 300 x real time), and the end-of-step to publication latency when frames arrive at
-// real time (target p99 <= 20 ms).
+// (target >= 300 x real time), the end-of-step to publication latency when frames arrive at
+// real time (target p99 <= 20 ms), and how long shutdown takes (target 2 s).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -211,6 +211,40 @@ void BM_MonitorLatencyRealTime(benchmark::State& state) {
   state.counters["max_ms"] = percentile(latencies, 1.0);
 }
 BENCHMARK(BM_MonitorLatencyRealTime)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
+
+// How long shutdown takes once the driver has stopped: the 60 s demo offered as fast as the
+// monitor takes it, with [model] effects = stress_relaxation, then stop() timed from the call to
+// its return. range(0) = 0: a plain stop, which fits and publishes every step still queued and
+// fits the effects' window as it ends; 1: an interrupted run (close() first, as on SIGINT or
+// SIGTERM), which keeps the effects' latest estimate (the target is 2 s).
+void BM_MonitorShutdown(benchmark::State& state) {
+  static const std::vector<gaitmon::SensorFrame> frames =
+      gaitmon::test::session_frames(gaitmon::test::demo_session());
+  gaitmon::Config c = config();
+  c.model.effects = {"stress_relaxation"};
+  const bool interrupted = state.range(0) != 0;
+  for (auto _ : state) {
+    LatencyPublisher publisher;
+    gaitmon::MonitorOptions options;
+    options.backlog_overflow = gaitmon::BacklogOverflow::Wait;
+    gaitmon::Monitor monitor(c, options, publisher);
+    for (const auto& frame : frames) {
+      if (!monitor.offer_wait(frame)) state.SkipWithError("the monitor refused a frame");
+    }
+    const auto start = Clock::now();
+    if (interrupted) monitor.close();
+    monitor.stop();
+    state.SetIterationTime(std::chrono::duration<double>(Clock::now() - start).count());
+    state.counters["fits"] = static_cast<double>(monitor.counters().fits_published);
+  }
+}
+BENCHMARK(BM_MonitorShutdown)
+    ->ArgName("interrupted")
+    ->Arg(0)
+    ->Arg(1)
+    ->Iterations(3)
+    ->UseManualTime()
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
