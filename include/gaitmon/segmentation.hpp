@@ -84,7 +84,7 @@
 #include <vector>
 
 #include "gaitmon/config.hpp"
-#include "gaitmon/session.hpp"
+#include "gaitmon/frame.hpp"
 #include "gaitmon/types.hpp"
 
 namespace gaitmon {

@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "gaitmon/frame.hpp"
 #include "gaitmon/types.hpp"
 
 namespace gaitmon {
@@ -37,13 +38,6 @@ struct SessionHeader {
 /// --duration stops there too). A time beyond it is corrupt (1e308 would overflow the wire
 /// format's microseconds), not a recording.
 inline constexpr double kMaxSessionTimeS = 86400.0;
-
-/// One frame of one foot: raw readings 0..255, sensor i at bits[i].
-struct Frame {
-  double t_s = 0.0;
-  Foot foot = Foot::Left;
-  std::vector<std::uint8_t> bits;
-};
 
 class SessionReader {
  public:
