@@ -116,7 +116,7 @@ void OutputFile::commit_all(std::span<OutputFile* const> files) {
 }
 
 OutputSet::OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names)
-    : dir_(std::move(dir)), names_(names) {
+    : dir_(std::move(dir)), names_(names.begin(), names.end()) {
   remove_earlier_outputs(dir_, names);
 }
 

@@ -77,7 +77,7 @@ class OutputSet {
 
  private:
   std::filesystem::path dir_;
-  std::vector<std::string_view> names_;
+  std::vector<std::string> names_;
   std::vector<std::unique_ptr<OutputFile>> files_;
 };
 
