@@ -13,10 +13,12 @@
 #include <memory>
 #include <stdexcept>
 #include <stop_token>
+#include <tuple>
 #include <utility>
 
 #include "discrepancy_diagnostics.hpp"
 #include "discrepancy_effects.hpp"
+#include "discrepancy_search.hpp"
 #include "parallel_for.hpp"
 
 namespace gaitmon {
@@ -32,8 +34,14 @@ using discrepancy_detail::candidate_specs;
 using discrepancy_detail::CandidateSpec;
 using discrepancy_detail::diagnose;
 using discrepancy_detail::ParamSpec;
+using discrepancy_detail::pattern_search;
 using discrepancy_detail::residual_map;
 using discrepancy_detail::savgol_noise_sd;
+using discrepancy_detail::SearchBox;
+using discrepancy_detail::SearchObjective;
+using discrepancy_detail::SearchPoint;
+using discrepancy_detail::settle_on_stencil;
+using discrepancy_detail::SettledMinimum;
 using discrepancy_detail::Unit;
 
 double g_of(double area, double P) {
@@ -488,58 +496,6 @@ std::vector<std::vector<double>> grid_of(const CandidateSpec& spec,
   return grid;
 }
 
-// Standard errors from the curvature of the profiled deviance at its minimum `value`: cov = 2
-// H^-1 (diagonal of the inverse). With the force alone that is 2 s^2 H_SSE^-1, s^2 = SSE /
-// N_eff, N_eff inflating for autocorrelated residuals. NaN where H is not positive definite.
-std::vector<double> standard_errors(
-    const std::vector<double>& theta, double value,
-    const std::function<double(const std::vector<double>&)>& objective) {
-  const std::size_t q = theta.size();
-  std::vector<double> se(q, 0.0);
-  std::vector<double> h(q);
-  // The profile has kinks where a unit's n moves to the next of its grid values; a step of 1 %
-  // could straddle one and give a curvature of either sign (stress relaxation's strength 0.56
-  // and tau 0.83 s, both well inside their ranges, came out without an SE), so the step spans
-  // 3 % and averages over them.
-  for (std::size_t i = 0; i < q; ++i) h[i] = std::max(1e-4, 3e-2 * std::abs(theta[i]));
-  const auto at = [&](std::size_t i, double di, std::size_t j, double dj) {
-    auto th = theta;
-    th[i] += di;
-    th[j] += dj;
-    return objective(th);
-  };
-  std::vector<double> H(q * q, 0.0);
-  for (std::size_t i = 0; i < q; ++i) {
-    H[i * q + i] = (at(i, h[i], i, 0) - 2 * value + at(i, -h[i], i, 0)) / (h[i] * h[i]);
-    for (std::size_t j = i + 1; j < q; ++j) {
-      const double v = (at(i, h[i], j, h[j]) - at(i, h[i], j, -h[j]) - at(i, -h[i], j, h[j]) +
-                        at(i, -h[i], j, -h[j])) /
-                       (4 * h[i] * h[j]);
-      H[i * q + j] = H[j * q + i] = v;
-    }
-  }
-  // Invert H (q <= 2: no candidate has more).
-  std::vector<double> inv(q * q, 0.0);
-  if (q == 1 && H[0] > 0) {
-    inv[0] = 1.0 / H[0];
-  } else if (q == 2) {
-    const double det = H[0] * H[3] - H[1] * H[2];
-    if (det > 0 && H[0] > 0) {
-      inv = {H[3] / det, -H[1] / det, -H[2] / det, H[0] / det};
-    }
-  }
-  for (std::size_t i = 0; i < q; ++i) {
-    const double var = 2.0 * inv[i * q + i];
-    se[i] = var > 0 ? std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
-  }
-  return se;
-}
-
-// The refinement's pattern search: how often its steps halve, and how many moves it makes at
-// most (a bound on the work; a search that starts on the grid's best point settles in far fewer).
-constexpr int kPatternHalvings = 4;
-constexpr int kPatternMoves = 40;
-
 // Half the grid's spacing around its point nearest `value`.
 double half_local_spacing(const ParamSpec& p, double value) {
   const auto& g = p.grid;
@@ -585,12 +541,15 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     fx.push_back({&spec, th});
     return unit_costs(units, fx);
   };
-  // From the grid point that fits the units outside `held_out` best, a pattern search: poll a
-  // step along each parameter and, with two, along both diagonals (relaxation's strength and
-  // tau trade off along one); move to the first poll that improves, or halve the steps where
-  // none does. Steps start at half the grid's spacing around the start, so a geometric grid (the
-  // time constants) is searched at its own scale. Returns the parameters and their costs on every
-  // unit.
+  SearchBox box;
+  for (const ParamSpec& p : spec.params) {
+    box.lo.push_back(p.lo);
+    box.hi.push_back(p.hi);
+  }
+  // From the grid point that fits the units outside `held_out` best, the pattern search, its
+  // steps starting at half the grid's spacing around the start so that a geometric grid (the
+  // time constants) is searched at its own scale; on all units (-1) then the settling that
+  // gives the standard errors. Returns the parameters, their costs on every unit and the SEs.
   const auto refine = [&](int held_out) {
     std::size_t best = 0;
     for (std::size_t gi = 1; gi < grid.size(); ++gi) {
@@ -598,55 +557,27 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
         best = gi;
       }
     }
-    std::vector<double> theta = grid[best];
-    Costs at_theta = costs[best];
-    double value = deviance_without(at_theta, held_out);
-    const std::size_t q = theta.size();
-    std::vector<double> step(q);
-    for (std::size_t p = 0; p < q; ++p) step[p] = half_local_spacing(spec.params[p], theta[p]);
-    std::vector<std::vector<double>> directions;
-    for (std::size_t p = 0; p < q; ++p) {
-      for (double sign : {-1.0, 1.0}) {
-        directions.emplace_back(q, 0.0);
-        directions.back()[p] = sign;
-      }
+    // Every point's costs on every unit, kept: the held-out errors and the in-sample costs are
+    // those of the point the search ends on.
+    std::map<std::vector<double>, Costs> seen{{grid[best], costs[best]}};
+    const SearchObjective objective = [&](const std::vector<double>& th) {
+      auto it = seen.find(th);
+      if (it == seen.end()) it = seen.emplace(th, costs_at(th)).first;
+      return deviance_without(it->second, held_out);
+    };
+    std::vector<double> step(grid[best].size());
+    for (std::size_t p = 0; p < step.size(); ++p) {
+      step[p] = half_local_spacing(spec.params[p], grid[best][p]);
     }
-    if (q == 2) {
-      for (double a : {-1.0, 1.0}) {
-        for (double b : {-1.0, 1.0}) directions.push_back({a, b});
-      }
+    SearchPoint at = pattern_search({grid[best], deviance_without(costs[best], held_out)},
+                                    std::move(step), box, objective);
+    std::vector<double> se;
+    if (held_out < 0) {
+      SettledMinimum settled = settle_on_stencil(std::move(at), box, objective);
+      at = std::move(settled.at);
+      se = std::move(settled.se);
     }
-    // Polls start with the direction that last improved, so a walk along a valley costs one
-    // evaluation a move.
-    std::size_t first = 0;
-    for (int halvings = 0, moves = 0; halvings < kPatternHalvings && moves < kPatternMoves;) {
-      bool moved = false;
-      for (std::size_t k = 0; k < directions.size() && !moved; ++k) {
-        const std::size_t d = (first + k) % directions.size();
-        auto trial = theta;
-        for (std::size_t p = 0; p < q; ++p) {
-          trial[p] = std::clamp(theta[p] + directions[d][p] * step[p], spec.params[p].lo,
-                                spec.params[p].hi);
-        }
-        if (trial == theta) continue;
-        Costs c = costs_at(trial);
-        const double v = deviance_without(c, held_out);
-        if (v < value) {
-          value = v;
-          theta = std::move(trial);
-          at_theta = std::move(c);
-          first = d;
-          moved = true;
-        }
-      }
-      if (moved) {
-        ++moves;
-      } else {
-        for (double& st : step) st *= 0.5;
-        ++halvings;
-      }
-    }
-    return std::pair{theta, at_theta};
+    return std::tuple{at.theta, seen.at(at.theta), se};
   };
   CandidateOutcome out;
   out.spec = &spec;
@@ -654,21 +585,15 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   // Each fold's held-out error under the parameters fitted (grid, then refined) on the other
   // folds; and the fit on all steps (the last slot).
   const auto folds = static_cast<std::size_t>(pooled.folds);
-  std::vector<std::pair<std::vector<double>, Costs>> fits(folds + 1);
+  std::vector<std::tuple<std::vector<double>, Costs, std::vector<double>>> fits(folds + 1);
   parallel_for(fits.size(),
                [&](std::size_t f) { fits[f] = refine(f < folds ? static_cast<int>(f) : -1); });
   for (std::size_t ui = 0; ui < units.size(); ++ui) {
-    const Costs& c = fits[static_cast<std::size_t>(pooled.fold_of[ui])].second;
+    const Costs& c = std::get<1>(fits[static_cast<std::size_t>(pooled.fold_of[ui])]);
     out.heldout.force[ui] = c.force[ui];
     out.heldout.zero[ui] = c.zero[ui];
   }
-  out.theta = fits[folds].first;
-  out.in_sample = fits[folds].second;
-  out.se = standard_errors(out.theta, deviance_without(out.in_sample, -1),
-                           [&](const std::vector<double>& th) {
-                             const Costs c = costs_at(th);
-                             return deviance(c.force_sse(), c.zero_sse(), pooled);
-                           });
+  std::tie(out.theta, out.in_sample, out.se) = std::move(fits[folds]);
   // At a bound the minimum is the constraint's, not the data's: the curvature says nothing of
   // how well the parameter is determined.
   for (std::size_t p = 0; p < out.theta.size(); ++p) {

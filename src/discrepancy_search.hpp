@@ -1,0 +1,47 @@
+// The candidates' parameter search, kept apart from the workflow so that it can be tested on
+// objectives with a known minimum and curvature. Internal: not part of the public API.
+#pragma once
+
+#include <functional>
+#include <vector>
+
+namespace gaitmon::discrepancy_detail {
+
+/// The deviance to minimise at a parameter vector. It may be called from the thread that calls
+/// the search only.
+using SearchObjective = std::function<double(const std::vector<double>&)>;
+
+struct SearchPoint {
+  std::vector<double> theta;
+  double value = 0.0;
+};
+
+/// The parameters' ranges; the search never leaves them.
+struct SearchBox {
+  std::vector<double> lo, hi;
+};
+
+/// A pattern search from `start`: polls `step` along each parameter and, with two, along both
+/// diagonals; moves to the first poll that improves, polling first the direction that last did,
+/// and halves the steps where none does. Stops after 4 halvings or 40 moves.
+SearchPoint pattern_search(SearchPoint start, std::vector<double> step, const SearchBox& box,
+                           const SearchObjective& objective);
+
+/// The step of the standard errors' difference stencil: 3 % of the value, at least 1e-4.
+std::vector<double> stencil_steps(const std::vector<double>& theta);
+
+struct SettledMinimum {
+  SearchPoint at;
+  /// From the curvature of the deviance at `at`: cov = 2 H^-1. NaN where H is not positive
+  /// definite. Not told apart for a parameter on a bound: the caller knows its ranges.
+  std::vector<double> se;
+  int moves = 0;  ///< how often the stencil's centre moved
+};
+
+/// Moves from `start` to the lowest point of the standard errors' stencil (the axis steps and,
+/// with two parameters, the four diagonal ones) until the centre is the lowest, for at most 6
+/// moves, and takes the curvature from the last stencil. Up to two parameters.
+SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
+                                 const SearchObjective& objective);
+
+}  // namespace gaitmon::discrepancy_detail
