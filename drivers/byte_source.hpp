@@ -12,6 +12,14 @@ namespace gaitmon::drivers {
 enum class LinkState : std::uint8_t { Connecting, Connected, Disconnected };
 std::string_view link_state_name(LinkState state);  ///< "connecting", "connected", "disconnected"
 
+/// What a source lost or survived below the bytes it delivered: totals since construction, across
+/// reconnections. A source without such a fault reports zeros.
+struct SourceCounters {
+  /// USB bulk transfers that ended in LIBUSB_TRANSFER_OVERFLOW: the device sent more than the
+  /// transfer's buffer holds, and the bytes beyond it are lost.
+  std::uint64_t transfers_overflowed = 0;
+};
+
 class ByteSource {
  public:
   using BytesHandler = std::function<void(std::span<const std::uint8_t>)>;
@@ -26,6 +34,10 @@ class ByteSource {
 
   /// Makes run() return soon. Safe from any thread, and more than once.
   virtual void stop() = 0;
+
+  /// Thread-safe and non-blocking: callable from any thread while run() delivers. Each value is
+  /// consistent on its own, not across values.
+  virtual SourceCounters counters() const { return {}; }
 };
 
 }  // namespace gaitmon::drivers

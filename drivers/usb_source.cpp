@@ -48,6 +48,7 @@ struct UsbSource::Impl {
   UsbSettings settings;
   libusb_context* context = nullptr;
   std::atomic<bool> stopping{false};
+  std::atomic<std::uint64_t> transfers_overflowed{0};  ///< written by the driver thread only
   bool arrived = false;  ///< set by the hotplug callback on the driver thread
   bool lost = false;
   bool received = false;  ///< the current connection has delivered bytes
@@ -64,6 +65,10 @@ struct UsbSource::Impl {
     slot->in_flight = false;
     if (transfer->actual_length > 0) d.received = true;
     if (transfer->status == LIBUSB_TRANSFER_STALL) d.halted = true;
+    // Before the bytes are delivered, so that whoever has seen them also sees the count.
+    if (transfer->status == LIBUSB_TRANSFER_OVERFLOW) {
+      d.transfers_overflowed.fetch_add(1, std::memory_order_relaxed);
+    }
     const std::span<const std::uint8_t> data(transfer->buffer,
                                              static_cast<std::size_t>(transfer->actual_length));
     const TransferAction action =
@@ -226,6 +231,12 @@ void UsbSource::run(const BytesHandler& on_bytes, const StateHandler& on_state) 
   }
   if (hotplug) libusb_hotplug_deregister_callback(d.context, hotplug_handle);
   if (state != LinkState::Disconnected) on_state(LinkState::Disconnected, name + ": stopped");
+}
+
+SourceCounters UsbSource::counters() const {
+  SourceCounters c;
+  c.transfers_overflowed = impl_->transfers_overflowed.load(std::memory_order_relaxed);
+  return c;
 }
 
 void UsbSource::stop() {

@@ -32,7 +32,11 @@ TransferAction on_transfer_complete(int status, std::span<const std::uint8_t> da
 /// hotplug arrival (where libusb supports hotplug) ends the wait early. Events are handled with a
 /// 100 ms timeout, so stop() takes effect promptly.
 ///
-/// Threading: run() on one thread, once per object; stop() from any thread.
+/// A transfer that overflows (the device sent more than transfer_bytes: libusb delivers what fit
+/// and the rest is lost) keeps the link up but is counted in counters().transfers_overflowed, so
+/// that the loss is visible; a larger transfer_bytes avoids it.
+///
+/// Threading: run() on one thread, once per object; stop() and counters() from any thread.
 class UsbSource final : public ByteSource {
  public:
   /// Throws std::runtime_error if libusb cannot be initialised.
@@ -43,6 +47,7 @@ class UsbSource final : public ByteSource {
 
   void run(const BytesHandler& on_bytes, const StateHandler& on_state) override;
   void stop() override;
+  SourceCounters counters() const override;
 
  private:
   struct Impl;

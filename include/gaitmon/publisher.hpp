@@ -82,6 +82,7 @@ struct StatusReport {
   std::uint64_t frames_lost_sequence = 0;  ///< gaps in the device counter
   std::uint64_t sequence_restarts = 0;
   std::uint64_t reconnects = 0;
+  std::uint64_t transfers_overflowed = 0;  ///< USB transfers whose excess bytes were lost
   std::uint64_t ring_depth = 0;
   std::uint64_t ring_drops = 0;
   std::uint64_t frames_processed = 0;   ///< taken from the ring and segmented

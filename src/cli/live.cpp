@@ -85,6 +85,17 @@ void LinkStatus::fill(StatusReport& status) const {
   status.sequence_restarts = c.sequence_restarts;
   const std::uint64_t connections = connections_.load();
   status.reconnects = connections > 0 ? connections - 1 : 0;
+  status.transfers_overflowed = source_.counters().transfers_overflowed;
+}
+
+void LinkStatus::warn_of_overflows() {
+  const std::uint64_t overflowed = source_.counters().transfers_overflowed;
+  if (overflowed <= overflows_warned_.load() || !overflow_log_.allow()) return;
+  const std::uint64_t warned = overflows_warned_.exchange(overflowed);
+  spdlog::warn(
+      "link: {} USB transfers overflowed, {} in all: the device sent more than a transfer holds "
+      "and the excess bytes were lost; raise [usb] transfer_bytes",
+      overflowed - warned, overflowed);
 }
 
 std::string LinkStatus::summary() const {
@@ -92,9 +103,10 @@ std::string LinkStatus::summary() const {
   fill(s);
   return fmt::format(
       "link: {} bytes, {} frames decoded; {} CRC errors, {} truncated, {} bad headers, {} resyncs; "
-      "{} frames lost (sequence gaps), {} device restarts, {} reconnects",
+      "{} frames lost (sequence gaps), {} device restarts, {} reconnects, {} USB transfers "
+      "overflowed",
       s.bytes_received, s.frames_decoded, s.crc_errors, s.frames_truncated, s.header_errors,
-      s.resyncs, s.frames_lost_sequence, s.sequence_restarts, s.reconnects);
+      s.resyncs, s.frames_lost_sequence, s.sequence_restarts, s.reconnects, s.transfers_overflowed);
 }
 
 void StepPrinter::publish(const FitReport& report) {

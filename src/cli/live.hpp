@@ -14,6 +14,7 @@
 #include "drivers/byte_source.hpp"
 #include "drivers/frame_decoder.hpp"
 #include "gaitmon/config.hpp"
+#include "gaitmon/log_throttle.hpp"
 #include "gaitmon/publisher.hpp"
 
 namespace gaitmon::cli {
@@ -33,10 +34,11 @@ std::unique_ptr<drivers::ByteSource> make_insole_source(const Config& config, bo
 std::string insole_source_name(const Config& config, bool usb);
 
 /// The link's state and reconnections, written by the driver thread's state handler and read by
-/// the status (any thread), and the link's decoder.
+/// the status (any thread), and the link's decoder and source, for their counters.
 class LinkStatus {
  public:
-  explicit LinkStatus(drivers::FrameDecoder& decoder) : decoder_(decoder) {}
+  LinkStatus(drivers::FrameDecoder& decoder, const drivers::ByteSource& source)
+      : decoder_(decoder), source_(source) {}
 
   /// The ByteSource's state handler, so on the driver thread: logs every change, counts
   /// reconnections (a Connected after the first) and resets the decoder on a Disconnected, as
@@ -45,17 +47,27 @@ class LinkStatus {
   /// A Disconnected that is the planned end of a finite source (a replay's end of session or
   /// stop): handled as one, but logged as information rather than as a warning.
   void on_end(std::string_view detail);
-  /// Fills the driver's fields of a status report from this and the decoder's counters.
+  /// Fills the driver's fields of a status report from this, the decoder's and the source's
+  /// counters.
   void fill(StatusReport& status) const;
+  /// Warns of the USB transfers that overflowed since the last warning, at most once a second:
+  /// their excess bytes are lost, which the decoder sees only as damaged frames and sequence
+  /// gaps, and a larger [usb] transfer_bytes avoids it. For the commands' periodic work; any
+  /// thread.
+  void warn_of_overflows();
   /// One line of the link's totals for a command's closing summary: what was decoded, every
-  /// kind of fault, the frames the sequence counters show lost, device restarts and reconnects.
+  /// kind of fault, the frames the sequence counters show lost, device restarts, reconnects and
+  /// overflowed transfers.
   std::string summary() const;
   drivers::LinkState state() const { return state_.load(); }
 
  private:
   drivers::FrameDecoder& decoder_;
+  const drivers::ByteSource& source_;
   std::atomic<drivers::LinkState> state_{drivers::LinkState::Connecting};
   std::atomic<std::uint64_t> connections_{0};
+  std::atomic<std::uint64_t> overflows_warned_{0};
+  LogThrottle overflow_log_;
 };
 
 /// Forwards every message to `next` and prints one line per fitted step on stdout: the foot,

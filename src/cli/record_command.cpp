@@ -187,7 +187,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
   // a full ring drops (and counts) them as in `gaitmon run`.
   FrameRing ring(config.ring.capacity_frames);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
-  LinkStatus link(decoder);
+  LinkStatus link(decoder, *source);
   SessionRecorder recorder(partial, config.sample_rate_hz, config.segmentation.max_gap_s,
                            source_name);
   std::atomic<bool> driver_done{false};
@@ -211,6 +211,7 @@ void run_record(const GlobalOptions& global, const RecordArgs& args,
       for (;;) {
         if (const auto now = std::chrono::steady_clock::now(); now >= next_drop_log) {
           log_drops(fmt::format("in the last {:.1f} s", config.monitor.status_period_s));
+          link.warn_of_overflows();
           next_drop_log = now + drop_period;
         }
         if (ring.try_pop(frame)) {

@@ -45,7 +45,7 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   LcmPublisher lcm(open_lcm_url(global, config.lcm.url, !args.lcm_url.empty()), config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder(format);
-  LinkStatus link(decoder);
+  LinkStatus link(decoder, source);
   MonitorOptions options;
   options.sample_rate_hz = source.header().sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;

@@ -41,12 +41,15 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   LcmPublisher lcm(open_lcm_url(global, config.lcm.url, !args.lcm_url.empty()), config.lcm);
   StepPrinter printer(lcm);
   drivers::FrameDecoder decoder{drivers::WireFormat(config.wire)};
-  LinkStatus link(decoder);
+  LinkStatus link(decoder, *source);
   MonitorOptions options;
   options.sample_rate_hz = config.sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
   options.backlog_overflow = BacklogOverflow::DropOldest;
-  options.driver_status = [&](StatusReport& status) { link.fill(status); };
+  options.driver_status = [&](StatusReport& status) {
+    link.fill(status);
+    link.warn_of_overflows();
+  };
   Monitor monitor(config, options, printer);
   spdlog::info("run: {} -> LCM {}", insole_source_name(config, args.usb), config.lcm.url);
 

@@ -103,6 +103,7 @@ json to_json(const StatusReport& s) {
           {"frames_lost_sequence", s.frames_lost_sequence},
           {"sequence_restarts", s.sequence_restarts},
           {"reconnects", s.reconnects},
+          {"transfers_overflowed", s.transfers_overflowed},
           {"ring_depth", s.ring_depth},
           {"ring_drops", s.ring_drops},
           {"frames_processed", s.frames_processed},

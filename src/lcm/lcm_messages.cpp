@@ -96,6 +96,7 @@ void for_each_counter(Visit&& visit) {
   visit(&StatusReport::frames_lost_sequence, &status_t::frames_lost_sequence);
   visit(&StatusReport::sequence_restarts, &status_t::sequence_restarts);
   visit(&StatusReport::reconnects, &status_t::reconnects);
+  visit(&StatusReport::transfers_overflowed, &status_t::transfers_overflowed);
   visit(&StatusReport::ring_depth, &status_t::ring_depth);
   visit(&StatusReport::ring_drops, &status_t::ring_drops);
   visit(&StatusReport::frames_processed, &status_t::frames_processed);

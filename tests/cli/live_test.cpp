@@ -1,5 +1,6 @@
-// The pieces the live commands share: --speed, the link's state in the status, the console line
-// per fitted step, and SIGINT / SIGTERM sent to the process for real.
+// The pieces the live commands share: --speed, the link's state and counters in the status and
+// its overflow warning, the console line per fitted step, and SIGINT / SIGTERM sent to the
+// process for real.
 #include "src/cli/live.hpp"
 
 #include <gtest/gtest.h>
@@ -8,12 +9,14 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -43,9 +46,35 @@ TEST(Live, SpeedIsMaxOrANumberFromTheSlowest) {
   }
 }
 
+/// What the default logger writes while it lives. Removed on every way out, a failed ASSERT too:
+/// the sink must not outlive `text`.
+struct LogCapture {
+  std::ostringstream text;
+  LogCapture() {
+    spdlog::default_logger()->sinks().push_back(
+        std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
+  }
+  ~LogCapture() { spdlog::default_logger()->sinks().pop_back(); }
+  LogCapture(const LogCapture&) = delete;
+  LogCapture& operator=(const LogCapture&) = delete;
+};
+
+/// A source that delivers nothing and reports the overflows it is told of.
+class OverflowingSource final : public drivers::ByteSource {
+ public:
+  void run(const BytesHandler&, const StateHandler&) override {}
+  void stop() override {}
+  drivers::SourceCounters counters() const override {
+    return {.transfers_overflowed = overflowed.load()};
+  }
+
+  std::atomic<std::uint64_t> overflowed{0};
+};
+
 TEST(Live, StatusCountsEveryConnectionAfterTheFirstAsAReconnect) {
   drivers::FrameDecoder decoder;
-  LinkStatus link(decoder);
+  const OverflowingSource source;
+  LinkStatus link(decoder, source);
   StatusReport status;
   link.fill(status);
   EXPECT_EQ(status.connection, "connecting");
@@ -100,7 +129,8 @@ TEST(Live, StatusTakesTheDecodersCounters) {
   ASSERT_EQ(frames, 4);
 
   StatusReport status;
-  LinkStatus(decoder).fill(status);
+  const OverflowingSource source;
+  LinkStatus(decoder, source).fill(status);
   EXPECT_EQ(status.bytes_received, stream.size() + half.size() + restarted.size());
   EXPECT_EQ(status.frames_decoded, 4u);
   EXPECT_EQ(status.frames_lost_sequence, 2u);
@@ -108,6 +138,55 @@ TEST(Live, StatusTakesTheDecodersCounters) {
   EXPECT_EQ(status.frames_truncated, 1u);
   EXPECT_EQ(status.header_errors, 0u);
   EXPECT_EQ(status.sequence_restarts, 1u);
+  EXPECT_EQ(status.transfers_overflowed, 0u);
+}
+
+TEST(Live, StatusAndSummaryCarryTheSourcesOverflowedTransfers) {
+  drivers::FrameDecoder decoder;
+  OverflowingSource source;
+  source.overflowed.store(5);
+  const LinkStatus link(decoder, source);
+  StatusReport status;
+  link.fill(status);
+  EXPECT_EQ(status.transfers_overflowed, 5u);
+  EXPECT_NE(link.summary().find("0 reconnects, 5 USB transfers overflowed"), std::string::npos)
+      << link.summary();
+}
+
+TEST(Live, OverflowedTransfersAreWarnedOfWhenTheyGrowAtMostOnceASecond) {
+  drivers::FrameDecoder decoder;
+  OverflowingSource source;
+  LinkStatus link(decoder, source);
+  const LogCapture log;
+  link.warn_of_overflows();
+  EXPECT_EQ(log.text.str(), "");
+
+  source.overflowed.store(3);
+  link.warn_of_overflows();
+  source.overflowed.store(5);
+  link.warn_of_overflows();  // within the second: held back
+  const auto warnings = [&] {
+    const std::string text = log.text.str();
+    std::vector<std::string> lines;
+    for (std::size_t at = text.find("link: "); at != std::string::npos;
+         at = text.find("link: ", at + 1)) {
+      lines.push_back(text.substr(at, text.find('\n', at) - at));
+    }
+    return lines;
+  };
+  const std::string first =
+      "link: 3 USB transfers overflowed, 3 in all: the device sent more than a transfer holds and "
+      "the excess bytes were lost; raise [usb] transfer_bytes";
+  EXPECT_EQ(warnings(), std::vector<std::string>{first});
+
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  link.warn_of_overflows();
+  link.warn_of_overflows();  // nothing new
+  const std::vector<std::string> both{
+      first,
+      "link: 2 USB transfers overflowed, 5 in all: the device sent more than a transfer holds and "
+      "the excess bytes were lost; raise [usb] transfer_bytes"};
+  EXPECT_EQ(warnings(), both);
 }
 
 // Without a CRC nothing tells a partial frame joined to the next connection's bytes from a real
@@ -127,7 +206,8 @@ TEST(Live, ADroppedLinkDiscardsThePartialFrameOfTheOldConnection) {
     return bytes;
   };
   drivers::FrameDecoder decoder(format);
-  LinkStatus link(decoder);
+  const OverflowingSource source;
+  LinkStatus link(decoder, source);
   std::vector<std::uint32_t> sequences;
   const auto feed = [&](std::span<const std::uint8_t> bytes) {
     decoder.feed(bytes, [&](const SensorFrame& f) { sequences.push_back(f.sequence); });
@@ -261,15 +341,7 @@ TEST(Live, TheFirstSignalStopsTheCommandOnceAndLaterOnesWaitBlocked) {
 
 TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   std::atomic<int> calls{0};
-  // Removed on every way out, a failed ASSERT too: the sink must not outlive `log`.
-  struct LogCapture {
-    std::ostringstream text;
-    LogCapture() {
-      spdlog::default_logger()->sinks().push_back(
-          std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
-    }
-    ~LogCapture() { spdlog::default_logger()->sinks().pop_back(); }
-  } log;
+  const LogCapture log;
   {
     StopOnSignal stop("the test", [&](int) {
       ++calls;

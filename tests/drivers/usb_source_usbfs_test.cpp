@@ -78,6 +78,7 @@ class Driver {
     std::lock_guard lock(mutex_);
     return details_;
   }
+  SourceCounters counters() const { return source_.counters(); }
 
  private:
   UsbSource source_;
@@ -163,18 +164,22 @@ TEST(UsbSourceOnUsbfs, StreamsTheDevicesBytesInOrderThroughItsTransfersInFlight)
   EXPECT_EQ(counts.in_flight, 0);
 }
 
-TEST(UsbSourceOnUsbfs, AnOverflowingTransferDeliversWhatFitAndKeepsStreaming) {
+TEST(UsbSourceOnUsbfs, AnOverflowingTransferDeliversWhatFitIsCountedAndKeepsStreaming) {
   test::UsbfsInsole insole;
   insole.plug();
   const UsbSettings settings = insole_settings();
   Driver driver(settings);
   ASSERT_TRUE(driver.wait_for_state_count(LinkState::Connected, 1));
+  EXPECT_EQ(driver.counters().transfers_overflowed, 0u);
   insole.send(std::vector<std::uint8_t>(700, 0xAB));  // the buffer takes 512
   ASSERT_TRUE(driver.wait_for_bytes(512));
+  // Counted before its bytes were delivered.
+  EXPECT_EQ(driver.counters().transfers_overflowed, 1u);
   // The overflowing transfer went back in flight, and nothing was cancelled.
   EXPECT_TRUE(eventually([&] { return insole.counts().submits == settings.transfers + 1; }));
   insole.send({1, 2, 3});
   ASSERT_TRUE(driver.wait_for_bytes(515));
+  EXPECT_EQ(driver.counters().transfers_overflowed, 1u);
   EXPECT_EQ(insole.counts().discards, 0);
   EXPECT_EQ(driver.states(), (std::vector<LinkState>{LinkState::Connecting, LinkState::Connected}));
   driver.stop();

@@ -109,6 +109,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
       std::chrono::seconds(10));
   ASSERT_FALSE(final_status.is_null()) << "no final status";
   EXPECT_EQ(final_status["reconnects"], 1);
+  EXPECT_EQ(final_status["transfers_overflowed"], 0);
   EXPECT_EQ(final_status["crc_errors"], 0);
   EXPECT_EQ(final_status["frames_lost_sequence"], 0);
   EXPECT_EQ(final_status["ring_drops"], 0);

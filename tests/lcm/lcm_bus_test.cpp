@@ -169,29 +169,14 @@ json lua_expected_effects() {
 
 json lua_expected_status() {
   const StatusReport s = test::sample_status();
-  return {{"utime", s.utime},
-          {"connection", "connected"},
-          {"bytes_received", 123456789},
-          {"frames_decoded", 98765},
-          {"crc_errors", 3},
-          {"resyncs", 5},
-          {"frames_truncated", 37},
-          {"header_errors", 41},
-          {"sequence_restarts", 43},
-          {"segmentation_gaps", 47},
-          {"frames_lost_sequence", 7},
-          {"reconnects", 2},
-          {"ring_depth", 11},
-          {"ring_drops", 13},
-          {"frames_processed", 98700},
-          {"frames_rejected", 31},
-          {"steps_detected", 17},
-          {"step_backlog", 19},
-          {"step_drops", 23},
-          {"fits_published", 29},
-          {"fits_failed", 31},
-          {"fit_latency_p50_ms", 1.5},
-          {"fit_latency_p99_ms", 12.25}};
+  return {{"utime", s.utime},           {"connection", "connected"}, {"bytes_received", 123456789},
+          {"frames_decoded", 98765},    {"crc_errors", 3},           {"resyncs", 5},
+          {"frames_truncated", 37},     {"header_errors", 41},       {"sequence_restarts", 43},
+          {"segmentation_gaps", 47},    {"frames_lost_sequence", 7}, {"reconnects", 2},
+          {"transfers_overflowed", 53}, {"ring_depth", 11},          {"ring_drops", 13},
+          {"frames_processed", 98700},  {"frames_rejected", 31},     {"steps_detected", 17},
+          {"step_backlog", 19},         {"step_drops", 23},          {"fits_published", 29},
+          {"fits_failed", 31},          {"fit_latency_p50_ms", 1.5}, {"fit_latency_p99_ms", 12.25}};
 }
 
 const json* find_channel(const std::vector<json>& messages, const std::string& channel) {

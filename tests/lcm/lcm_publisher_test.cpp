@@ -181,6 +181,7 @@ TEST_F(LcmPublisherMemq, StatusReportArrivesAsStatusT) {
   EXPECT_EQ(m.segmentation_gaps, 47);
   EXPECT_EQ(m.frames_lost_sequence, 7);
   EXPECT_EQ(m.reconnects, 2);
+  EXPECT_EQ(m.transfers_overflowed, 53);
   EXPECT_EQ(m.ring_depth, 11);
   EXPECT_EQ(m.ring_drops, 13);
   EXPECT_EQ(m.frames_processed, 98700);

@@ -127,6 +127,7 @@ void expect_same(const StatusReport& a, const StatusReport& b) {
   EXPECT_EQ(a.segmentation_gaps, b.segmentation_gaps);
   EXPECT_EQ(a.frames_lost_sequence, b.frames_lost_sequence);
   EXPECT_EQ(a.reconnects, b.reconnects);
+  EXPECT_EQ(a.transfers_overflowed, b.transfers_overflowed);
   EXPECT_EQ(a.ring_depth, b.ring_depth);
   EXPECT_EQ(a.ring_drops, b.ring_drops);
   EXPECT_EQ(a.frames_processed, b.frames_processed);

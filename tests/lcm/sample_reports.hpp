@@ -88,6 +88,7 @@ inline StatusReport sample_status() {
   s.frames_lost_sequence = 7;
   s.sequence_restarts = 43;
   s.reconnects = 2;
+  s.transfers_overflowed = 53;
   s.ring_depth = 11;
   s.ring_drops = 13;
   s.frames_processed = 98700;
