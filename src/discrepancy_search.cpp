@@ -17,19 +17,20 @@ constexpr int kPatternHalvings = 4;
 constexpr int kPatternMoves = 40;
 constexpr int kSettleMoves = 6;
 
-// The stencil's offsets in units of its steps: the axes first, then (two parameters) the
-// diagonals; the curvature below reads them in this order.
-std::vector<std::vector<double>> stencil_offsets(std::size_t q) {
+// The pattern search's polls and the stencil's points, in units of their steps: each axis
+// both ways, then (two parameters) the diagonals, since relaxation's strength and tau trade off
+// along one, which axis polls alone leave early. The stencil's Hessian reads them in this order.
+std::vector<std::vector<double>> poll_offsets(std::size_t q) {
   std::vector<std::vector<double>> out;
   for (std::size_t p = 0; p < q; ++p) {
-    for (double sign : {1.0, -1.0}) {
+    for (double sign : {-1.0, 1.0}) {
       out.emplace_back(q, 0.0);
       out.back()[p] = sign;
     }
   }
   if (q == 2) {
-    for (double a : {1.0, -1.0}) {
-      for (double b : {1.0, -1.0}) out.push_back({a, b});
+    for (double a : {-1.0, 1.0}) {
+      for (double b : {-1.0, 1.0}) out.push_back({a, b});
     }
   }
   return out;
@@ -49,30 +50,67 @@ bool inside(const std::vector<double>& theta, const SearchBox& box) {
   return true;
 }
 
-// cov = 2 H^-1 from the stencil's values around `centre` (in stencil_offsets' order).
-std::vector<double> standard_errors(double centre, const std::vector<double>& values,
-                                    const std::vector<double>& h) {
-  const std::size_t q = h.size();
+// The stencil's Hessian in units of its steps, from its values around `centre` (in
+// poll_offsets' order).
+std::vector<double> stencil_hessian(double centre, const std::vector<double>& values,
+                                    std::size_t q) {
   std::vector<double> H(q * q, 0.0);
-  for (std::size_t i = 0; i < q; ++i) {
-    H[i * q + i] = (values[2 * i] - 2 * centre + values[2 * i + 1]) / (h[i] * h[i]);
-  }
-  if (q == 2) {
-    // (+,+), (+,-), (-,+), (-,-)
-    H[1] = H[2] = (values[4] - values[5] - values[6] + values[7]) / (4 * h[0] * h[1]);
-  }
-  std::vector<double> inv(q * q, 0.0);
-  if (q == 1 && H[0] > 0) {
-    inv[0] = 1.0 / H[0];
-  } else if (q == 2) {
-    const double det = H[0] * H[3] - H[1] * H[2];
-    if (det > 0 && H[0] > 0) inv = {H[3] / det, -H[1] / det, -H[2] / det, H[0] / det};
+  for (std::size_t i = 0; i < q; ++i) H[i * q + i] = values[2 * i] - 2 * centre + values[2 * i + 1];
+  // (-,-), (-,+), (+,-), (+,+)
+  if (q == 2) H[1] = H[2] = (values[4] - values[5] - values[6] + values[7]) / 4;
+  return H;
+}
+
+// Unit eigenvectors of a symmetric matrix of order 1 or 2.
+std::vector<std::vector<double>> principal_directions(const std::vector<double>& H, std::size_t q) {
+  if (q == 1) return {{1.0}};
+  const double angle = 0.5 * std::atan2(2 * H[1], H[0] - H[3]);
+  return {{std::cos(angle), std::sin(angle)}, {-std::sin(angle), std::cos(angle)}};
+}
+
+// Along a direction where the deviance is nearly flat, as along the valley where relaxation's
+// strength and tau trade off, the kinks of the profile (a unit's n moving to the next of its
+// grid values; some tenths of a deviance unit) are as large as the rise over one stencil step,
+// and a curvature taken there can have either sign: the session of relaxation 0.5 and 0.2 s
+// (size 41-42, seed 301) came out without a standard error so. Along each principal direction
+// of the stencil's Hessian the step therefore doubles until the deviance rises by 2 (a profile
+// interval of about 1.4 SE, where the kinks are a small part of the rise) or the next step
+// would leave the box, and the secant's curvature is taken over that step. On a quadratic
+// every step gives the same curvature.
+constexpr double kRise = 2.0;
+constexpr int kMaxDoublings = 5;
+
+std::vector<double> secant_standard_errors(const SearchPoint& at, const std::vector<double>& h,
+                                           const std::vector<double>& stencil_H,
+                                           const SearchBox& box, const SearchObjective& objective) {
+  const std::size_t q = h.size();
+  const auto directions = principal_directions(stencil_H, q);
+  const auto along = [&](const std::vector<double>& v, double s) {
+    auto th = at.theta;
+    for (std::size_t p = 0; p < q; ++p) th[p] += s * v[p] * h[p];
+    return th;
+  };
+  // cov = 2 H^-1 = V diag(2 / c) V' in the steps' units.
+  std::vector<double> cov(q * q, 0.0);
+  for (const auto& v : directions) {
+    double s = 1.0;
+    double rise = 0.0;
+    for (int k = 0; k <= kMaxDoublings; ++k) {
+      rise = 0.5 * (objective(along(v, s)) + objective(along(v, -s))) - at.value;
+      if (rise >= kRise || k == kMaxDoublings || !inside(along(v, 2 * s), box) ||
+          !inside(along(v, -2 * s), box)) {
+        break;
+      }
+      s *= 2;
+    }
+    const double c = 2 * rise / (s * s);
+    if (!(c > 0)) return std::vector<double>(q, std::numeric_limits<double>::quiet_NaN());
+    for (std::size_t i = 0; i < q; ++i) {
+      for (std::size_t j = 0; j < q; ++j) cov[i * q + j] += 2.0 / c * v[i] * v[j];
+    }
   }
   std::vector<double> se(q);
-  for (std::size_t i = 0; i < q; ++i) {
-    const double var = 2.0 * inv[i * q + i];
-    se[i] = var > 0 ? std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
-  }
+  for (std::size_t i = 0; i < q; ++i) se[i] = std::sqrt(cov[i * q + i]) * h[i];
   return se;
 }
 
@@ -82,20 +120,7 @@ SearchPoint pattern_search(SearchPoint start, std::vector<double> step, const Se
                            const SearchObjective& objective) {
   SearchPoint at = std::move(start);
   const std::size_t q = at.theta.size();
-  std::vector<std::vector<double>> directions;
-  for (std::size_t p = 0; p < q; ++p) {
-    for (double sign : {-1.0, 1.0}) {
-      directions.emplace_back(q, 0.0);
-      directions.back()[p] = sign;
-    }
-  }
-  // Relaxation's strength and tau trade off along a diagonal valley, which axis polls alone
-  // leave early.
-  if (q == 2) {
-    for (double a : {-1.0, 1.0}) {
-      for (double b : {-1.0, 1.0}) directions.push_back({a, b});
-    }
-  }
+  const auto directions = poll_offsets(q);
   // Polls start with the direction that last improved, so a walk along a valley costs one
   // evaluation a move.
   std::size_t first = 0;
@@ -142,7 +167,7 @@ SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
   const std::size_t q = start.theta.size();
   if (q == 0 || q > 2) throw std::invalid_argument("settle_on_stencil: one or two parameters");
   SettledMinimum out{std::move(start), {}, 0};
-  const auto offsets = stencil_offsets(q);
+  const auto offsets = poll_offsets(q);
   std::vector<double> values(offsets.size());
   for (;;) {
     const auto h = stencil_steps(out.at.theta);
@@ -154,7 +179,8 @@ SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
       if (inside(point, box) && values[k] < best) lowest = k;
     }
     if (lowest == offsets.size() || out.moves == kSettleMoves) {
-      out.se = standard_errors(out.at.value, values, h);
+      out.se = secant_standard_errors(out.at, h, stencil_hessian(out.at.value, values, q), box,
+                                      objective);
       return out;
     }
     out.at = {offset_point(out.at.theta, offsets[lowest], h), values[lowest]};

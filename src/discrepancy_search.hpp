@@ -32,15 +32,17 @@ std::vector<double> stencil_steps(const std::vector<double>& theta);
 
 struct SettledMinimum {
   SearchPoint at;
-  /// From the curvature of the deviance at `at`: cov = 2 H^-1. NaN where H is not positive
-  /// definite. Not told apart for a parameter on a bound: the caller knows its ranges.
+  /// cov = 2 H^-1, H measured along the stencil Hessian's principal directions by secants over
+  /// the step at which the deviance rises by 2 (at most 32 stencil steps, and not beyond the
+  /// box). NaN where a secant's curvature is not positive. Not told apart for a parameter on a
+  /// bound: the caller knows its ranges.
   std::vector<double> se;
   int moves = 0;  ///< how often the stencil's centre moved
 };
 
 /// Moves from `start` to the lowest point of the standard errors' stencil (the axis steps and,
 /// with two parameters, the four diagonal ones) until the centre is the lowest, for at most 6
-/// moves, and takes the curvature from the last stencil. Up to two parameters.
+/// moves, and takes the standard errors there. Up to two parameters.
 SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
                                  const SearchObjective& objective);
 

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <vector>
 
 namespace gaitmon::discrepancy_detail {
@@ -78,13 +79,14 @@ TEST(SettleOnStencil, OneParameter) {
   EXPECT_NEAR(s.se[0], std::sqrt(0.5), 1e-9);
 }
 
-// A well -exp(-Q/2) of width sd in each parameter: near its floor the deviance is -1 + Q/2, so
-// H = 1/sd^2 and SE = sqrt(2) sd; more than sd from it the curvature is negative.
+// A well -100 exp(-Q/2) of width sd in each parameter: near its floor the deviance is
+// -100 + 50 Q, so H = 100/sd^2 and SE = sqrt(2/100) sd; more than sd from it the curvature is
+// negative.
 double well(const std::vector<double>& th) {
   constexpr double kSd = 0.08;
   const double x = (th[0] - 1.0) / kSd;
   const double y = (th[1] - 1.0) / kSd;
-  return -std::exp(-0.5 * (x * x + y * y));
+  return -100.0 * std::exp(-0.5 * (x * x + y * y));
 }
 
 TEST(SettleOnStencil, TakesTheCurvatureAtTheLowestPointOfItsStencilNotOnASlope) {
@@ -102,10 +104,28 @@ TEST(SettleOnStencil, TakesTheCurvatureAtTheLowestPointOfItsStencilNotOnASlope) 
   EXPECT_DOUBLE_EQ(s.at.value, f(s.at.theta));
   // The stencil's 3 % step is 0.4 sd and the centre within half a step of the floor: each costs
   // the curvature a few per cent.
-  const double se = std::sqrt(2.0) * 0.08;
+  const double se = std::sqrt(2.0 / 100.0) * 0.08;
   for (double v : s.se) {
     ASSERT_TRUE(std::isfinite(v));
     EXPECT_NEAR(v, se, 0.1 * se);
+  }
+}
+
+TEST(SettleOnStencil, MeasuresAFlatValleyOverTheStepWhereTheDevianceRises) {
+  // A valley along (1, 1) whose floor rises by 0.02 over one stencil step, with ripples of 0.1
+  // a tenth of a step apart: the kinks of the real profile. Over one step the ripples decide
+  // the curvature along the floor; over the step where the deviance rises by 2 they are a few
+  // per cent of it.
+  const Quadratic q{5010.0, -4990.0, 5010.0, {1.0, 1.0}};
+  const SearchObjective f = [&](const std::vector<double>& th) {
+    return q(th) + 0.1 * std::sin(2 * std::numbers::pi * th[0] / 0.003) *
+                       std::sin(2 * std::numbers::pi * th[1] / 0.003);
+  };
+  const SettledMinimum s = settle_on_stencil({q.centre, f(q.centre)}, kWide, f);
+  EXPECT_EQ(s.moves, 0);
+  for (std::size_t i = 0; i < 2; ++i) {
+    ASSERT_TRUE(std::isfinite(s.se[i])) << i;
+    EXPECT_NEAR(s.se[i], q.se(i), 0.1 * q.se(i)) << i;
   }
 }
 
