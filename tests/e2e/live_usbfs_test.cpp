@@ -2,7 +2,9 @@
 // insole emulated on usbfs (usbfs_insole.hpp) that streams a session in the wire format, is
 // unplugged halfway and plugged back in, and the monitor publishes over LCM udpm to a Lua client
 // built from the lcm-gen types. Nothing is lost across the unplug: the fits equal
-// `gaitmon analyze` on the same session.
+// `gaitmon analyze` on the same session. A transfer the device overfills loses what did not fit,
+// and that loss is counted twice over: as an overflowed transfer and as the frames missing from
+// the sequence.
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -126,6 +128,66 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
             0)
       << output;
   test::expect_fits_match_regions(fits, dir / "analyze" / "regions.csv", 12);
+}
+
+TEST(LiveRunUsb, AnOverfilledTransferIsCountedAndWarnedOfAndItsFramesCountedLost) {
+  const test::Bus& bus = test::private_bus();
+  std::cout << "LCM bus: " << bus.description << std::endl;
+  const fs::path dir = test::scratch_dir("live-usbfs-overflow");
+  const fs::path session = test::cut_session(test::demo_session(), dir / "demo10.csv", 10.0);
+  const std::vector<SensorFrame> frames = test::session_frames(session);
+  std::vector<std::vector<std::uint8_t>> transfers = test::wire_transfers(frames, 10);
+  // Each transfer's buffer holds ten frames exactly; one chunk of twenty overfills its transfer,
+  // which delivers the first ten: the next ten never arrive.
+  const std::size_t over = transfers.size() / 2;
+  ASSERT_EQ(transfers[over].size(), transfers[over + 1].size());
+  const std::size_t buffer = transfers[over].size();
+  transfers[over].insert(transfers[over].end(), transfers[over + 1].begin(),
+                         transfers[over + 1].end());
+  transfers.erase(transfers.begin() + static_cast<std::ptrdiff_t>(over) + 1);
+
+  const fs::path config = test::roomy_config(
+      dir, {{"vendor_id = 0x0000", "vendor_id = 0x1209"},
+            {"product_id = 0x0000", "product_id = 0x0001"},
+            {"transfer_bytes = 16384", "transfer_bytes = " + std::to_string(buffer)}});
+  test::UsbfsInsole insole;
+  insole.plug();
+  const std::unique_ptr<ChildProcess> lua = test::fit_and_status_client(bus);
+  ASSERT_TRUE(lua);
+  ChildProcess run({test::gaitmon_binary().string(), "--config", config.string(), "--log-level",
+                    "info", "run", "--usb", "--lcm-url", bus.url});
+  const auto soon = [] { return Clock::now() + std::chrono::seconds(30); };
+  ASSERT_FALSE(run.read_until(ChildProcess::Stderr, "link connected", soon()).empty())
+      << "gaitmon run --usb did not connect";
+  for (const auto& t : transfers) insole.send(t);
+  std::vector<json> fits;
+  ASSERT_FALSE(read_bus_until(
+                   *lua, fits,
+                   [&](const json& s) {
+                     return s["frames_decoded"].get<std::size_t>() == frames.size() - 10;
+                   },
+                   std::chrono::seconds(120))
+                   .is_null())
+      << "gaitmon run never reported the " << frames.size() - 10 << " frames that arrived";
+  const auto warned = run.read_until(ChildProcess::Stderr, "USB transfers overflowed", soon());
+  ASSERT_FALSE(warned.empty()) << "no warning of the overflow";
+  EXPECT_NE(warned.back().find("link: 1 USB transfers overflowed, 1 in all"), std::string::npos)
+      << warned.back();
+
+  run.signal(SIGINT);
+  const auto run_status = run.wait(Clock::now() + std::chrono::seconds(10));
+  ASSERT_TRUE(run_status.has_value()) << "gaitmon run still running 10 s after SIGINT";
+  EXPECT_EQ(*run_status, 0);
+  const json final_status = read_bus_until(
+      *lua, fits, [](const json& s) { return s["connection"] == "finished"; },
+      std::chrono::seconds(10));
+  ASSERT_FALSE(final_status.is_null()) << "no final status";
+  EXPECT_EQ(final_status["transfers_overflowed"], 1);
+  EXPECT_EQ(final_status["frames_lost_sequence"], 10);
+  EXPECT_EQ(final_status["crc_errors"], 0);
+  EXPECT_EQ(final_status["reconnects"], 0);
+  EXPECT_EQ(final_status["frames_processed"].get<std::size_t>(), frames.size() - 10);
+  EXPECT_EQ(insole.counts().chunks_waiting, 0u);
 }
 
 }  // namespace
