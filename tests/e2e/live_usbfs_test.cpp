@@ -13,6 +13,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "drivers/usbfs_insole.hpp"
@@ -50,6 +51,30 @@ json read_bus_until(ChildProcess& lua, std::vector<json>& fits,
   return nullptr;
 }
 
+/// SIGINTs `gaitmon run`, which must exit with 0 within 10 s, and returns its final status (the
+/// one whose connection is "finished"), collecting the fits before it; null if none came.
+json interrupt(ChildProcess& run, ChildProcess& lua, std::vector<json>& fits) {
+  run.signal(SIGINT);
+  const auto run_status = run.wait(Clock::now() + std::chrono::seconds(10));
+  if (!run_status) {
+    ADD_FAILURE() << "gaitmon run still running 10 s after SIGINT";
+    return nullptr;
+  }
+  EXPECT_EQ(*run_status, 0);
+  // The workers finish every queued fit before the final status.
+  return read_bus_until(
+      lua, fits, [](const json& s) { return s["connection"] == "finished"; },
+      std::chrono::seconds(10));
+}
+
+/// The shipped config with the emulated insole's ids, and `changes` on top.
+fs::path usbfs_config(const fs::path& dir,
+                      std::vector<std::pair<std::string, std::string>> changes = {}) {
+  changes.insert(changes.begin(), {{"vendor_id = 0x0000", "vendor_id = 0x1209"},
+                                   {"product_id = 0x0000", "product_id = 0x0001"}});
+  return test::roomy_config(dir, changes);
+}
+
 TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   const test::Bus& bus = test::private_bus();
   std::cout << "LCM bus: " << bus.description << std::endl;
@@ -60,8 +85,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
   const std::vector<std::vector<std::uint8_t>> transfers = test::wire_transfers(frames, 10);
   const std::size_t half = transfers.size() / 2;
 
-  const fs::path config = test::roomy_config(dir, {{"vendor_id = 0x0000", "vendor_id = 0x1209"},
-                                                   {"product_id = 0x0000", "product_id = 0x0001"}});
+  const fs::path config = usbfs_config(dir);
   test::UsbfsInsole insole;
   insole.plug();
   const std::unique_ptr<ChildProcess> lua = test::fit_and_status_client(bus);
@@ -101,14 +125,7 @@ TEST(LiveRunUsb, AnEmulatedUsbInsoleUnpluggedHalfwayLosesNothing) {
           .is_null())
       << "gaitmon run never reported all " << frames.size() << " frames";
 
-  run.signal(SIGINT);
-  const auto run_status = run.wait(Clock::now() + std::chrono::seconds(10));
-  ASSERT_TRUE(run_status.has_value()) << "gaitmon run still running 10 s after SIGINT";
-  EXPECT_EQ(*run_status, 0);
-  // The workers finish every queued fit before the final status.
-  const json final_status = read_bus_until(
-      *lua, fits, [](const json& s) { return s["connection"] == "finished"; },
-      std::chrono::seconds(10));
+  const json final_status = interrupt(run, *lua, fits);
   ASSERT_FALSE(final_status.is_null()) << "no final status";
   EXPECT_EQ(final_status["reconnects"], 1);
   EXPECT_EQ(final_status["transfers_overflowed"], 0);
@@ -146,10 +163,8 @@ TEST(LiveRunUsb, AnOverfilledTransferIsCountedAndWarnedOfAndItsFramesCountedLost
                          transfers[over + 1].end());
   transfers.erase(transfers.begin() + static_cast<std::ptrdiff_t>(over) + 1);
 
-  const fs::path config = test::roomy_config(
-      dir, {{"vendor_id = 0x0000", "vendor_id = 0x1209"},
-            {"product_id = 0x0000", "product_id = 0x0001"},
-            {"transfer_bytes = 16384", "transfer_bytes = " + std::to_string(buffer)}});
+  const fs::path config =
+      usbfs_config(dir, {{"transfer_bytes = 16384", "transfer_bytes = " + std::to_string(buffer)}});
   test::UsbfsInsole insole;
   insole.plug();
   const std::unique_ptr<ChildProcess> lua = test::fit_and_status_client(bus);
@@ -174,13 +189,7 @@ TEST(LiveRunUsb, AnOverfilledTransferIsCountedAndWarnedOfAndItsFramesCountedLost
   EXPECT_NE(warned.back().find("link: 1 USB transfers overflowed, 1 in all"), std::string::npos)
       << warned.back();
 
-  run.signal(SIGINT);
-  const auto run_status = run.wait(Clock::now() + std::chrono::seconds(10));
-  ASSERT_TRUE(run_status.has_value()) << "gaitmon run still running 10 s after SIGINT";
-  EXPECT_EQ(*run_status, 0);
-  const json final_status = read_bus_until(
-      *lua, fits, [](const json& s) { return s["connection"] == "finished"; },
-      std::chrono::seconds(10));
+  const json final_status = interrupt(run, *lua, fits);
   ASSERT_FALSE(final_status.is_null()) << "no final status";
   EXPECT_EQ(final_status["transfers_overflowed"], 1);
   EXPECT_EQ(final_status["frames_lost_sequence"], 10);
