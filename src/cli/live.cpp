@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <iterator>
 #include <string>
 #include <system_error>
 
@@ -101,12 +102,17 @@ void LinkStatus::warn_of_overflows() {
 std::string LinkStatus::summary() const {
   StatusReport s;
   fill(s);
-  return fmt::format(
+  std::string line = fmt::format(
       "link: {} bytes, {} frames decoded; {} CRC errors, {} truncated, {} bad headers, {} resyncs; "
-      "{} frames lost (sequence gaps), {} device restarts, {} reconnects, {} USB transfers "
-      "overflowed",
+      "{} frames lost (sequence gaps), {} device restarts, {} reconnects",
       s.bytes_received, s.frames_decoded, s.crc_errors, s.frames_truncated, s.header_errors,
-      s.resyncs, s.frames_lost_sequence, s.sequence_restarts, s.reconnects, s.transfers_overflowed);
+      s.resyncs, s.frames_lost_sequence, s.sequence_restarts, s.reconnects);
+  // Only USB sources count overflows: a replay or a serial link would report a USB fault as none.
+  if (s.transfers_overflowed > 0) {
+    fmt::format_to(std::back_inserter(line), ", {} USB transfers overflowed",
+                   s.transfers_overflowed);
+  }
+  return line;
 }
 
 void StepPrinter::publish(const FitReport& report) {
