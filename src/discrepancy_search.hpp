@@ -7,8 +7,10 @@
 
 namespace gaitmon::discrepancy_detail {
 
-/// The deviance to minimise at a parameter vector. It may be called from the thread that calls
-/// the search only.
+/// The deviance to minimise at a parameter vector: -2 log-likelihood up to a constant, so that
+/// cov = 2 H^-1 (with the force alone 2 s^2 H_SSE^-1, s^2 = SSE / N_eff, N_eff inflating for
+/// autocorrelated residuals) and a rise of 1 is one standard error out. It may be called from
+/// the thread that calls the search only.
 using SearchObjective = std::function<double(const std::vector<double>&)>;
 
 struct SearchPoint {
