@@ -114,6 +114,17 @@ std::vector<double> secant_standard_errors(const SearchPoint& at, const std::vec
   return se;
 }
 
+// The step of the standard errors' difference stencil.
+std::vector<double> stencil_steps(const std::vector<double>& theta) {
+  // The profile has kinks where a unit's n moves to the next of its grid values; a step of 1 %
+  // could straddle one and give a curvature of either sign (stress relaxation's strength 0.56
+  // and tau 0.83 s, both well inside their ranges, came out without an SE), so the step spans
+  // 3 % and averages over them.
+  std::vector<double> h(theta.size());
+  for (std::size_t i = 0; i < h.size(); ++i) h[i] = std::max(1e-4, 3e-2 * std::abs(theta[i]));
+  return h;
+}
+
 }  // namespace
 
 SearchPoint pattern_search(SearchPoint start, std::vector<double> step, const SearchBox& box,
@@ -146,16 +157,6 @@ SearchPoint pattern_search(SearchPoint start, std::vector<double> step, const Se
     }
   }
   return at;
-}
-
-std::vector<double> stencil_steps(const std::vector<double>& theta) {
-  // The profile has kinks where a unit's n moves to the next of its grid values; a step of 1 %
-  // could straddle one and give a curvature of either sign (stress relaxation's strength 0.56
-  // and tau 0.83 s, both well inside their ranges, came out without an SE), so the step spans
-  // 3 % and averages over them.
-  std::vector<double> h(theta.size());
-  for (std::size_t i = 0; i < h.size(); ++i) h[i] = std::max(1e-4, 3e-2 * std::abs(theta[i]));
-  return h;
 }
 
 // The pattern search stops where its own polls, finer than the stencil by the end, find nothing

@@ -29,9 +29,6 @@ struct SearchBox {
 SearchPoint pattern_search(SearchPoint start, std::vector<double> step, const SearchBox& box,
                            const SearchObjective& objective);
 
-/// The step of the standard errors' difference stencil: 3 % of the value, at least 1e-4.
-std::vector<double> stencil_steps(const std::vector<double>& theta);
-
 struct SettledMinimum {
   SearchPoint at;
   /// cov = 2 H^-1, H measured along the stencil Hessian's principal directions by secants over
@@ -42,9 +39,10 @@ struct SettledMinimum {
   int moves = 0;  ///< how often the stencil's centre moved
 };
 
-/// Moves from `start` to the lowest point of the standard errors' stencil (the axis steps and,
-/// with two parameters, the four diagonal ones) until the centre is the lowest, for at most 6
-/// moves, and takes the standard errors there. Up to two parameters.
+/// Moves from `start` to the lowest point of the standard errors' stencil (steps of 3 % of each
+/// value, at least 1e-4: the axis steps and, with two parameters, the four diagonal ones) until the
+/// centre is the lowest, for at most 6 moves, and takes the standard errors there. Up to two
+/// parameters.
 SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
                                  const SearchObjective& objective);
 
