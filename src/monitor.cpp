@@ -17,6 +17,7 @@
 #include <exception>
 #include <map>
 #include <mutex>
+#include <new>
 #include <optional>
 #include <span>
 #include <stdexcept>
@@ -139,23 +140,29 @@ double percentile(std::vector<double>& values, double p) {
 }  // namespace
 
 struct Monitor::Impl {
-  struct Job {
-    Foot foot = Foot::Left;
-    std::uint64_t seq = 0;  ///< per foot, in step order: the reorder buffer's key
-    Step step;
-    std::shared_ptr<const InsoleLayout> layout;
-    Clock::time_point finalised;
-  };
   struct Ready {
     FitReport report;
     Clock::time_point finalised;
     bool failed = false;
   };
-  /// Per foot: results that finished before an earlier step's. nullopt marks a dropped step.
+  /// Per foot, by step order: results that finished before an earlier step's. nullopt marks a
+  /// step with nothing to publish (dropped, or lost after its analysis).
+  using Outcomes = std::map<std::uint64_t, std::optional<Ready>>;
+  /// A step's entry in its foot's Outcomes, allocated before the step takes its place in the
+  /// order: filing an outcome then allocates nothing, so a step lost because memory ran out
+  /// cannot hold back the results after it.
+  using Slot = Outcomes::node_type;
+  struct Job {
+    Foot foot = Foot::Left;
+    Slot slot;  ///< its key is the step's place in the foot's order
+    Step step;
+    std::shared_ptr<const InsoleLayout> layout;
+    Clock::time_point finalised;
+  };
   struct Reorder {
     std::uint64_t next = 0;
     bool draining = false;  ///< a thread is publishing from this buffer
-    std::map<std::uint64_t, std::optional<Ready>> pending;
+    Outcomes pending;
   };
   /// The latest complete steps for the extended model, keyed by time (both feet), so that the
   /// window and the fit do not depend on the order in which the workers finish.
@@ -394,9 +401,35 @@ struct Monitor::Impl {
       if (step.status != StepStatus::Ok) continue;
       foot.zero = step.sensor_zero_bits;
       foot.threshold_bits = step.adaptive_threshold_bits;
-      enqueue(Job{step.foot, foot.next_seq++, std::move(step), foot.layout, Clock::now()});
+      queue_step(foot, std::move(step));
     }
     finalised.clear();
+  }
+
+  /// The step takes its place in the foot's order only once its slot is allocated.
+  void queue_step(FootState& foot, Step step) {
+    Slot slot;
+    try {
+      Outcomes one;
+      one.emplace(foot.next_seq, std::nullopt);
+      slot = one.extract(one.begin());
+    } catch (const std::bad_alloc& e) {
+      count_drop(step, e.what());
+      return;
+    }
+    ++foot.next_seq;
+    enqueue(Job{step.foot, std::move(slot), std::move(step), foot.layout, Clock::now()});
+  }
+
+  /// A step that memory ran out for before a worker took it.
+  void count_drop(const Step& step, const char* why) {
+    const std::uint64_t drops = step_drops.fetch_add(1, std::memory_order_relaxed) + 1;
+    if (auto held = step_drop_log.allow()) {
+      spdlog::warn(
+          "monitor: dropped foot {} step {}: {}; {} dropped so far ({} similar messages "
+          "suppressed)",
+          foot_name(step.foot), step.index, why, drops, *held);
+    }
   }
 
   void enqueue(Job job) {
@@ -407,16 +440,29 @@ struct Monitor::Impl {
       if (options.backlog_overflow == BacklogOverflow::Wait) {
         room.wait(lock, [&] { return jobs.size() < max_backlog; });
       }
-      jobs.push_back(std::move(job));
+      try {
+        jobs.push_back(std::move(job));  // strong guarantee: on failure the job is intact
+      } catch (const std::bad_alloc& e) {
+        lock.unlock();
+        count_drop(job.step, e.what());
+        complete(job.foot, std::move(job.slot), std::nullopt);
+        return;
+      }
       steps_queued.fetch_add(1, std::memory_order_relaxed);
       if (jobs.size() > max_backlog) {
         dropped.emplace(std::move(jobs.front()));
         jobs.pop_front();
       }
       backlog.store(jobs.size(), std::memory_order_relaxed);
+      // A runner that could not be posted leaves the step queued for the next, or for stop().
       if (runners < config.monitor.workers) {
-        ++runners;
-        boost::asio::post(pool, [this] { run_jobs(); });
+        try {
+          boost::asio::post(pool, [this] { run_jobs(); });
+          ++runners;
+        } catch (const std::bad_alloc& e) {
+          spdlog::error("monitor: no worker started for foot {} step {}: {}; it waits",
+                        foot_name(jobs.back().foot), jobs.back().step.index, e.what());
+        }
       }
     }
     if (dropped) {
@@ -427,7 +473,7 @@ struct Monitor::Impl {
             "so far ({} similar messages suppressed)",
             max_backlog, foot_name(dropped->foot), dropped->step.index, drops, *held);
       }
-      complete(dropped->foot, dropped->seq, std::nullopt);
+      complete(dropped->foot, std::move(dropped->slot), std::nullopt);
     }
   }
 
@@ -468,41 +514,54 @@ struct Monitor::Impl {
       }
       room.notify_one();
       std::optional<StepAnalysis> analysis;
+      std::optional<Ready> ready(Ready{{}, job->finalised, false});
       try {
-        Ready ready{{}, job->finalised, false};
         try {
           analysis = analyse_step(job->step, *job->layout, config, options.analysis, &cache);
-          ready.report = fit_report(*analysis, ready.failed);
+          ready->report = fit_report(*analysis, ready->failed);
         } catch (const std::exception& e) {
-          ready.report = failed_report(job->step, e.what());
-          ready.failed = true;
+          // Logged before its report is built, which may fail too.
           if (auto held = fit_log.allow()) {
             spdlog::warn("monitor: foot {} step {}: analysis failed: {} ({} similar suppressed)",
                          foot_name(job->foot), job->step.index, e.what(), *held);
           }
+          ready->report = failed_report(job->step, e.what());
+          ready->failed = true;
         }
-        complete(job->foot, job->seq, std::move(ready));
       } catch (const std::exception& e) {
-        // A failed fit rather than a drop: step_drops says the backlog was too small for the
-        // load, and this step was taken by a worker; no fit came of it.
+        // A failed fit rather than a drop: step_drops counts steps no worker took; this one was
+        // taken, and no fit came of it.
         fits_failed.fetch_add(1, std::memory_order_relaxed);
         spdlog::error("monitor: foot {} step {} lost: {}", foot_name(job->foot), job->step.index,
                       e.what());
-        complete(job->foot, job->seq, std::nullopt);
+        ready.reset();
       }
+      complete(job->foot, std::move(job->slot), std::move(ready));
       if (analysis && !config.model.effects.empty()) {
         remember_for_effects(std::move(job->step), std::move(*analysis), job->layout);
       }
     }
   }
 
-  /// Files one outcome (nullopt: dropped) and publishes every result now in order. One thread
-  /// at a time drains a foot's buffer, publishing outside the lock, so neither the detector
-  /// (filing a dropped step) nor another worker ever waits for a slow publisher.
-  void complete(Foot foot, std::uint64_t seq, std::optional<Ready> ready) {
+  /// Steps still queued once the pool is done: only if posting their runner failed.
+  void run_leftover_jobs() {
+    {
+      const std::lock_guard lock(jobs_mutex);
+      if (jobs.empty()) return;
+      ++runners;
+    }
+    run_jobs();
+  }
+
+  /// Files one outcome (nullopt: nothing to publish) in its slot and publishes every result now
+  /// in order. One thread at a time drains a foot's buffer, publishing outside the lock, so
+  /// neither the detector (filing a dropped step) nor another worker ever waits for a slow
+  /// publisher. Allocates nothing.
+  void complete(Foot foot, Slot slot, std::optional<Ready> ready) {
+    slot.mapped() = std::move(ready);
     std::unique_lock lock(publish_mutex);
     Reorder& r = reorder[static_cast<std::size_t>(foot)];
-    r.pending.emplace(seq, std::move(ready));
+    r.pending.insert(std::move(slot));
     if (r.draining) return;
     r.draining = true;
     while (!r.pending.empty() && r.pending.begin()->first == r.next) {
@@ -722,6 +781,7 @@ struct Monitor::Impl {
     input_done.store(true, std::memory_order_release);
     if (detector.joinable()) detector.join();
     pool.join();
+    run_leftover_jobs();
     finish_effects();
     log_ring_drops("since the last status");
     send(status(true));

@@ -1,6 +1,7 @@
 // Counts every allocation of a test program, so that a test can prove that a hot path allocates
-// nothing. It replaces the global operator new and delete (keeping their behaviour otherwise),
-// so it belongs in exactly one translation unit of a program.
+// nothing, and makes a thread's next allocations fail when a test asks, so that it can show that
+// memory running out is survived. It replaces the global operator new and delete (keeping their
+// behaviour otherwise), so it belongs in exactly one translation unit of a program.
 #pragma once
 
 #include <atomic>
@@ -10,12 +11,27 @@
 
 namespace gaitmon::test {
 inline std::atomic<std::uint64_t> allocations{0};
+/// How many of this thread's next allocations throw std::bad_alloc.
+inline thread_local int failing_allocations = 0;
 }  // namespace gaitmon::test
 
 [[gnu::noinline]] void* operator new(std::size_t size) {
+  if (gaitmon::test::failing_allocations > 0) {
+    --gaitmon::test::failing_allocations;
+    throw std::bad_alloc();
+  }
   gaitmon::test::allocations.fetch_add(1, std::memory_order_relaxed);
   if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
   throw std::bad_alloc();
+}
+// Replaced too, or its memory (std::stable_sort's buffer) would come from the sanitizer's own
+// operator new and go back through the free() below.
+[[gnu::noinline]] void* operator new(std::size_t size, const std::nothrow_t&) noexcept {
+  try {
+    return ::operator new(size);
+  } catch (const std::bad_alloc&) {
+    return nullptr;
+  }
 }
 [[gnu::noinline]] void operator delete(void* p) noexcept {
   std::free(p);

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <spdlog/sinks/base_sink.h>
 #include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
 
@@ -17,12 +18,14 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <regex>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <utility>
 #include <vector>
 
+#include "allocation_count.hpp"
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/discrepancy.hpp"
@@ -638,6 +641,135 @@ TEST(Monitor, APublisherThatThrowsIsCountedAndLogged) {
                       "lost so far"),
             std::string::npos)
       << text;
+}
+
+// The published fits of one foot, by step index.
+std::vector<std::int64_t> fitted_steps(const std::vector<FitReport>& fits, Foot foot) {
+  std::vector<std::int64_t> steps;
+  for (const FitReport& fit : fits) {
+    if (fit.foot == foot) steps.push_back(fit.step);
+  }
+  return steps;
+}
+
+// Keeps the log's text; at the first message matching `arm_on` it makes the logging thread's
+// next allocation fail (spdlog calls a sink on the thread that logs, and allocates nothing after
+// the last sink).
+class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
+ public:
+  explicit ArmingSink(std::regex arm_on) : arm_on_(std::move(arm_on)) {}
+  std::string text() {
+    const std::lock_guard lock(mutex_);
+    return text_;
+  }
+  /// The submatches of the message that armed it; empty if none did.
+  std::vector<std::string> armed_at() {
+    const std::lock_guard lock(mutex_);
+    return armed_at_;
+  }
+
+ protected:
+  void sink_it_(const spdlog::details::log_msg& msg) override {
+    const std::string line(msg.payload.begin(), msg.payload.end());
+    text_ += line + "\n";
+    std::smatch match;
+    if (armed_at_.empty() && std::regex_search(line, match, arm_on_)) {
+      armed_at_.assign(match.begin(), match.end());
+      test::failing_allocations = 1;
+    }
+  }
+  void flush_() override {}
+
+ private:
+  std::regex arm_on_;
+  std::string text_;
+  std::vector<std::string> armed_at_;
+};
+
+TEST(Monitor, AStepLostAfterItsAnalysisIsCountedAndLoggedAndHoldsBackNoLaterStep) {
+  const Config config = shipped_config();
+  MonitorOptions options;
+  options.analysis.fit.max_iterations = 0;  // every analysis fails: its report is then built
+  options.backlog_overflow = BacklogOverflow::Wait;
+  RecordingPublisher publisher;
+  // Memory runs out for the first failed analysis's report, on its worker.
+  const auto sink =
+      std::make_shared<ArmingSink>(std::regex("foot (L|R) step ([0-9]+): analysis failed"));
+  spdlog::default_logger()->sinks().push_back(sink);
+  Monitor monitor(config, options, publisher);
+  for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+    ASSERT_TRUE(monitor.offer_wait(frame));
+  }
+  monitor.stop();
+  spdlog::default_logger()->sinks().pop_back();
+
+  const std::vector<std::string> at = sink->armed_at();
+  ASSERT_EQ(at.size(), 3u) << sink->text();
+  const Foot foot = at[1] == "L" ? Foot::Left : Foot::Right;
+  const std::int64_t lost = std::stoll(at[2]);
+  EXPECT_THAT(sink->text(),
+              testing::HasSubstr(fmt::format("monitor: foot {} step {} lost: std::bad_alloc",
+                                             foot_name(foot), lost)));
+  const auto fits = publisher.fits();
+  const MonitorCounters c = monitor.counters();
+  EXPECT_EQ(c.steps_queued, fits.size() + 1);
+  EXPECT_EQ(c.fits_failed, fits.size() + 1);
+  EXPECT_EQ(c.step_drops, 0u);
+  // Every other step of the foot is published, in order, the ones after the lost one too.
+  const std::vector<std::int64_t> steps = fitted_steps(fits, foot);
+  ASSERT_FALSE(steps.empty());
+  EXPECT_GT(steps.back(), lost);
+  EXPECT_TRUE(std::is_sorted(steps.begin(), steps.end()));
+  EXPECT_EQ(std::count(steps.begin(), steps.end(), lost), 0);
+  const std::vector<StepEvent> events = publisher.events();
+  const auto detected = std::count_if(events.begin(), events.end(), [&](const StepEvent& e) {
+    return e.foot == foot && e.kind == StepEvent::Kind::ToeOff && e.complete;
+  });
+  EXPECT_EQ(static_cast<std::int64_t>(steps.size()) + 1, detected);
+}
+
+// Makes the detector's next allocation fail once it has published the toe off of one step.
+class ArmingPublisher final : public RecordingPublisher {
+ public:
+  ArmingPublisher(Foot foot, std::int64_t step) : foot_(foot), step_(step) {}
+  using RecordingPublisher::publish;
+  void publish(const StepEvent& event) override {
+    RecordingPublisher::publish(event);
+    if (event.foot == foot_ && event.step == step_ && event.kind == StepEvent::Kind::ToeOff) {
+      test::failing_allocations = 1;
+    }
+  }
+
+ private:
+  Foot foot_;
+  std::int64_t step_;
+};
+
+TEST(Monitor, AStepThatMemoryRanOutForBeforeItWasQueuedIsDroppedAndHoldsBackNoLaterStep) {
+  const Config config = shipped_config();
+  ArmingPublisher publisher(Foot::Left, 3);
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  Monitor monitor(config, quick_replay(), publisher);
+  for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+    ASSERT_TRUE(monitor.offer_wait(frame));
+  }
+  monitor.stop();
+  spdlog::default_logger()->sinks().pop_back();
+
+  EXPECT_THAT(log.str(), testing::HasSubstr("monitor: dropped foot L step 3: std::bad_alloc; 1 "
+                                            "dropped so far"));
+  const auto fits = publisher.fits();
+  const MonitorCounters c = monitor.counters();
+  EXPECT_EQ(c.step_drops, 1u);
+  EXPECT_EQ(c.steps_queued, fits.size());
+  EXPECT_EQ(c.frames_rejected, 0u);
+  const std::vector<std::int64_t> left = fitted_steps(fits, Foot::Left);
+  EXPECT_TRUE(std::is_sorted(left.begin(), left.end()));
+  EXPECT_EQ(std::count(left.begin(), left.end(), 3), 0);
+  EXPECT_GT(left.size(), 10u);
+  EXPECT_GT(left.back(), 3);
 }
 
 TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {

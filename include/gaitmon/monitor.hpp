@@ -111,6 +111,7 @@ struct MonitorCounters {
   std::uint64_t steps_detected = 0;  ///< finalised steps, Ok and incomplete
   std::uint64_t steps_queued = 0;    ///< Ok steps handed to the backlog
   std::uint64_t step_backlog = 0;    ///< waiting for a worker now
+  /// Steps no worker took: the backlog overflowed, or memory ran out in queueing them.
   std::uint64_t step_drops = 0;
   std::uint64_t fits_published = 0;
   /// Steps whose analysis threw or a region failed (published with fit_failed), and steps lost

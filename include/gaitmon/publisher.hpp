@@ -90,9 +90,10 @@ struct StatusReport {
   std::uint64_t segmentation_gaps = 0;  ///< gaps over max_gap_s: a foot's segmentation restarted
   std::uint64_t steps_detected = 0;
   std::uint64_t step_backlog = 0;
-  std::uint64_t step_drops = 0;
+  std::uint64_t step_drops = 0;  ///< steps no worker took (see MonitorCounters)
   std::uint64_t fits_published = 0;
-  std::uint64_t fits_failed = 0;  ///< published fits with a region (or the step) fit_failed
+  /// Published fits with a region (or the step) fit_failed, and steps lost after their analysis
+  std::uint64_t fits_failed = 0;
   double fit_latency_p50_ms = 0.0;
   double fit_latency_p99_ms = 0.0;
 };
