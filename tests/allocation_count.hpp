@@ -11,13 +11,14 @@
 
 namespace gaitmon::test {
 inline std::atomic<std::uint64_t> allocations{0};
-/// How many of this thread's next allocations throw std::bad_alloc.
-inline thread_local int failing_allocations = 0;
+/// When not negative: how many of this thread's allocations succeed before one throws
+/// std::bad_alloc (and the count goes back to -1).
+inline thread_local int allocations_until_failure = -1;
 }  // namespace gaitmon::test
 
 [[gnu::noinline]] void* operator new(std::size_t size) {
-  if (gaitmon::test::failing_allocations > 0) {
-    --gaitmon::test::failing_allocations;
+  if (gaitmon::test::allocations_until_failure >= 0 &&
+      gaitmon::test::allocations_until_failure-- == 0) {
     throw std::bad_alloc();
   }
   gaitmon::test::allocations.fetch_add(1, std::memory_order_relaxed);

@@ -675,7 +675,7 @@ class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
     std::smatch match;
     if (armed_at_.empty() && std::regex_search(line, match, arm_on_)) {
       armed_at_.assign(match.begin(), match.end());
-      test::failing_allocations = 1;
+      test::allocations_until_failure = 0;
     }
   }
   void flush_() override {}
@@ -728,21 +728,24 @@ TEST(Monitor, AStepLostAfterItsAnalysisIsCountedAndLoggedAndHoldsBackNoLaterStep
   EXPECT_EQ(static_cast<std::int64_t>(steps.size()) + 1, detected);
 }
 
-// Makes the detector's next allocation fail once it has published the toe off of one step.
+// Once it has published the toe off of one step, lets `succeeding` more of the detector's
+// allocations succeed and makes the next one fail.
 class ArmingPublisher final : public RecordingPublisher {
  public:
-  ArmingPublisher(Foot foot, std::int64_t step) : foot_(foot), step_(step) {}
+  ArmingPublisher(Foot foot, std::int64_t step, int succeeding = 0)
+      : foot_(foot), step_(step), succeeding_(succeeding) {}
   using RecordingPublisher::publish;
   void publish(const StepEvent& event) override {
     RecordingPublisher::publish(event);
     if (event.foot == foot_ && event.step == step_ && event.kind == StepEvent::Kind::ToeOff) {
-      test::failing_allocations = 1;
+      test::allocations_until_failure = succeeding_;
     }
   }
 
  private:
   Foot foot_;
   std::int64_t step_;
+  int succeeding_;
 };
 
 TEST(Monitor, AStepThatMemoryRanOutForBeforeItWasQueuedIsDroppedAndHoldsBackNoLaterStep) {
@@ -770,6 +773,45 @@ TEST(Monitor, AStepThatMemoryRanOutForBeforeItWasQueuedIsDroppedAndHoldsBackNoLa
   EXPECT_EQ(std::count(left.begin(), left.end(), 3), 0);
   EXPECT_GT(left.size(), 10u);
   EXPECT_GT(left.back(), 3);
+}
+
+TEST(Monitor, AStepWhoseWorkerCouldNotBeStartedWaitsForTheEndOfTheRun) {
+  Config config = shipped_config();
+  config.monitor.workers = 1;
+  // The left foot alone, up to just before its second complete step: one step to queue.
+  std::vector<Step> left;
+  for (Step& step : batch_steps(demo_30s(), config)) {
+    if (step.foot == Foot::Left && step.status == StepStatus::Ok) left.push_back(std::move(step));
+  }
+  ASSERT_GE(left.size(), 2u);
+  std::vector<SensorFrame> frames;
+  for (const SensorFrame& frame : test::session_frames(demo_30s())) {
+    if (frame.foot == Foot::Left && frame.device_time_us < (left[1].t_heel_strike_s - 0.05) * 1e6) {
+      frames.push_back(frame);
+    }
+  }
+  // After its toe off the detector allocates the step's slot, then (the backlog's first block
+  // has room for it) the runner's post: that one fails.
+  ArmingPublisher publisher(Foot::Left, left[0].index, 1);
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  Monitor monitor(config, quick_replay(), publisher);
+  for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
+  monitor.stop();
+  spdlog::default_logger()->sinks().pop_back();
+
+  EXPECT_THAT(log.str(),
+              testing::HasSubstr(fmt::format(
+                  "monitor: no worker started for foot L step {}: std::bad_alloc; it waits",
+                  left[0].index)));
+  const auto fits = publisher.fits();
+  ASSERT_EQ(fits.size(), 1u) << log.str();
+  EXPECT_EQ(fits[0].step, left[0].index);
+  const MonitorCounters c = monitor.counters();
+  EXPECT_EQ(c.steps_queued, 1u);
+  EXPECT_EQ(c.step_drops, 0u);
+  EXPECT_EQ(c.frames_rejected, 0u);
 }
 
 TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {
