@@ -481,8 +481,19 @@ struct Monitor::Impl {
     const auto now = Clock::now();
     if (now < next_status) return;
     next_status = now + status_period;
-    log_ring_drops(fmt::format("in the last {:.1f} s", config.monitor.status_period_s));
-    send(status(false));
+    publish_status(false);
+  }
+
+  /// With the ring drops of the period. A status that cannot be built (memory ran out) is lost
+  /// and logged, and the run goes on.
+  void publish_status(bool final) noexcept {
+    try {
+      log_ring_drops(final ? std::string("since the last status")
+                           : fmt::format("in the last {:.1f} s", config.monitor.status_period_s));
+      send(status(final));
+    } catch (const std::exception& e) {
+      spdlog::error("monitor: a status report was lost: {}", e.what());
+    }
   }
 
   // Once per status period, and at the end for what the last period left: a run shorter than
@@ -631,31 +642,36 @@ struct Monitor::Impl {
         w.fresh < std::max(folds, w.steps.size() - w.fresh)) {
       return;
     }
-    w.fitting = true;
+    // Marked once posted (the fit waits for this lock): a post that fails leaves the next step
+    // to try again.
     boost::asio::post(pool, [this] { fit_effects(false); });
+    w.fitting = true;
   }
 
   /// Fits the extended model to a copy of the window and publishes it. When the run is
   /// interrupted a fit still queued is skipped and a running one stops.
-  void fit_effects(bool final_estimate) {
-    std::vector<Step> steps;
-    std::vector<StepAnalysis> analyses;
-    std::shared_ptr<const InsoleLayout> layout;
-    {
-      const std::lock_guard lock(effects_mutex);
-      if (interrupted.load()) {
-        effect_window.fitting = false;
-        return;
-      }
-      for (const auto& [key, entry] : effect_window.steps) {
-        steps.push_back(entry.first);
-        analyses.push_back(entry.second);
-      }
-      layout = effect_window.layout;
-      effect_window.fresh = 0;
-    }
+  /// Never throws: it runs on the pool, where an exception would end the program.
+  void fit_effects(bool final_estimate) noexcept {
+    std::size_t count = 0;
     std::optional<EffectsReport> report;
     try {
+      std::vector<Step> steps;
+      std::vector<StepAnalysis> analyses;
+      std::shared_ptr<const InsoleLayout> layout;
+      {
+        const std::lock_guard lock(effects_mutex);
+        if (interrupted.load()) {
+          effect_window.fitting = false;
+          return;
+        }
+        count = effect_window.steps.size();
+        for (const auto& [key, entry] : effect_window.steps) {
+          steps.push_back(entry.first);
+          analyses.push_back(entry.second);
+        }
+        layout = effect_window.layout;
+        effect_window.fresh = 0;
+      }
       const ExtendedModelFit fit =
           fit_extended_model(make_discrepancy_input(steps, std::move(analyses), *layout, config),
                              config.model.effects, {}, effects_stop.get_token());
@@ -664,13 +680,13 @@ struct Monitor::Impl {
       report->utime = now_utime();
       send(*report);
     } catch (const FitStopped&) {
-      spdlog::debug("monitor: the extended model's fit to {} steps stopped", steps.size());
+      spdlog::debug("monitor: the extended model's fit to {} steps stopped", count);
     } catch (const std::exception& e) {
       if (auto held = effects_log.allow()) {
         spdlog::warn(
             "monitor: the extended model could not be fitted to {} steps: {} ({} similar "
             "suppressed)",
-            steps.size(), e.what(), *held);
+            count, e.what(), *held);
       }
     }
     const std::lock_guard lock(effects_mutex);
@@ -682,26 +698,31 @@ struct Monitor::Impl {
   /// At shutdown, after the workers: the final estimate, over the window as it ends. An
   /// interrupted run (close()) publishes its latest estimate instead, as a fit of the window
   /// could take longer than a signal's shutdown may.
-  void finish_effects() {
+  /// Never throws: stop() runs it, and ~Monitor() calls stop().
+  void finish_effects() noexcept {
     if (config.model.effects.empty()) return;
-    std::size_t held = 0;
-    std::optional<EffectsReport> last;
-    {
-      const std::lock_guard lock(effects_mutex);
-      held = effect_window.steps.size();
-      if (effect_window.last_is_current || interrupted.load()) last = effect_window.last;
-    }
-    if (last) {
-      last->final_estimate = true;
-      last->utime = now_utime();
-      send(*last);
-    } else if (held < static_cast<std::size_t>(DiscrepancySettings{}.folds)) {
-      spdlog::warn("monitor: {} complete steps are too few for the extended model (it needs {})",
-                   held, DiscrepancySettings{}.folds);
-    } else if (interrupted.load()) {
-      spdlog::warn("monitor: stopped before the extended model's first estimate");
-    } else {
-      fit_effects(true);
+    try {
+      std::size_t held = 0;
+      std::optional<EffectsReport> last;
+      {
+        const std::lock_guard lock(effects_mutex);
+        held = effect_window.steps.size();
+        if (effect_window.last_is_current || interrupted.load()) last = effect_window.last;
+      }
+      if (last) {
+        last->final_estimate = true;
+        last->utime = now_utime();
+        send(*last);
+      } else if (held < static_cast<std::size_t>(DiscrepancySettings{}.folds)) {
+        spdlog::warn("monitor: {} complete steps are too few for the extended model (it needs {})",
+                     held, DiscrepancySettings{}.folds);
+      } else if (interrupted.load()) {
+        spdlog::warn("monitor: stopped before the extended model's first estimate");
+      } else {
+        fit_effects(true);
+      }
+    } catch (const std::exception& e) {
+      spdlog::error("monitor: the extended model's final estimate was lost: {}", e.what());
     }
   }
 
@@ -783,8 +804,7 @@ struct Monitor::Impl {
     pool.join();
     run_leftover_jobs();
     finish_effects();
-    log_ring_drops("since the last status");
-    send(status(true));
+    publish_status(true);
     stopped = true;
   }
 

@@ -814,6 +814,80 @@ TEST(Monitor, AStepWhoseWorkerCouldNotBeStartedWaitsForTheEndOfTheRun) {
   EXPECT_EQ(c.frames_rejected, 0u);
 }
 
+TEST(Monitor, AStatusThatMemoryRanOutForIsLostAndLoggedAndTheRunGoesOn) {
+  Config config = shipped_config();
+  config.monitor.status_period_s = 1e-3;
+  MonitorOptions options = quick_replay();
+  // Once a fit is published its latency is in the window that the status copies: the driver's
+  // fields filled, that copy is the status's next allocation, and it fails.
+  std::atomic<Monitor*> watched{nullptr};
+  std::atomic<int> calls{0};
+  bool armed = false;  // the detector thread's only
+  options.driver_status = [&](StatusReport&) {
+    calls.fetch_add(1);
+    const Monitor* monitor = watched.load();
+    if (!armed && monitor != nullptr && monitor->counters().fits_published > 0) {
+      armed = true;
+      test::allocations_until_failure = 0;
+    }
+  };
+  RecordingPublisher publisher;
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  Monitor monitor(config, options, publisher);
+  watched.store(&monitor);
+  for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
+  monitor.stop();
+  spdlog::default_logger()->sinks().pop_back();
+
+  EXPECT_THAT(log.str(), testing::HasSubstr("monitor: a status report was lost: std::bad_alloc"));
+  const auto statuses = publisher.statuses();
+  EXPECT_EQ(statuses.size() + 1, static_cast<std::size_t>(calls.load()));
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().connection, "finished");
+  EXPECT_EQ(statuses.back().frames_processed, frames.size());
+  EXPECT_EQ(statuses.back().fits_published, monitor.counters().steps_queued);
+  EXPECT_EQ(monitor.counters().publish_failures, 0u);
+}
+
+// Runs the demo with an effect, and stop() with its first allocation failing: the final effects
+// estimate's (a copy of the latest, or of the window to fit), on the thread that stops.
+std::string stop_without_memory_for_the_final_effects(bool interrupt) {
+  Config config = shipped_config();
+  config.model.effects = {"impact_transient"};
+  RecordingPublisher publisher;
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  Monitor monitor(config, quick_replay(), publisher);
+  offer_all(monitor, test::session_frames(demo_30s()));
+  EXPECT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
+  if (interrupt) monitor.close();
+  test::allocations_until_failure = 0;
+  monitor.stop();
+  test::allocations_until_failure = -1;
+  spdlog::default_logger()->sinks().pop_back();
+  for (const EffectsReport& report : publisher.effects()) EXPECT_FALSE(report.final_estimate);
+  const std::vector<StatusReport> statuses = publisher.statuses();
+  EXPECT_TRUE(!statuses.empty() && statuses.back().connection == "finished") << "no final status";
+  return log.str();
+}
+
+TEST(Monitor, AnInterruptedRunThatMemoryRanOutForInItsFinalEffectsEstimateStillEnds) {
+  EXPECT_THAT(
+      stop_without_memory_for_the_final_effects(true),
+      testing::HasSubstr("monitor: the extended model's final estimate was lost: std::bad_alloc"));
+}
+
+TEST(Monitor, ARunThatMemoryRanOutForInItsFinalEffectsEstimateStillEnds) {
+  // Whether the latest estimate is of the window as it ends depends on when the workers finished.
+  EXPECT_THAT(stop_without_memory_for_the_final_effects(false),
+              testing::ContainsRegex("monitor: the extended model('s final estimate was lost| "
+                                     "could not be fitted to [0-9]+ steps): std::bad_alloc"));
+}
+
 TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {
   Config config = shipped_config();
   config.segmentation.swing_window_frames = 20;

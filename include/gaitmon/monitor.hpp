@@ -54,7 +54,9 @@
 // Errors: exceptions never cross threads. A step whose analysis throws is published with every
 // region's status fit_failed:<reason>; a frame that cannot be processed is rejected and counted;
 // a Publisher that throws is counted (publish_failures), logged (rate-limited) and the message
-// is lost.
+// is lost. Memory running out loses what it hits and nothing after it: a step before a worker
+// takes it (step_drops) or after its analysis (fits_failed), a status report, or an estimate of
+// the extended model; each is logged, and later steps of the foot are still published in order.
 //
 // Shutdown, by stop(): (1) stop accepting: offer() and offer_wait() return false from now on;
 // (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
