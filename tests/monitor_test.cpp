@@ -6,7 +6,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <spdlog/sinks/base_sink.h>
-#include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -19,7 +18,6 @@
 #include <memory>
 #include <mutex>
 #include <regex>
-#include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <utility>
@@ -30,6 +28,7 @@
 #include "gaitmon/batch.hpp"
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/insole.hpp"
+#include "log_capture.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
 
@@ -337,18 +336,15 @@ TEST(Monitor, FullRingDropsAndCountsFrames) {
   MonitorOptions options;
   options.analysis = quick_fits();
   options.publish_raw = true;
-  std::ostringstream log;
-  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::LogCapture log;
   Monitor monitor(config, options, publisher);
   std::uint64_t refused = 0;
   for (const SensorFrame& frame : frames) refused += monitor.offer(frame) ? 0 : 1;
   monitor.stop();
-  spdlog::default_logger()->sinks().pop_back();
   const MonitorCounters c = monitor.counters();
   ASSERT_GT(refused, 0u) << "the detector kept up with an 8-frame ring; nothing was exercised";
   // Logged too, however short the run: the last status period's drops at the end.
-  const std::string text = log.str();
+  const std::string text = log.text.str();
   EXPECT_NE(text.find("monitor: ring full: "), std::string::npos) << text;
   EXPECT_NE(text.find(fmt::format(", {} in all", refused)), std::string::npos) << text;
   EXPECT_EQ(c.ring_drops, refused);
@@ -627,16 +623,13 @@ TEST(Monitor, APublisherThatThrowsIsCountedAndLogged) {
   options.analysis = quick_fits();
   options.backlog_overflow = BacklogOverflow::Wait;
   FrameRefusingPublisher publisher;
-  std::ostringstream log;
-  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::LogCapture log;
   Monitor monitor(config, options, publisher);
   for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
   monitor.stop();
-  spdlog::default_logger()->sinks().pop_back();
   EXPECT_EQ(monitor.counters().publish_failures, frames.size());
   EXPECT_EQ(publisher.statuses().back().frames_processed, frames.size());
-  const std::string text = log.str();
+  const std::string text = log.text.str();
   EXPECT_NE(text.find("monitor: publishing failed, the message is lost: no room for frames; 1 "
                       "lost so far"),
             std::string::npos)
@@ -652,16 +645,11 @@ std::vector<std::int64_t> fitted_steps(const std::vector<FitReport>& fits, Foot 
   return steps;
 }
 
-// Keeps the log's text; at the first message matching `arm_on` it makes the logging thread's
-// next allocation fail (spdlog calls a sink on the thread that logs, and allocates nothing after
-// the last sink).
+// At the first message matching `arm_on` it makes the logging thread's next allocation fail
+// (spdlog calls a sink on the thread that logs, and allocates nothing after the last sink).
 class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
  public:
   explicit ArmingSink(std::regex arm_on) : arm_on_(std::move(arm_on)) {}
-  std::string text() {
-    const std::lock_guard lock(mutex_);
-    return text_;
-  }
   /// The submatches of the message that armed it; empty if none did.
   std::vector<std::string> armed_at() {
     const std::lock_guard lock(mutex_);
@@ -671,7 +659,6 @@ class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
  protected:
   void sink_it_(const spdlog::details::log_msg& msg) override {
     const std::string line(msg.payload.begin(), msg.payload.end());
-    text_ += line + "\n";
     std::smatch match;
     if (armed_at_.empty() && std::regex_search(line, match, arm_on_)) {
       armed_at_.assign(match.begin(), match.end());
@@ -682,7 +669,6 @@ class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
 
  private:
   std::regex arm_on_;
-  std::string text_;
   std::vector<std::string> armed_at_;
 };
 
@@ -692,22 +678,23 @@ TEST(Monitor, AStepLostAfterItsAnalysisIsCountedAndLoggedAndHoldsBackNoLaterStep
   options.analysis.fit.max_iterations = 0;  // every analysis fails: its report is then built
   options.backlog_overflow = BacklogOverflow::Wait;
   RecordingPublisher publisher;
-  // Memory runs out for the first failed analysis's report, on its worker.
-  const auto sink =
+  // Memory runs out for the first failed analysis's report, on its worker. The arming sink is
+  // the last.
+  const test::LogCapture log;
+  const auto arming =
       std::make_shared<ArmingSink>(std::regex("foot (L|R) step ([0-9]+): analysis failed"));
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::ScopedSink attached(arming);
   Monitor monitor(config, options, publisher);
   for (const SensorFrame& frame : test::session_frames(demo_30s())) {
     ASSERT_TRUE(monitor.offer_wait(frame));
   }
   monitor.stop();
-  spdlog::default_logger()->sinks().pop_back();
 
-  const std::vector<std::string> at = sink->armed_at();
-  ASSERT_EQ(at.size(), 3u) << sink->text();
+  const std::vector<std::string> at = arming->armed_at();
+  ASSERT_EQ(at.size(), 3u) << log.text.str();
   const Foot foot = at[1] == "L" ? Foot::Left : Foot::Right;
   const std::int64_t lost = std::stoll(at[2]);
-  EXPECT_THAT(sink->text(),
+  EXPECT_THAT(log.text.str(),
               testing::HasSubstr(fmt::format("monitor: foot {} step {} lost: std::bad_alloc",
                                              foot_name(foot), lost)));
   const auto fits = publisher.fits();
@@ -751,18 +738,16 @@ class ArmingPublisher final : public RecordingPublisher {
 TEST(Monitor, AStepThatMemoryRanOutForBeforeItWasQueuedIsDroppedAndHoldsBackNoLaterStep) {
   const Config config = shipped_config();
   ArmingPublisher publisher(Foot::Left, 3);
-  std::ostringstream log;
-  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::LogCapture log;
   Monitor monitor(config, quick_replay(), publisher);
   for (const SensorFrame& frame : test::session_frames(demo_30s())) {
     ASSERT_TRUE(monitor.offer_wait(frame));
   }
   monitor.stop();
-  spdlog::default_logger()->sinks().pop_back();
 
-  EXPECT_THAT(log.str(), testing::HasSubstr("monitor: dropped foot L step 3: std::bad_alloc; 1 "
-                                            "dropped so far"));
+  EXPECT_THAT(log.text.str(),
+              testing::HasSubstr("monitor: dropped foot L step 3: std::bad_alloc; 1 "
+                                 "dropped so far"));
   const auto fits = publisher.fits();
   const MonitorCounters c = monitor.counters();
   EXPECT_EQ(c.step_drops, 1u);
@@ -793,20 +778,17 @@ TEST(Monitor, AStepWhoseWorkerCouldNotBeStartedWaitsForTheEndOfTheRun) {
   // After its toe off the detector allocates the step's slot, then (the backlog's first block
   // has room for it) the runner's post: that one fails.
   ArmingPublisher publisher(Foot::Left, left[0].index, 1);
-  std::ostringstream log;
-  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::LogCapture log;
   Monitor monitor(config, quick_replay(), publisher);
   for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
   monitor.stop();
-  spdlog::default_logger()->sinks().pop_back();
 
-  EXPECT_THAT(log.str(),
+  EXPECT_THAT(log.text.str(),
               testing::HasSubstr(fmt::format(
                   "monitor: no worker started for foot L step {}: std::bad_alloc; it waits",
                   left[0].index)));
   const auto fits = publisher.fits();
-  ASSERT_EQ(fits.size(), 1u) << log.str();
+  ASSERT_EQ(fits.size(), 1u) << log.text.str();
   EXPECT_EQ(fits[0].step, left[0].index);
   const MonitorCounters c = monitor.counters();
   EXPECT_EQ(c.steps_queued, 1u);
@@ -832,17 +814,15 @@ TEST(Monitor, AStatusThatMemoryRanOutForIsLostAndLoggedAndTheRunGoesOn) {
     }
   };
   RecordingPublisher publisher;
-  std::ostringstream log;
-  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::LogCapture log;
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
   Monitor monitor(config, options, publisher);
   watched.store(&monitor);
   for (const SensorFrame& frame : frames) ASSERT_TRUE(monitor.offer_wait(frame));
   monitor.stop();
-  spdlog::default_logger()->sinks().pop_back();
 
-  EXPECT_THAT(log.str(), testing::HasSubstr("monitor: a status report was lost: std::bad_alloc"));
+  EXPECT_THAT(log.text.str(),
+              testing::HasSubstr("monitor: a status report was lost: std::bad_alloc"));
   const auto statuses = publisher.statuses();
   EXPECT_EQ(statuses.size() + 1, static_cast<std::size_t>(calls.load()));
   ASSERT_FALSE(statuses.empty());
@@ -858,9 +838,7 @@ std::string stop_without_memory_for_the_final_effects(bool interrupt) {
   Config config = shipped_config();
   config.model.effects = {"impact_transient"};
   RecordingPublisher publisher;
-  std::ostringstream log;
-  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
-  spdlog::default_logger()->sinks().push_back(sink);
+  const test::LogCapture log;
   Monitor monitor(config, quick_replay(), publisher);
   offer_all(monitor, test::session_frames(demo_30s()));
   EXPECT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
@@ -868,11 +846,10 @@ std::string stop_without_memory_for_the_final_effects(bool interrupt) {
   test::allocations_until_failure = 0;
   monitor.stop();
   test::allocations_until_failure = -1;
-  spdlog::default_logger()->sinks().pop_back();
   for (const EffectsReport& report : publisher.effects()) EXPECT_FALSE(report.final_estimate);
   const std::vector<StatusReport> statuses = publisher.statuses();
   EXPECT_TRUE(!statuses.empty() && statuses.back().connection == "finished") << "no final status";
-  return log.str();
+  return log.text.str();
 }
 
 TEST(Monitor, AnInterruptedRunThatMemoryRanOutForInItsFinalEffectsEstimateStillEnds) {

@@ -5,8 +5,6 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <spdlog/sinks/ostream_sink.h>
-#include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -14,13 +12,13 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "drivers/wire_format.hpp"
+#include "log_capture.hpp"
 #include "monitor_support.hpp"
 #include "replay/pacer.hpp"
 
@@ -45,19 +43,6 @@ TEST(Live, SpeedIsMaxOrANumberFromTheSlowest) {
     }
   }
 }
-
-/// What the default logger writes while it lives. Removed on every way out, a failed ASSERT too:
-/// the sink must not outlive `text`.
-struct LogCapture {
-  std::ostringstream text;
-  LogCapture() {
-    spdlog::default_logger()->sinks().push_back(
-        std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
-  }
-  ~LogCapture() { spdlog::default_logger()->sinks().pop_back(); }
-  LogCapture(const LogCapture&) = delete;
-  LogCapture& operator=(const LogCapture&) = delete;
-};
 
 /// A source that delivers nothing and reports the overflows it is told of.
 class OverflowingSource final : public drivers::ByteSource {
@@ -160,7 +145,7 @@ TEST(Live, OverflowedTransfersAreWarnedOfWhenTheyGrowAtMostOnceASecond) {
   drivers::FrameDecoder decoder;
   OverflowingSource source;
   LinkStatus link(decoder, source);
-  const LogCapture log;
+  const test::LogCapture log;
   link.warn_of_overflows();
   EXPECT_EQ(log.text.str(), "");
 
@@ -344,7 +329,7 @@ TEST(Live, TheFirstSignalStopsTheCommandOnceAndLaterOnesWaitBlocked) {
 
 TEST(Live, AStopThatThrowsIsLoggedAndTheWatcherStillEnds) {
   std::atomic<int> calls{0};
-  const LogCapture log;
+  const test::LogCapture log;
   {
     StopOnSignal stop("the test", [&](int) {
       ++calls;

@@ -4,8 +4,6 @@
 // that delivers nothing leaves no file, and a driver that throws ends the command with its error.
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <spdlog/sinks/ostream_sink.h>
-#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -16,7 +14,6 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -28,6 +25,7 @@
 #include "gaitmon/session.hpp"
 #include "lcm/bus_support.hpp"
 #include "live_support.hpp"
+#include "log_capture.hpp"
 #include "monitor_support.hpp"
 #include "replay/pseudo_terminal.hpp"
 #include "src/cli/commands.hpp"
@@ -349,17 +347,14 @@ std::string record_in_process(const fs::path& config, const fs::path& out,
   const std::string out_arg = out.string();
   const std::array<const char*, 6> argv{"gaitmon",       "record",   "--out",
                                         out_arg.c_str(), "--serial", "fake"};
-  std::ostringstream text;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
   std::string error;
+  const test::LogCapture capture;
   try {
     app.parse(static_cast<int>(argv.size()), argv.data());
   } catch (const std::exception& e) {
     error = e.what();
   }
-  spdlog::default_logger()->sinks().pop_back();
-  log = text.str();
+  log = capture.text.str();
   return error;
 }
 

@@ -4,8 +4,6 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <spdlog/sinks/ostream_sink.h>
-#include <spdlog/spdlog.h>
 
 #include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
@@ -17,13 +15,13 @@
 #include <map>
 #include <memory>
 #include <set>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "gaitmon/lcm_connection.hpp"
 #include "lcm/sample_reports.hpp"
+#include "log_capture.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -293,15 +291,15 @@ TEST(LcmPublisher, CountsAndLogsFailedPublishesWithoutThrowing) {
   }
   settings.url = "file://" + log.string() + "?mode=r";
   LcmPublisher publisher(settings);
-  std::ostringstream text;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(text));
-  EXPECT_NO_THROW(publisher.publish(test::sample_status()));
-  EXPECT_NO_THROW(publisher.publish(test::sample_fit()));
-  spdlog::default_logger()->sinks().pop_back();
+  std::string logged;
+  {
+    const test::LogCapture capture;
+    EXPECT_NO_THROW(publisher.publish(test::sample_status()));
+    EXPECT_NO_THROW(publisher.publish(test::sample_fit()));
+    logged = capture.text.str();
+  }
   EXPECT_EQ(publisher.failed_publishes(), 2U);
   EXPECT_EQ(publisher.published(), 0U);
-  const std::string logged = text.str();
   EXPECT_NE(logged.find("LCM: a message on GAITMON_STATUS was lost: LCM did not send it; 1 lost so "
                         "far"),
             std::string::npos)

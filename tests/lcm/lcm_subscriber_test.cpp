@@ -4,15 +4,12 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <spdlog/sinks/ostream_sink.h>
-#include <spdlog/spdlog.h>
 
 #include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
 #include <gaitmon/step_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -20,6 +17,7 @@
 #include "gaitmon/lcm_connection.hpp"
 #include "gaitmon/lcm_publisher.hpp"
 #include "lcm/sample_reports.hpp"
+#include "log_capture.hpp"
 
 namespace gaitmon {
 namespace {
@@ -227,18 +225,16 @@ TEST_F(LcmSubscriberMemq, ForeignAndImpossibleMessagesAreCountedNotDelivered) {
   frame.foot = 0;
   frame.regions[3].ellipse_case = 6;
   bus->publish("GAITMON_FRAME", &frame);
-  std::ostringstream log;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  const test::LogCapture log;
   drain(subscriber);
-  spdlog::default_logger()->sinks().pop_back();
   EXPECT_TRUE(deliveries.empty());
   EXPECT_EQ(subscriber.decode_errors(), 4U);
   // Logged too, the first of them (the others come within the same second).
-  EXPECT_NE(log.str().find("LCM: a malformed message on GAITMON_FIT skipped: another type, cut "
-                           "short or an impossible value; 1 so far (0 similar suppressed)"),
-            std::string::npos)
-      << log.str();
+  EXPECT_NE(
+      log.text.str().find("LCM: a malformed message on GAITMON_FIT skipped: another type, cut "
+                          "short or an impossible value; 1 so far (0 similar suppressed)"),
+      std::string::npos)
+      << log.text.str();
 }
 
 // The generated decoder throws for a negative array length; the exception must not cross LCM's
