@@ -642,10 +642,19 @@ struct Monitor::Impl {
         w.fresh < std::max(folds, w.steps.size() - w.fresh)) {
       return;
     }
-    // Marked once posted (the fit waits for this lock): a post that fails leaves the next step
-    // to try again.
-    boost::asio::post(pool, [this] { fit_effects(false); });
-    w.fitting = true;
+    // Marked once posted (the fit waits for this lock): the step is in the window either way,
+    // and after a post that fails the next step tries again.
+    try {
+      boost::asio::post(pool, [this] { fit_effects(false); });
+      w.fitting = true;
+    } catch (const std::bad_alloc& e) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: the extended model's fit to {} steps could not be started: {}; the next "
+            "step starts it ({} similar suppressed)",
+            w.steps.size(), e.what(), *held);
+      }
+    }
   }
 
   /// Fits the extended model to a copy of the window and publishes it. When the run is
