@@ -421,7 +421,7 @@ struct Monitor::Impl {
     enqueue(Job{step.foot, std::move(slot), std::move(step), foot.layout, Clock::now()});
   }
 
-  /// A step that memory ran out for before a worker took it.
+  /// A step no worker will take. Allocates nothing, so that a dropped step is always filed.
   void count_drop(const Step& step, const char* why) {
     const std::uint64_t drops = step_drops.fetch_add(1, std::memory_order_relaxed) + 1;
     if (auto held = step_drop_log.allow()) {
@@ -466,13 +466,7 @@ struct Monitor::Impl {
       }
     }
     if (dropped) {
-      const std::uint64_t drops = step_drops.fetch_add(1, std::memory_order_relaxed) + 1;
-      if (auto held = step_drop_log.allow()) {
-        spdlog::warn(
-            "monitor: step backlog full ({} steps): dropped foot {} step {}; {} dropped "
-            "so far ({} similar messages suppressed)",
-            max_backlog, foot_name(dropped->foot), dropped->step.index, drops, *held);
-      }
+      count_drop(dropped->step, "the step backlog is full ([monitor] max_step_backlog)");
       complete(dropped->foot, std::move(dropped->slot), std::nullopt);
     }
   }

@@ -290,6 +290,7 @@ TEST(Monitor, BacklogOverflowDropsTheOldestWaitingSteps) {
   }
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
   GatedPublisher publisher;
+  const test::LogCapture log;
   Monitor monitor(config, MonitorOptions{}, publisher);
 
   // Feed frame by frame until the first step is queued, and let the worker take it.
@@ -326,6 +327,12 @@ TEST(Monitor, BacklogOverflowDropsTheOldestWaitingSteps) {
   std::sort(published.begin(), published.end());
   std::sort(expected.begin(), expected.end());
   EXPECT_EQ(published, expected);
+  // The first drop (the rest follow within the second).
+  EXPECT_THAT(log.text.str(),
+              testing::HasSubstr(fmt::format(
+                  "monitor: dropped foot {} step {}: the step backlog is full ([monitor] "
+                  "max_step_backlog); 1 dropped so far",
+                  foot_name(ok_order[1].first), ok_order[1].second)));
 }
 
 TEST(Monitor, FullRingDropsAndCountsFrames) {
