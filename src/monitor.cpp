@@ -169,10 +169,10 @@ struct Monitor::Impl {
   struct EffectWindow {
     std::map<std::pair<double, Foot>, std::pair<Step, StepAnalysis>> steps;
     std::shared_ptr<const InsoleLayout> layout;  ///< of the first step; one insole per session
-    std::size_t fresh = 0;                       ///< steps added since the last fit took its copy
-    bool fitting = false;                        ///< a fit is queued or running
-    std::optional<EffectsReport> last;           ///< the latest published
-    bool last_is_current = false;                ///< `last` is of the window as it is now
+    std::size_t fresh = 0;  ///< steps in the window added since the last fit took its copy
+    bool fitting = false;   ///< a fit is queued or running
+    std::optional<EffectsReport> last;  ///< the latest published
+    bool last_is_current = false;       ///< `last` is of the window as it is now
   };
   /// Detector-thread state of one foot.
   struct FootState {
@@ -198,6 +198,7 @@ struct Monitor::Impl {
             std::chrono::duration<double>(config.monitor.status_period_s))),
         pool(static_cast<std::size_t>(config.monitor.workers)) {
     latencies.reserve(kLatencyWindow);
+    if (!config.model.effects.empty()) effects_thread.emplace(1);
     detector = std::thread([this] { detector_main(); });
   }
 
@@ -225,17 +226,29 @@ struct Monitor::Impl {
         maybe_status();
         if (!any) std::this_thread::sleep_for(kIdlePoll);
       }
-      for (FootState& foot : feet) {
-        if (!foot.started) continue;
-        finalised.clear();
-        foot.segmenter->finish(finalised);
-        deliver(foot);
-      }
+      finish_foot(Foot::Left);
+      finish_foot(Foot::Right);
     } catch (const std::exception& e) {
       // Only resource exhaustion gets here (handle() contains per-frame errors). Refuse further
       // frames so that a replay waiting for room does not wait forever.
       closed.store(true);
       spdlog::error("monitor: the detector thread stopped: {}", e.what());
+    }
+  }
+
+  /// At the end of input. Memory running out here loses what this foot still held, and not
+  /// the other foot's last step.
+  void finish_foot(Foot which) noexcept {
+    FootState& foot = feet[static_cast<std::size_t>(which)];
+    if (!foot.started) return;
+    try {
+      finalised.clear();
+      foot.segmenter->finish(finalised);
+      deliver(foot);
+    } catch (const std::exception& e) {
+      finalised.clear();
+      spdlog::error("monitor: foot {}: the step still open at the end of input was lost: {}",
+                    foot_name(which), e.what());
     }
   }
 
@@ -629,7 +642,9 @@ struct Monitor::Impl {
     while (w.steps.size() > static_cast<std::size_t>(config.model.effects_window_steps)) {
       w.steps.erase(w.steps.begin());
     }
-    ++w.fresh;
+    // Capped at the window: a step that has left it again is not new in it, and below, size -
+    // fresh counts the old steps even when the window turned over while a fit ran.
+    w.fresh = std::min(w.fresh + 1, w.steps.size());
     w.last_is_current = false;
     const std::size_t folds = static_cast<std::size_t>(DiscrepancySettings{}.folds);
     if (w.fitting || w.steps.size() < folds ||
@@ -639,7 +654,7 @@ struct Monitor::Impl {
     // Marked once posted (the fit waits for this lock): the step is in the window either way,
     // and after a post that fails the next step tries again.
     try {
-      boost::asio::post(pool, [this] { fit_effects(false); });
+      boost::asio::post(*effects_thread, [this] { fit_effects(false); });
       w.fitting = true;
     } catch (const std::bad_alloc& e) {
       if (auto held = effects_log.allow()) {
@@ -653,7 +668,7 @@ struct Monitor::Impl {
 
   /// Fits the extended model to a copy of the window and publishes it. When the run is
   /// interrupted a fit still queued is skipped and a running one stops.
-  /// Never throws: it runs on the pool, where an exception would end the program.
+  /// Never throws: it runs on a pool thread, where an exception would end the program.
   void fit_effects(bool final_estimate) noexcept {
     std::size_t count = 0;
     std::optional<EffectsReport> report;
@@ -806,6 +821,7 @@ struct Monitor::Impl {
     if (detector.joinable()) detector.join();
     pool.join();
     run_leftover_jobs();
+    if (effects_thread) effects_thread->join();
     finish_effects();
     publish_status(true);
     stopped = true;
@@ -852,11 +868,14 @@ struct Monitor::Impl {
 
   LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log, gap_log;
 
-  // The extended model's window, shared by the workers.
+  // The extended model's window: the workers fill it, the effects thread copies it.
   std::mutex effects_mutex;
   EffectWindow effect_window;
 
   boost::asio::thread_pool pool;
+  /// With [model] effects: one thread for the extended model's fits, which take tenths of a
+  /// second, so that a step finalised meanwhile waits for no fit but its own.
+  std::optional<boost::asio::thread_pool> effects_thread;
   std::thread detector;
 };
 

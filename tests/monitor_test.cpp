@@ -251,11 +251,11 @@ TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
   EXPECT_GE(last.fit_latency_p99_ms, last.fit_latency_p50_ms);
 }
 
-// Holds the first fit inside publish() until released, so the single worker is busy while the
-// detector queues more steps than the backlog holds.
+// Holds the first message of one kind inside publish() until released, keeping its thread busy.
+template <typename Gated>
 class GatedPublisher : public RecordingPublisher {
  public:
-  void publish(const FitReport& r) override {
+  void publish(const Gated& r) override {
     if (entered_.fetch_add(1) == 0) {
       std::unique_lock lock(mutex_);
       open_cv_.wait(lock, [&] { return open_; });
@@ -289,7 +289,9 @@ TEST(Monitor, BacklogOverflowDropsTheOldestWaitingSteps) {
     if (step.status == StepStatus::Ok) ok_order.emplace_back(step.foot, step.index);
   }
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
-  GatedPublisher publisher;
+  // The first fit held: the single worker is busy while the detector queues more steps than the
+  // backlog holds.
+  GatedPublisher<FitReport> publisher;
   const test::LogCapture log;
   Monitor monitor(config, MonitorOptions{}, publisher);
 
@@ -521,6 +523,55 @@ TEST(Monitor, AnInterruptedRunPublishesItsLatestEffectsEstimateAsTheFinalOne) {
   for (std::size_t i = 0; i < last.params.size(); ++i) {
     EXPECT_EQ(last.params[i].value, before.params[i].value) << last.params[i].name;
   }
+}
+
+TEST(Monitor, AStepWaitsForNoFitOfTheEffectsEvenWithOneWorker) {
+  Config config = shipped_config();
+  config.monitor.workers = 1;
+  config.model.effects = {"impact_transient"};
+  GatedPublisher<EffectsReport> publisher;  // the first estimate's fit never ends till released
+  Monitor monitor(config, quick_replay(), publisher);
+  std::thread driver([&] { offer_all(monitor, test::session_frames(demo_30s())); });
+  const bool held = wait_until([&] { return publisher.entered() == 1; });
+  const std::uint64_t before = monitor.counters().fits_published;
+  const bool went_on =
+      held && wait_until([&] { return monitor.counters().fits_published >= before + 20; });
+  publisher.release();
+  driver.join();
+  monitor.stop();
+  ASSERT_TRUE(held);
+  EXPECT_TRUE(went_on) << "fits published while the effects fit was held: "
+                       << monitor.counters().fits_published - before;
+  EXPECT_EQ(monitor.counters().fits_published, monitor.counters().steps_queued);
+  EXPECT_EQ(monitor.counters().step_drops, 0u);
+}
+
+TEST(Monitor, AWindowThatTurnedOverWhileAnEffectsFitRanIsFittedAgain) {
+  Config config = shipped_config();
+  config.model.effects = {"impact_transient"};
+  config.model.effects_window_steps = 10;
+  std::vector<SensorFrame> first = test::session_frames(demo_30s());
+  const auto later = std::find_if(first.begin(), first.end(), [](const SensorFrame& f) {
+    return f.device_time_us > 20'000'000;
+  });
+  const std::vector<SensorFrame> rest(later, first.end());
+  first.erase(later, first.end());
+  GatedPublisher<EffectsReport> publisher;
+  Monitor monitor(config, quick_replay(), publisher);
+  // The first estimate is held while more new steps than the window holds arrive.
+  std::thread driver([&] { offer_all(monitor, first); });
+  const bool turned_over = wait_until(
+      [&] { return publisher.entered() == 1 && monitor.counters().fits_published >= 25; });
+  driver.join();
+  publisher.release();
+  EXPECT_TRUE(wait_until([&] { return publisher.effects().size() == 1; }));
+  offer_all(monitor, rest);
+  monitor.stop();
+  ASSERT_TRUE(turned_over);
+  const std::vector<EffectsReport> reports = publisher.effects();
+  const auto estimates = std::count_if(reports.begin(), reports.end(),
+                                       [](const EffectsReport& r) { return !r.final_estimate; });
+  EXPECT_GE(estimates, 2) << "a fit of the new window follows the held one";
 }
 
 TEST(Monitor, WithoutEffectsNothingIsPublishedOnTheirChannel) {
@@ -801,6 +852,54 @@ TEST(Monitor, AStepWhoseWorkerCouldNotBeStartedWaitsForTheEndOfTheRun) {
   EXPECT_EQ(c.steps_queued, 1u);
   EXPECT_EQ(c.step_drops, 0u);
   EXPECT_EQ(c.frames_rejected, 0u);
+}
+
+// Once it has published the report of the input's last frame (foot and index), makes the
+// detector's next allocation fail: the first foot's finish at the end of input.
+class LastFrameArmingPublisher final : public RecordingPublisher {
+ public:
+  explicit LastFrameArmingPublisher(const std::vector<SensorFrame>& frames)
+      : foot_(frames.back().foot),
+        index_(std::count_if(frames.begin(), frames.end(),
+                             [&](const SensorFrame& f) { return f.foot == foot_; }) -
+               1) {}
+  using RecordingPublisher::publish;
+  void publish(const FrameReport& report) override {
+    RecordingPublisher::publish(report);
+    if (report.foot == foot_ && report.frame == index_) test::allocations_until_failure = 0;
+  }
+
+ private:
+  Foot foot_;
+  std::int64_t index_;
+};
+
+TEST(Monitor, MemoryRunningOutAtOneFootsEndOfInputLosesNotTheOtherFootsLastStep) {
+  Config config = shipped_config();
+  config.monitor.publish_frames = true;
+  config.monitor.status_period_s = 3600.0;  // no status between the last frame and the end
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  std::vector<std::int64_t> batch_right;
+  for (const Step& step : batch_steps(demo_30s(), config)) {
+    if (step.foot == Foot::Right && step.status == StepStatus::Ok)
+      batch_right.push_back(step.index);
+  }
+  LastFrameArmingPublisher publisher(frames);
+  const test::LogCapture log;
+  Monitor monitor(config, quick_replay(), publisher);
+  offer_all(monitor, frames);
+  monitor.stop();
+
+  const std::string text = log.text.str();
+  EXPECT_THAT(text, testing::HasSubstr("monitor: foot L: the step still open at the end of input "
+                                       "was lost: std::bad_alloc"));
+  EXPECT_THAT(text, testing::Not(testing::HasSubstr("detector thread stopped")));
+  // The right foot's last step, which only its own finish cuts, is fitted.
+  EXPECT_EQ(fitted_steps(publisher.fits(), Foot::Right), batch_right);
+  const std::vector<StatusReport> statuses = publisher.statuses();
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().frames_processed, frames.size());
+  EXPECT_EQ(statuses.back().fits_published, monitor.counters().steps_queued);
 }
 
 TEST(Monitor, AStatusThatMemoryRanOutForIsLostAndLoggedAndTheRunGoesOn) {

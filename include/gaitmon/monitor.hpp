@@ -20,11 +20,11 @@
 //    published in step order per foot (a reorder buffer holds those that finish early), each
 //    with latency_ms = publication time - the time the detector finalised the step.
 //  - With [model] effects in the config, the workers also keep the latest
-//    config.model.effects_window_steps analysed Ok steps (both feet, by heel strike time) and
-//    fit the extended model (discrepancy.hpp: make_discrepancy_input, fit_extended_model) to
-//    them on the pool, once there are as many steps as folds (5) and again whenever the new
-//    steps are as many as the old (5, 10, 20, ...; every half window once full); each estimate
-//    is published as an EffectsReport. Over a session no longer than the window, the final one
+//    config.model.effects_window_steps analysed Ok steps (both feet, by heel strike time), and
+//    a thread of its own fits the extended model (discrepancy.hpp: make_discrepancy_input,
+//    fit_extended_model) to them, once there are as many steps as folds (5) and again whenever
+//    the new steps are as many as the old (5, 10, 20, ...; every half window once full), so
+//    that no step waits for such a fit; each estimate is published as an EffectsReport. Over a session no longer than the window, the final one
 //    equals `gaitmon analyze --effects` on it.
 //
 // Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
@@ -55,8 +55,9 @@
 // region's status fit_failed:<reason>; a frame that cannot be processed is rejected and counted;
 // a Publisher that throws is counted (publish_failures), logged (rate-limited) and the message
 // is lost. Memory running out loses what it hits and nothing after it: a step before a worker
-// takes it (step_drops) or after its analysis (fits_failed), a status report, or an estimate of
-// the extended model; each is logged, and later steps of the foot are still published in order.
+// takes it (step_drops) or after its analysis (fits_failed), a status report, an estimate of
+// the extended model, or at the end of input the step one foot's segmentation still held; each
+// is logged, and later steps of the foot, and the other foot's, are still published in order.
 //
 // Shutdown, by stop(): (1) stop accepting: offer() and offer_wait() return false from now on;
 // (2) the detector thread drains the ring, ends each foot's segmentation as at the end of a
