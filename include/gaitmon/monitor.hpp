@@ -24,8 +24,8 @@
 //    a thread of its own fits the extended model (discrepancy.hpp: make_discrepancy_input,
 //    fit_extended_model) to them, once there are as many steps as folds (5) and again whenever
 //    the new steps are as many as the old (5, 10, 20, ...; every half window once full), so
-//    that no step waits for such a fit; each estimate is published as an EffectsReport. Over a session no longer than the window, the final one
-//    equals `gaitmon analyze --effects` on it.
+//    that no step waits for such a fit; each estimate is published as an EffectsReport. Over a
+//    session no longer than the window, the final one equals `gaitmon analyze --effects` on it.
 //
 // Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
 // wrap, divided by 1e6 (for replays that is the session's t_s, which the drivers encode as
