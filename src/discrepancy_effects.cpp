@@ -1,6 +1,6 @@
 // The candidate effects of the discrepancy workflow: each transforms the baseline's force of a
 // unit with its shared parameters fixed (tissue memory, hysteresis, heel impact, cell ceiling,
-// sensor creep).
+// sensor creep, thermal drift).
 #include "discrepancy_effects.hpp"
 
 #include <algorithm>
@@ -256,6 +256,37 @@ class SaturationEffect final : public Applied {
   double q_scale_;
 };
 
+// Every cell's unloaded reading drifting at one rate as the insole warms to the foot (or cools):
+// a region's zero moves by its cell count times the drift between the two steps' zero windows.
+// Linear in time: warm-up time constants are minutes, and over a session of that length only
+// the mean rate is left once the zeros' noise is in. The stance force is zeroed at the windows
+// on both sides, which takes a linear drift off it exactly (the step's zero is their mean, the
+// drift at mid-stance), so the force is left to the baseline; with one window only, the stance
+// is off by the drift since that window, a few hundredths of a bit per cell in contact at 4
+// bits a minute, under the force's noise.
+class ThermalDriftEffect final : public Applied {
+ public:
+  ThermalDriftEffect(const std::vector<Unit>& units, double rate_bits_per_min,
+                     double newtons_per_bit)
+      : level_(units.size(), 0.0) {
+    const double n_per_cell_s = rate_bits_per_min / 60.0 * newtons_per_bit;
+    for (std::size_t ui = 0; ui < units.size(); ++ui) {
+      const Unit& u = units[ui];
+      if (!std::isfinite(u.t_pre_zero_s) || !std::isfinite(u.t_post_zero_s)) continue;
+      level_[ui] = n_per_cell_s * u.cells * 0.5 * (u.t_pre_zero_s + u.t_post_zero_s);
+    }
+  }
+  bool affects(const Unit&) const override { return false; }
+  void apply(std::size_t, const Unit&, std::span<const double> F, std::span<double> out,
+             std::size_t /*choice*/) const override {
+    std::copy(F.begin(), F.end(), out.begin());
+  }
+  double swing_reading(std::size_t ui) const override { return level_[ui]; }
+
+ private:
+  std::vector<double> level_;
+};
+
 std::vector<double> linspace(double lo, double hi, int n) {
   std::vector<double> v;
   for (int i = 0; i < n; ++i) v.push_back(lo + (hi - lo) * i / (n - 1));
@@ -308,6 +339,13 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
                                                         LagEffect::Stage::Sensor);
                    },
                    true});
+  specs.push_back(
+      {"thermal_drift",
+       1,
+       {{"rate_bits_per_min", -200.0, 200.0, {-16, -8, -4, -2, -1, -0.5, 0, 0.5, 1, 2, 4, 8, 16}}},
+       [newtons_per_bit](const std::vector<Unit>& units, std::span<const double> th) {
+         return std::make_unique<ThermalDriftEffect>(units, th[0], newtons_per_bit);
+       }});
   return specs;
 }
 

@@ -38,6 +38,7 @@ struct Unit {
   // the chain is observed. A chain that does not start at the foot's first contact carries a
   // lag from loads nobody analysed (a recording that starts in stance): unknown, and solved for.
   double zero_n = 0.0;
+  int cells = 0;  // the region's cells, whose zeros zero_n sums
   double t_pre_zero_s = std::numeric_limits<double>::quiet_NaN();
   double t_post_zero_s = std::numeric_limits<double>::quiet_NaN();
   int chain = -1;  // the unit that starts its chain

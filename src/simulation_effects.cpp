@@ -25,6 +25,12 @@
 //   the cell's bits low-passed with time constant tau (decaying in the swing), so a held load
 //   reads (1 + beta) of its value after a few tau. gain beta in [0.02, 0.4], tau_s in [0.2, 10] s
 //   (capacitive insoles creep by a few per cent, resistive ones by up to 20-30 %, over seconds).
+// - thermal_drift: the insole warms from room temperature toward the foot's from the start of
+//   the recording, and every cell's unloaded reading moves with it: bits_out = bits + o (1 -
+//   exp(-t / tau)), loaded or not (a warmer resistive cell conducts more). offset_bits in
+//   [0.5, 20] (the rise still to come at t = 0, up to 8 % of the range), tau_s in [30, 1800] s
+//   (a thin insole in a shoe reaches skin temperature over minutes). Assumed sizes: no thermal
+//   specification of the Medilogic cells was at hand.
 //
 // The filters use the exact step response of a first-order lag between successive samples, with
 // the newer input held over the interval. That is exact for an input that steps at the samples;
@@ -179,6 +185,19 @@ class SensorCreep final : public SimulationEffect {
   Lag lag_;
 };
 
+class ThermalDrift final : public SimulationEffect {
+ public:
+  explicit ThermalDrift(const EffectParams& p)
+      : offset_bits_(p.at("offset_bits")), tau_s_(p.at("tau_s")) {}
+  double sensor_bits(const SensorSample& s, double bits) override {
+    return bits + offset_bits_ * -std::expm1(-s.t_s / tau_s_);
+  }
+
+ private:
+  double offset_bits_;
+  double tau_s_;
+};
+
 struct EffectEntry {
   std::string_view name;
   std::vector<EffectParamSpec> params;
@@ -214,6 +233,10 @@ const std::vector<EffectEntry>& registry() {
        {{"gain", 0.15, 0.02, 0.4, "extra reading under a held load, fraction"},
         {"tau_s", 1.5, 0.2, 10.0, "creep time constant, s"}},
        make<SensorCreep>},
+      {"thermal_drift",
+       {{"offset_bits", 5.0, 0.5, 20.0, "rise of every cell's unloaded reading, bits"},
+        {"tau_s", 300.0, 30.0, 1800.0, "warm-up time constant, s"}},
+       make<ThermalDrift>},
   };
   return entries;
 }

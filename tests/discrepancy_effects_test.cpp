@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -156,11 +157,13 @@ TEST(DiscrepancyEffects, TheAffineCheckCatchesTheCeilingThatIsNot) {
 
 TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {
   const std::vector<Unit> units = two_steps();
-  std::vector<std::string> additive;
+  std::vector<std::string> additive, force_untouched;
   for (const Made& m : every_candidate(units)) {
     bool depends_on_force = false;
+    bool affects_any = false;
     for (std::size_t ui = 0; ui < units.size(); ++ui) {
       if (!m.effect->affects(units[ui])) continue;
+      affects_any = true;
       for (std::size_t c = 0; c < m.effect->choices(units[ui]); ++c) {
         const double defect = additive_defect(*m.effect, ui, units[ui], c);
         if (m.effect->additive()) {
@@ -170,7 +173,9 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {
         }
       }
     }
-    if (m.effect->additive()) {
+    if (!affects_any) {
+      force_untouched.push_back(m.name);
+    } else if (m.effect->additive()) {
       additive.push_back(m.name);
     } else {
       // The check can tell: every other effect changes with the force it is given.
@@ -178,6 +183,8 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {
     }
   }
   EXPECT_EQ(additive, std::vector<std::string>{"impact_transient"});
+  // The drift reads in the zero windows only; the zeroing takes it off the stance.
+  EXPECT_EQ(force_untouched, std::vector<std::string>{"thermal_drift"});
 }
 
 // Gauss-Newton takes an effect's slope in place of differences, so a slope that is off would
@@ -365,6 +372,46 @@ TEST(DiscrepancyEffects, CandidatesReproduceTheSimulatorsEffectsAtItsParameters)
   EXPECT_LT(impact.force, 1e-12);
   EXPECT_LT(creep.force, 1e-12);
   EXPECT_LT(creep.swing, 1e-12);
+}
+
+// A warming insole: each region's zero moves by its cells times the drift between the mean times
+// of the two steps' zero windows, and the stance force is left to the baseline (the zeroing at
+// the windows on both sides takes a linear drift off it). Against the simulator's warm-up at a
+// time constant far beyond these 3 s, where it is linear, in the same units: bits per cell, N.
+TEST(DiscrepancyEffects, ThermalDriftMovesEachZeroByItsCellsTimesTheDrift) {
+  std::vector<Unit> units = heel_contacts(3);
+  for (Unit& u : units) u.cells = 3;
+  const double npb = 0.2824;
+  const double rate_bits_per_min = 20.0 * 60.0 / 1800.0;
+  const auto applied = candidate("thermal_drift", units, {rate_bits_per_min}, 112.5, npb);
+  const auto effect =
+      make_simulation_effect("thermal_drift", {{"offset_bits", 20.0}, {"tau_s", 1800.0}});
+  const auto simulated_zero = [&](const Unit& u) {
+    double bits = 0.0;
+    for (std::size_t cell = 0; cell < 3; ++cell) {
+      bits += effect->sensor_bits({Foot::Left, cell, u.t_pre_zero_s}, 0.0) +
+              effect->sensor_bits({Foot::Left, cell, u.t_post_zero_s}, 0.0);
+    }
+    return 0.5 * bits * npb;
+  };
+  for (std::size_t ui = 1; ui < units.size(); ++ui) {
+    const Unit& u = units[ui];
+    const Unit& p = units[ui - 1];
+    EXPECT_FALSE(applied->affects(u));
+    const double dt = 0.5 * (u.t_pre_zero_s + u.t_post_zero_s - p.t_pre_zero_s - p.t_post_zero_s);
+    const double change = applied->swing_reading(ui) - applied->swing_reading(ui - 1);
+    EXPECT_NEAR(change, 3.0 * npb * rate_bits_per_min / 60.0 * dt, 1e-12);
+    const double sim_change = simulated_zero(u) - simulated_zero(p);
+    EXPECT_GT(sim_change, 0.0);
+    EXPECT_NEAR(change / sim_change, 1.0, 3e-3) << ui;
+    std::vector<double> out(u.y.size());
+    applied->apply(ui, u, u.y, out, 0);
+    EXPECT_EQ(out, u.y);
+  }
+  // A unit without both windows has no zero the drift could be read from.
+  units[1].t_post_zero_s = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(candidate("thermal_drift", units, {rate_bits_per_min}, 112.5, npb)->swing_reading(1),
+            0.0);
 }
 
 // Closed forms on simple inputs, whatever the simulator does. Hysteresis on a triangle of

@@ -1,8 +1,8 @@
 // The discrepancy workflow on simulated sessions through the whole measurement chain (insole
 // cells, segmentation, contact ellipses, per-step fits): prints the confusion matrix and the
-// held-out gap shrink for each of the five effects and for none, three sessions each with
-// different seeds, insole sizes and strengths, each force effect's also against the same session
-// without it; and checks that it is deterministic end to end.
+// held-out gap shrink for each of the five effects the issue asks for, the thermal drift and
+// none, three sessions each with different seeds, insole sizes and strengths, each force effect's
+// also against the same session without it; and checks that it is deterministic end to end.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -42,14 +42,16 @@ struct SessionCase {
   EffectParams params;
   InsoleSize size;
   std::uint64_t seed;
+  // 12 s: about 20 complete steps, enough for 5 folds, and the whole matrix (33 sessions with
+  // the paired ones) runs in about 35 s in a RelWithDebInfo build. A thermal drift needs a
+  // minute: over 12 s the warm-up's rise is a bit or two.
+  double duration_s = 12.0;
 };
 
 DiscrepancyInput session_input(const SessionCase& c, const std::filesystem::path& dir) {
   const Config& config = shipped_config();
   SimulationOptions o;
-  // 12 s: about 20 complete steps, enough for 5 folds, and the whole matrix (30 sessions with
-  // the paired ones) runs in about 20 s in a RelWithDebInfo build.
-  o.duration_s = 12.0;
+  o.duration_s = c.duration_s;
   o.seed = c.seed;
   o.size = c.size;
   if (c.effect != "none") {
@@ -94,10 +96,18 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
        {{{"gain", 0.2}, {"tau_s", 1.0}},
         {{"gain", 0.3}, {"tau_s", 2.0}},
         {{"gain", 0.4}, {"tau_s", 0.5}}}},
+      {"thermal_drift",
+       {{{"offset_bits", 5.0}, {"tau_s", 120.0}},
+        {{"offset_bits", 10.0}, {"tau_s", 120.0}},
+        {{"offset_bits", 20.0}, {"tau_s", 300.0}}}},
   };
   const std::vector<std::string> classes{
-      "none",        "stress_relaxation", "hysteresis", "impact_transient", "sensor_saturation",
-      "sensor_creep"};
+      "none",         "stress_relaxation", "hysteresis", "impact_transient", "sensor_saturation",
+      "sensor_creep", "thermal_drift"};
+  // The effects that the per-step zeroing takes out of the force and the zeros show instead.
+  const auto in_zeros = [](const std::string& effect) {
+    return effect == "sensor_creep" || effect == "thermal_drift";
+  };
   const auto dir = test::scratch_dir("discrepancy-sessions");
   std::map<std::string, std::map<std::string, int>> named_matrix, ranked_matrix;
   std::string shrinks;
@@ -105,8 +115,8 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   int none_named = 0;
   int right_names = 0;
   // Sessions whose zero level was reported drifting on a foot [0]: no, [1]: yes.
-  std::array<int, 2> drift_in_creep{}, drift_elsewhere{};
-  double min_creep_zero_shrink = 100.0;
+  std::array<int, 2> drift_in_zeros{}, drift_elsewhere{};
+  std::map<std::string, double> min_zero_shrink{{"sensor_creep", 100.0}, {"thermal_drift", 100.0}};
   // The force effects against the same seed and size without the effect: what no extension can
   // take from the baseline (the paired session's own held-out NRMSE, its noise floor).
   std::string paired;
@@ -120,12 +130,16 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   std::uint64_t seed = 100;
   for (const std::string& effect : classes) {
     for (std::size_t i = 0; i < 3; ++i) {
-      const SessionCase c{effect, strengths.at(effect)[i], sizes[i], ++seed};
+      const SessionCase c{effect, strengths.at(effect)[i], sizes[i], ++seed,
+                          effect == "thermal_drift" ? 60.0 : 12.0};
       const DiscrepancyInput input = session_input(c, dir);
       const DiscrepancyResult r = find_discrepancy(input);
       const std::string first = r.named_effects.empty() ? "none" : r.named_effects.front().name;
       ++named_matrix[effect][first];
-      EXPECT_EQ(r.named_effects.empty(), !r.not_named_reason.empty()) << r.not_named_reason;
+      // Why the most likely candidate was not named, whenever it was not.
+      EXPECT_EQ(r.not_named_reason.empty(),
+                !r.named_effects.empty() && first == r.most_likely_candidate)
+          << r.not_named_reason;
       std::size_t best = 0;
       for (std::size_t k = 1; k < r.candidates.size(); ++k) {
         if (r.candidates[k].heldout_deviance_drop > r.candidates[best].heldout_deviance_drop) {
@@ -140,9 +154,9 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       for (const ZeroLevelDrift& z : r.zero_levels) {
         if (z.drifting) drifting += foot_name(z.foot);
       }
-      ++(effect == "sensor_creep" ? drift_in_creep : drift_elsewhere)[!drifting.empty()];
-      if (effect == "sensor_creep")
-        min_creep_zero_shrink = std::min(min_creep_zero_shrink, r.zero_gap_shrink_pct);
+      ++(in_zeros(effect) ? drift_in_zeros : drift_elsewhere)[!drifting.empty()];
+      if (in_zeros(effect))
+        min_zero_shrink[effect] = std::min(min_zero_shrink[effect], r.zero_gap_shrink_pct);
       std::string all_named;
       for (const EffectEstimate& e : r.named_effects) {
         all_named += (all_named.empty() ? "" : "+") + e.name;
@@ -157,7 +171,15 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
           r.zero_gap_shrink_pct, r.candidates[best].name, r.candidates[best].shrink_pct,
           r.candidates[best].zero_shrink_pct, drifting.empty() ? "-" : drifting);
       if (effect == "none") continue;
-      const FixedEffectEvaluation truth = evaluate_effect_at(input, effect, c.params);
+      // The drift's candidate is linear: the simulator's warm-up as its mean rate over the
+      // session, bits per minute.
+      const EffectParams truth_params =
+          effect == "thermal_drift"
+              ? EffectParams{{"rate_bits_per_min",
+                              60.0 * c.params.at("offset_bits") *
+                                  -std::expm1(-c.duration_s / c.params.at("tau_s")) / c.duration_s}}
+              : c.params;
+      const FixedEffectEvaluation truth = evaluate_effect_at(input, effect, truth_params);
       const double truth_shrink =
           100.0 * (1.0 - truth.extended_nrmse_pct / truth.baseline_nrmse_pct);
       const double truth_zero_shrink =
@@ -171,7 +193,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       // the true parameters in sample (measured: 0.97 x at the least, creep's zero channel
       // 45-46; the impact and saturation of size 37-38 and saturation 41-42 and 45-46 gained
       // more as named, with a second effect on top, than the one effect at its truth).
-      if (effect == "sensor_creep") {
+      if (in_zeros(effect)) {
         EXPECT_GE(r.zero_gap_shrink_pct, 0.8 * truth_zero_shrink) << c.seed;
         continue;
       }
@@ -227,23 +249,29 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   // without an effect (these three and twelve others, README: impact_transient 1.95 %;
   // sensor_saturation gained up to 7.6 % in size 45-46, where no cells share the top reading,
   // and the ceiling rule keeps it unnamed), so none of these is named and no effect session is
-  // named wrongly. All 15 effect sessions were named right when measured (sensor creep through
-  // the zero channel, the weakest impact through the heel's frames before its footprint); the
-  // issue's 40 % shrink is not met by stress relaxation (README, "Model-data discrepancy").
-  fmt::print("effect sessions named right: {} of 15; with a wrong effect named: {}\n", right_names,
+  // named wrongly. All 18 effect sessions were named right when measured (sensor creep and the
+  // thermal drift through the zero channel, the weakest impact through the heel's frames before
+  // its footprint); the issue's 40 % shrink is not met by stress relaxation (README,
+  // "Model-data discrepancy").
+  fmt::print("effect sessions named right: {} of 18; with a wrong effect named: {}\n", right_names,
              wrong_names);
   EXPECT_EQ(none_named, 0);
   EXPECT_EQ(wrong_names, 0);
-  EXPECT_EQ(right_names, 15);
-  // Creep is named on the zeros, and its zero channel gap shrinks by 72-78 % when measured.
-  fmt::print("smallest zero channel shrink of the creep sessions: {:.1f} %\n",
-             min_creep_zero_shrink);
-  EXPECT_GE(min_creep_zero_shrink, 40.0);
-  // Creep that the zeroing takes out of the force still shows in the zero levels, and nothing
-  // else moves them.
-  fmt::print("zero level drifting: {} of 3 creep sessions, {} of 15 others\n", drift_in_creep[1],
-             drift_elsewhere[1]);
-  EXPECT_EQ(drift_in_creep[1], 3);
+  EXPECT_EQ(right_names, 18);
+  // Creep and the drift are named on the zeros. Measured: creep's zero channel gap shrinks by
+  // 72-78 %, the drift's by 27 % at its weakest (5 bits over 120 s: 1.9 bits a minute) and
+  // 55-59 % at 3.6-3.9 bits a minute.
+  fmt::print(
+      "smallest zero channel shrink of the creep sessions: {:.1f} %, of the thermal drift "
+      "sessions: {:.1f} %\n",
+      min_zero_shrink["sensor_creep"], min_zero_shrink["thermal_drift"]);
+  EXPECT_GE(min_zero_shrink["sensor_creep"], 40.0);
+  EXPECT_GE(min_zero_shrink["thermal_drift"], 20.0);
+  // What the zeroing takes out of the force still shows in the zero levels, and nothing else
+  // moves them.
+  fmt::print("zero level drifting: {} of 6 creep and thermal drift sessions, {} of 15 others\n",
+             drift_in_zeros[1], drift_elsewhere[1]);
+  EXPECT_EQ(drift_in_zeros[1], 6);
   EXPECT_EQ(drift_elsewhere[1], 0);
   // The gap shrink's ceiling: the same session without the effect still has its noise (areas,
   // cells, rounding), so an extension that models only the effect cannot shrink the gap by more
@@ -292,7 +320,7 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
           "gap_shrink_pct", "where", "candidates"}) {
       EXPECT_TRUE(j.contains(key)) << key;
     }
-    EXPECT_EQ(j["candidates"].size(), 5u);
+    EXPECT_EQ(j["candidates"].size(), discrepancy_effect_names().size());
     EXPECT_GE(j["where"].size(), 1u);
     ASSERT_EQ(j["diagnostics"]["zero_levels"].size(), 2u);
     for (const auto& z : j["diagnostics"]["zero_levels"]) EXPECT_FALSE(z["drifting"].get<bool>());
@@ -414,7 +442,8 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   // area to speak of) the impact candidate lowers the held-out force error by more than the 5 %
   // threshold and BIC by hundreds, but its duration goes to the top of its range and its
   // amplitude with it: an optimum on a bound, without a finite standard error, is not an effect
-  // the data show, so nothing is named.
+  // the data show, so it is not named. What is named is the most likely candidate that passes:
+  // creep, from the zeros, as on the project's two other real recordings.
   if (kSanitized) {
     GTEST_SKIP() << "the whole workflow on a real recording takes six minutes under TSan; "
                     "its code runs under the sanitizers in discrepancy_test";
@@ -431,8 +460,12 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
       << output;
   std::ifstream in(dir / "out" / "discrepancy.json");
   const auto j = nlohmann::json::parse(in);
-  EXPECT_TRUE(j["named_effects"].empty()) << j["named_effects"].dump();
-  EXPECT_NE(output.find("named: none (the most likely candidate, impact_transient, is not named"),
+  ASSERT_FALSE(j["named_effects"].empty());
+  for (const auto& e : j["named_effects"]) EXPECT_NE(e, "impact_transient") << e.dump();
+  EXPECT_EQ(j["named_effects"][0], "sensor_creep");
+  EXPECT_GE(j["zero_channel"]["gap_shrink_pct"].get<double>(), 10.0) << j["zero_channel"].dump();
+  EXPECT_NE(output.find("named: sensor_creep gain="), std::string::npos) << output;
+  EXPECT_NE(output.find("(the most likely candidate, impact_transient, is not named"),
             std::string::npos)
       << output;
   EXPECT_EQ(j["most_likely_candidate"], "impact_transient");

@@ -116,6 +116,21 @@ TEST(SimulationEffects, SensorCreepDriftsUpwardUnderAHeldLoad) {
   EXPECT_DOUBLE_EQ(e->sensor_bits({Foot::Right, 3, 1.0}, 100.0), 100.0);
 }
 
+TEST(SimulationEffects, ThermalDriftRaisesEveryReadingLoadedOrNotAlongTheWarmUp) {
+  auto e = make_simulation_effect("thermal_drift", {{"offset_bits", 8.0}, {"tau_s", 120.0}});
+  EXPECT_DOUBLE_EQ(e->sensor_bits({Foot::Left, 0, 0.0}, 0.0), 0.0);
+  // One time constant in: 8 (1 - 1/e) bits on an unloaded cell and on a loaded one alike.
+  EXPECT_NEAR(e->sensor_bits({Foot::Left, 5, 120.0}, 0.0), 8.0 * (1.0 - std::exp(-1.0)), 1e-12);
+  EXPECT_NEAR(e->sensor_bits({Foot::Right, 9, 120.0}, 50.0), 50.0 + 8.0 * (1.0 - std::exp(-1.0)),
+              1e-12);
+  // Early on the rise is offset / tau per second.
+  EXPECT_NEAR(e->sensor_bits({Foot::Left, 0, 0.6}, 0.0), 0.6 * 8.0 / 120.0, 1e-4);
+  EXPECT_NEAR(e->sensor_bits({Foot::Left, 0, 1e5}, 0.0), 8.0, 1e-9);
+  EXPECT_THROW(make_simulation_effect("thermal_drift", {{"tau_s", 5.0}}), std::invalid_argument);
+  EXPECT_THROW(make_simulation_effect("thermal_drift", {{"offset_bits", -1.0}}),
+               std::invalid_argument);
+}
+
 TEST(SimulationEffects, UnknownNamesAndParametersAndOutOfRangeValuesFailClearly) {
   try {
     make_simulation_effect("stress_relaxation", {{"tau", 0.1}});

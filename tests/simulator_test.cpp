@@ -310,11 +310,11 @@ TEST(Simulator, PlannedContactAreaIsTheBumpAndItsRate) {
   }
 }
 
-TEST(Simulator, EffectRegistryListsNoneAndTheFivePhysicalEffects) {
+TEST(Simulator, EffectRegistryListsNoneAndTheSixPhysicalEffects) {
   EXPECT_EQ(
       simulation_effect_names(),
       (std::vector<std::string_view>{"none", "stress_relaxation", "hysteresis", "impact_transient",
-                                     "sensor_saturation", "sensor_creep"}));
+                                     "sensor_saturation", "sensor_creep", "thermal_drift"}));
   EXPECT_EQ(make_simulation_effect("none"), nullptr);
   EXPECT_NE(make_simulation_effect("hysteresis"), nullptr);
   EXPECT_THROW(make_simulation_effect("crosstalk"), std::invalid_argument);

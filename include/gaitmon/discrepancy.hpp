@@ -116,6 +116,9 @@ struct DiscrepancyInput {
   double cell_area_mm2 = 112.5;
   double newtons_per_bit = 0.2824;
   ModelVariant model = ModelVariant::Correct;  ///< the damping form of the steps' fits
+  /// Cells of each region (both feet share the layout): a drift of every cell's unloaded
+  /// reading moves a region's zero by that many times its own. 0 where unknown.
+  std::array<int, kRegionCount> region_cells{};
 };
 
 /// The analysis settings of the workflow's baseline: the raw series (Smoothing::None), because
@@ -289,7 +292,8 @@ struct DiscrepancyResult {
   std::vector<EffectEstimate> named_effects;
   /// The candidate whose held-out deviance falls most below the baseline's, and why it was not
   /// named, in words (empty where it was): a clear gain can still leave a parameter
-  /// undetermined, and "no missing effect" would hide it.
+  /// undetermined, and "no missing effect" would hide it. The first named effect is the most
+  /// likely of the candidates that pass, which is another one where this one does not.
   std::string most_likely_candidate;
   std::string not_named_reason;
   std::vector<CandidateResult> candidates;         ///< each on top of the baseline

@@ -1,5 +1,6 @@
 // `gaitmon analyze`: per step and region tissue fits, a session-level fit, and a report.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -561,9 +562,9 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                 "Also fit P = pi A B (keeping A/B); identifiable mode only. The steps are then "
                 "not pooled (pooling needs P declared): the *_pooled columns stay empty");
   sub->add_option("--effects", args->effects,
-                  "Effects added to the model, comma-separated (stress_relaxation, hysteresis, "
-                  "impact_transient, sensor_saturation, sensor_creep), or none; default: [model] "
-                  "effects of the config")
+                  fmt::format("Effects added to the model, comma-separated ({}), or none; "
+                              "default: [model] effects of the config",
+                              fmt::join(discrepancy_effect_names(), ", ")))
       ->delimiter(',')
       ->check(CLI::IsMember(effect_names_or_none()));
   sub->callback([&global, args, sub] {

@@ -242,9 +242,10 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   for (const EffectEstimate& e : result.named_effects) {
     named += (named.empty() ? "" : ", ") + e.name + params_text(e.params);
   }
-  if (named.empty()) {
-    named = fmt::format("none (the most likely candidate, {}, is not named: {})",
-                        result.most_likely_candidate, result.not_named_reason);
+  if (!result.not_named_reason.empty()) {
+    named = fmt::format("{} (the most likely candidate, {}, is not named: {})",
+                        named.empty() ? "none" : named, result.most_likely_candidate,
+                        result.not_named_reason);
   }
   fmt::print("named: {}\n", named);
   for (const ZeroLevelDrift& z : result.zero_levels) {

@@ -128,9 +128,10 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
     }
     named += "</li>";
   }
-  if (named.empty()) {
-    named = fmt::format("<li>none: the most likely candidate, {}, is not named: {}</li>",
-                        escape(r.most_likely_candidate), escape(r.not_named_reason));
+  if (named.empty()) named = "<li>none</li>";
+  if (!r.not_named_reason.empty()) {
+    named += fmt::format("<li>the most likely candidate, {}, is not named: {}</li>",
+                         escape(r.most_likely_candidate), escape(r.not_named_reason));
   }
 
   std::string candidates =

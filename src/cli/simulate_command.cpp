@@ -1,5 +1,6 @@
 // `gaitmon simulate`: a session CSV v1 and its ground truth from the forward model.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -260,9 +261,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "Override one tissue parameter, REGION.FIELD=VALUE (e.g. "
                   "heel.kbar_n_per_mm3=0.15); the rest are the seed's Appendix I means");
   sub->add_option("--effect", args->options.effects,
-                  "Physical effect to apply on top of the model, repeatable: none (default), "
-                  "stress_relaxation, hysteresis, impact_transient, sensor_saturation, "
-                  "sensor_creep");
+                  fmt::format("Physical effect to apply on top of the model, repeatable: {} "
+                              "(none is the default)",
+                              fmt::join(simulation_effect_names(), ", ")));
   sub->add_option("--effect-params", args->effect_params,
                   R"(Effect parameters as JSON, e.g. '{"strength":0.3,"tau_s":0.1}' for one )"
                   R"(--effect, or '{"NAME":{...},...}' for several (defaults otherwise; the )"

@@ -172,8 +172,16 @@ TEST(DiscrepancyReport, SaysWhyTheMostLikelyCandidateWasNotNamed) {
   r.most_likely_candidate = "hysteresis";
   r.not_named_reason = "held-out NRMSE fell 1.2 % < 5 %";
   const std::string html = render_discrepancy_html("walk-01", r);
-  EXPECT_NE(html.find("<li>none: the most likely candidate, hysteresis, is not named: held-out "
-                      "NRMSE fell 1.2 % &lt; 5 %</li>"),
+  EXPECT_NE(html.find("<li>none</li><li>the most likely candidate, hysteresis, is not named: "
+                      "held-out NRMSE fell 1.2 % &lt; 5 %</li>"),
+            std::string::npos);
+  // Another candidate that passes is named where the most likely one does not.
+  r.named_effects = sample_result().named_effects;
+  ASSERT_FALSE(r.named_effects.empty());
+  const std::string other = render_discrepancy_html("walk-01", r);
+  EXPECT_EQ(other.find("<li>none</li>"), std::string::npos);
+  EXPECT_NE(other.find("<li><b>" + r.named_effects.front().name + "</b>"), std::string::npos);
+  EXPECT_NE(other.find("<li>the most likely candidate, hysteresis, is not named"),
             std::string::npos);
 }
 
