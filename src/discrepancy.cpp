@@ -904,6 +904,8 @@ std::vector<ZeroLevelDrift> zero_level_drift(const DiscrepancyInput& input) {
       z.lowest_bits = std::min(z.lowest_bits, steps[i]->zero_bits);
       z.highest_bits = std::max(z.highest_bits, steps[i]->zero_bits);
       peaks.push_back(steps[i]->peak_summed_bits);
+      z.t_s.push_back(steps[i]->analysis.t_heel_strike_s);
+      z.zero_bits.push_back(steps[i]->zero_bits);
       if (i > 0) changes.push_back(std::abs(steps[i]->zero_bits - steps[i - 1]->zero_bits));
     }
     z.scatter_bits = 1.4826 * spread_of(std::move(changes)).median / std::sqrt(2.0);

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <filesystem>
@@ -323,7 +324,14 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
     EXPECT_EQ(j["candidates"].size(), discrepancy_effect_names().size());
     EXPECT_GE(j["where"].size(), 1u);
     ASSERT_EQ(j["diagnostics"]["zero_levels"].size(), 2u);
-    for (const auto& z : j["diagnostics"]["zero_levels"]) EXPECT_FALSE(z["drifting"].get<bool>());
+    for (const auto& z : j["diagnostics"]["zero_levels"]) {
+      EXPECT_FALSE(z["drifting"].get<bool>());
+      // The course the report plots: one zero per step, in time order.
+      ASSERT_EQ(z["zero_bits"].size(), z["steps"].get<std::size_t>());
+      ASSERT_EQ(z["t_s"].size(), z["steps"].get<std::size_t>());
+      const auto t = z["t_s"].get<std::vector<double>>();
+      EXPECT_TRUE(std::is_sorted(t.begin(), t.end()));
+    }
     EXPECT_EQ(output.find("zero level of foot"), std::string::npos) << output;
     std::ifstream html(out / "discrepancy.html");
     std::stringstream page;

@@ -485,6 +485,8 @@ TEST(Discrepancy, ZeroLevelDriftStandsOutOfTheStepToStepScatter) {
   EXPECT_NEAR(z[0].scatter_bits, 1.4826 / std::sqrt(2.0), 1e-12);
   EXPECT_DOUBLE_EQ(z[0].range_pct_of_peak, 3.2);
   EXPECT_TRUE(z[0].drifting);
+  EXPECT_EQ(z[0].zero_bits, left);
+  EXPECT_EQ(z[0].t_s, (std::vector<double>{0.0, 1.1, 2.2, 1.1 * 3, 1.1 * 4, 1.1 * 5}));
   EXPECT_EQ(z[1].foot, Foot::Right);
   EXPECT_DOUBLE_EQ(z[1].range_pct_of_peak, 0.2);
   EXPECT_FALSE(z[1].drifting);

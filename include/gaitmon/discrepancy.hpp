@@ -247,6 +247,8 @@ struct ZeroLevelDrift {
   /// highest - lowest is more than kZeroDriftScatters x max(scatter, 1 bit) and at least
   /// kZeroDriftPctOfPeak % of the peak.
   bool drifting = false;
+  /// Each step's heel strike time and zero, in time order: the course the report plots.
+  std::vector<double> t_s, zero_bits;
 };
 
 /// A drift must stand out of the step-to-step scatter of the zero...

@@ -176,7 +176,9 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
                      {"highest_bits", z.highest_bits},
                      {"scatter_bits", z.scatter_bits},
                      {"range_pct_of_peak", z.range_pct_of_peak},
-                     {"drifting", z.drifting}});
+                     {"drifting", z.drifting},
+                     {"t_s", z.t_s},
+                     {"zero_bits", z.zero_bits}});
   }
   j["diagnostics"]["zero_levels"] = zeros;
   return json_file_text(j);

@@ -117,6 +117,60 @@ std::string step_plot(const std::vector<StepComparison>& steps) {
       line(true, "#2b6cb0"), top, kW / 2, kH + 4);
 }
 
+// Each foot's zero (summed bits) against its steps' heel strike times: a drift, from creep or a
+// warming insole, is a rising line; without one the line stays flat within its scatter.
+std::string zero_level_plot(const std::vector<ZeroLevelDrift>& levels) {
+  constexpr int kW = 640, kH = 200, kPad = 50;
+  double t0 = 0, t1 = 0, lo = 0, hi = 0;
+  bool any = false;
+  for (const ZeroLevelDrift& z : levels) {
+    for (std::size_t i = 0; i < z.t_s.size() && i < z.zero_bits.size(); ++i) {
+      if (!any) {
+        t0 = t1 = z.t_s[i];
+        lo = hi = z.zero_bits[i];
+        any = true;
+      }
+      t0 = std::min(t0, z.t_s[i]);
+      t1 = std::max(t1, z.t_s[i]);
+      lo = std::min(lo, z.zero_bits[i]);
+      hi = std::max(hi, z.zero_bits[i]);
+    }
+  }
+  if (!any) return "";
+  if (!(t1 > t0)) t1 = t0 + 1.0;
+  if (!(hi > lo)) hi = lo + 1.0;
+  const int bottom = kH - 30;
+  std::string lines, legend;
+  int row = 0;
+  for (const ZeroLevelDrift& z : levels) {
+    const char* colour = z.foot == Foot::Left ? "#2b6cb0" : "#c05621";
+    std::string pts;
+    for (std::size_t i = 0; i < z.t_s.size() && i < z.zero_bits.size(); ++i) {
+      const double x = kPad + (kW - 2 * kPad) * (z.t_s[i] - t0) / (t1 - t0);
+      const double y = bottom - (bottom - 10) * (z.zero_bits[i] - lo) / (hi - lo);
+      pts += fmt::format("{:.1f},{:.1f} ", x, y);
+    }
+    lines += fmt::format(R"(<polyline fill="none" stroke="{}" stroke-width="1.5" points="{}"/>)",
+                         colour, pts);
+    legend += fmt::format(R"(<text x="{}" y="{}" font-size="11" fill="{}">foot {}</text>)",
+                          kW - kPad + 4, 20 + 14 * row++, colour, foot_name(z.foot));
+  }
+  return fmt::format(
+      R"(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" role="img">)"
+      R"(<line x1="{}" y1="{}" x2="{}" y2="{}" stroke="#000"/>)"
+      R"(<line x1="{}" y1="10" x2="{}" y2="{}" stroke="#000"/>{}{})"
+      R"(<text x="{}" y="14" font-size="11" text-anchor="end">{:.0f}</text>)"
+      R"(<text x="{}" y="{}" font-size="11" text-anchor="end">{:.0f}</text>)"
+      R"(<text x="4" y="{}" font-size="11">bits</text>)"
+      R"(<text x="{}" y="{}" font-size="11" text-anchor="middle">{:.0f} s</text>)"
+      R"(<text x="{}" y="{}" font-size="11" text-anchor="middle">{:.0f} s</text>)"
+      R"(<text x="{}" y="{}" font-size="11" text-anchor="middle">heel strike time</text>)"
+      R"(</svg>)",
+      kW, kH, kPad, bottom, kW - kPad, bottom, kPad, kPad, bottom, lines, legend, kPad - 4, hi,
+      kPad - 4, bottom, lo, kH / 2, kPad, bottom + 14, t0, kW - kPad, bottom + 14, t1, kW / 2,
+      bottom + 26);
+}
+
 }  // namespace
 
 std::string render_discrepancy_html(const std::string& session_name, const DiscrepancyResult& r) {
@@ -228,7 +282,8 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
   if (r.zero_changes > 0) {
     html += fmt::format(
         "<p>Zero channel ({} step-to-step changes of the step-regions' zeros, which the model "
-        "without a creeping sensor expects to be 0): held-out NRMSE {:.3f} % &rarr; {:.3f} %, "
+        "without a creeping or drifting sensor expects to be 0): held-out NRMSE {:.3f} % &rarr; "
+        "{:.3f} %, "
         "the gap shrinks by <b>{:.1f} %</b>.</p>",
         r.zero_changes, r.zero_baseline_heldout_nrmse_pct, r.zero_extended_heldout_nrmse_pct,
         r.zero_gap_shrink_pct);
@@ -267,7 +322,7 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
         foot_name(z.foot), z.steps, z.first_bits, z.last_bits, z.lowest_bits, z.highest_bits,
         z.scatter_bits, z.range_pct_of_peak, z.drifting ? "<b>yes</b>" : "no");
   }
-  html += "</table></body></html>\n";
+  html += "</table>" + zero_level_plot(r.zero_levels) + "</body></html>\n";
   return html;
 }
 

@@ -97,7 +97,9 @@ DiscrepancyResult sample_result() {
                     .highest_bits = 40.0,
                     .scatter_bits = 1.0,
                     .range_pct_of_peak = 3.5,
-                    .drifting = true}};
+                    .drifting = true,
+                    .t_s = {},
+                    .zero_bits = {}}};
   return r;
 }
 
@@ -183,6 +185,28 @@ TEST(DiscrepancyReport, SaysWhyTheMostLikelyCandidateWasNotNamed) {
   EXPECT_NE(other.find("<li><b>" + r.named_effects.front().name + "</b>"), std::string::npos);
   EXPECT_NE(other.find("<li>the most likely candidate, hysteresis, is not named"),
             std::string::npos);
+}
+
+TEST(DiscrepancyReport, PlotsEachFootsZeroAgainstTime) {
+  DiscrepancyResult r = sample_result();
+  const std::string without = render_discrepancy_html("walk-01", r);
+  EXPECT_EQ(without.find("heel strike time"), std::string::npos);  // no course, no plot
+  r.zero_levels[0].t_s = {1.0, 2.1, 3.2};
+  r.zero_levels[0].zero_bits = {10.0, 25.0, 40.0};
+  ZeroLevelDrift left;
+  left.t_s = {0.5, 1.6};
+  left.zero_bits = {12.0, 12.0};
+  r.zero_levels.push_back(left);
+  const std::string html = render_discrepancy_html("walk-01", r);
+  EXPECT_EQ(count(html, "<polyline"), count(without, "<polyline") + 2);
+  // Right: from the lowest reading at the first time to the highest at the last, on the axes
+  // of x 50..590 and y 170 (10 bits) .. 10 (40 bits), time 0.5..3.2 s.
+  EXPECT_NE(html.find(R"(stroke="#c05621" stroke-width="1.5" points="150.0,170.0 370.0,90.0 )"
+                      R"(590.0,10.0 ")"),
+            std::string::npos);
+  EXPECT_NE(html.find("foot L</text>"), std::string::npos);
+  EXPECT_NE(html.find(">40</text>"), std::string::npos);
+  EXPECT_NE(html.find(">3 s</text>"), std::string::npos);
 }
 
 TEST(DiscrepancyReport, EscapesTheSessionNameAndNeverPrintsNanOrInf) {
