@@ -20,6 +20,8 @@
 #include "discrepancy_diagnostics.hpp"
 #include "discrepancy_effects.hpp"
 #include "discrepancy_search.hpp"
+#include "gaitmon/crosstalk.hpp"
+#include "gaitmon/stance.hpp"
 #include "parallel_for.hpp"
 
 namespace gaitmon {
@@ -34,6 +36,7 @@ using discrepancy_detail::Applied;
 using discrepancy_detail::candidate_specs;
 using discrepancy_detail::CandidateSpec;
 using discrepancy_detail::diagnose;
+using discrepancy_detail::kCrosstalk;
 using discrepancy_detail::ParamSpec;
 using discrepancy_detail::pattern_search;
 using discrepancy_detail::residual_map;
@@ -50,35 +53,41 @@ double g_of(double area, double P) {
   return 1.0 - std::sqrt(1.0 - a);
 }
 
-// The elastic and damping shapes of one series (tissue_fit's raw-series model): F = K E + D V.
-void shapes(const RegionSeries& s, const IdentifiableParams& id, double C_mm, ModelVariant model,
-            Unit& u) {
-  const std::size_t n = s.t_s.size();
-  u.E.assign(n, 0.0);
-  u.En.assign(1 + kExponentGrid.size(), std::vector<double>(n, 0.0));
-  u.V.assign(n, 0.0);
-  u.d_mm.assign(n, 0.0);
-  u.ddot_mm_per_s.assign(n, 0.0);
-  for (const auto [begin, end] : contact_runs(s.area_mm2)) {
+}  // namespace
+
+// The elastic and damping shapes of one series (tissue_fit's raw-series model).
+discrepancy_detail::Shapes discrepancy_detail::shapes_of(std::span<const double> t_s,
+                                                         std::span<const double> area_mm2,
+                                                         const ShapeModel& m) {
+  const std::size_t n = t_s.size();
+  const IdentifiableParams& id = m.id;
+  Shapes out;
+  out.En.assign(1 + kExponentGrid.size(), std::vector<double>(n, 0.0));
+  out.V.assign(n, 0.0);
+  out.d_mm.assign(n, 0.0);
+  out.ddot_mm_per_s.assign(n, 0.0);
+  for (const auto [begin, end] : contact_runs(area_mm2)) {
     for (std::size_t i = begin; i < end; ++i) {
       const std::size_t lo = i > begin ? i - 1 : i;
       const std::size_t hi = i + 1 < end ? i + 1 : i;
-      const double g = g_of(s.area_mm2[i], id.P_mm2);
-      const double dt = s.t_s[hi] - s.t_s[lo];
+      const double g = g_of(area_mm2[i], id.P_mm2);
+      const double dt = t_s[hi] - t_s[lo];
       const double gdot =
-          hi > lo ? (g_of(s.area_mm2[hi], id.P_mm2) - g_of(s.area_mm2[lo], id.P_mm2)) / dt : 0.0;
-      u.E[i] = id.P_mm2 * std::pow(g, 2.0 + id.n) * (1.0 - g / 3.0);
-      u.En[0][i] = u.E[i];
+          hi > lo ? (g_of(area_mm2[hi], id.P_mm2) - g_of(area_mm2[lo], id.P_mm2)) / dt : 0.0;
+      out.En[0][i] = id.P_mm2 * std::pow(g, 2.0 + id.n) * (1.0 - g / 3.0);
       for (std::size_t k = 0; k < kExponentGrid.size(); ++k) {
-        u.En[k + 1][i] = id.P_mm2 * std::pow(g, 2.0 + kExponentGrid[k]) * (1.0 - g / 3.0);
+        out.En[k + 1][i] = id.P_mm2 * std::pow(g, 2.0 + kExponentGrid[k]) * (1.0 - g / 3.0);
       }
-      u.V[i] =
-          damping_sign(model) * id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot * damping_shape(g, model);
-      u.d_mm[i] = g * C_mm;
-      u.ddot_mm_per_s[i] = gdot * C_mm;
+      out.V[i] = damping_sign(m.model) * id.P_mm2 * std::pow(g, 1.0 + id.m) * gdot *
+                 damping_shape(g, m.model);
+      out.d_mm[i] = g * m.C_mm;
+      out.ddot_mm_per_s[i] = gdot * m.C_mm;
     }
   }
+  return out;
 }
+
+namespace {
 
 // The two columns' products, for solving against many y.
 struct Gram2 {
@@ -228,6 +237,21 @@ double refine(const Chain& rest, const Applied* sole, std::size_t ui, const Unit
   return value;
 }
 
+// The shapes of the unit under the chain: those of an effect on the area it is driven by, or
+// its own.
+struct ShapeView {
+  const std::vector<std::vector<double>>& En;
+  const std::vector<double>& V;
+};
+
+ShapeView shapes_under(const Chain& chain, std::size_t ui, const Unit& u) {
+  for (const Applied* e : chain) {
+    if (!e->affects(u)) continue;
+    if (const discrepancy_detail::Shapes* own = e->shapes(ui)) return {own->En, own->V};
+  }
+  return {u.En, u.V};
+}
+
 // The chain up to its first effect that is not affine in F (saturation) is affine: there the
 // force is T(0) + K L(E) + D L(V), with L(x) = T(x) - T(0) the prefix's linear part. So L(E) per
 // exponent and L(V) are computed once per choice, and K, D >= 0 solve exactly when nothing
@@ -238,6 +262,7 @@ double refine(const Chain& rest, const Applied* sole, std::size_t ui, const Unit
 void solve_chain(const Chain& chain, std::size_t ui, const Unit& u, std::size_t choices,
                  Workspace& w, UnitSolution& best) {
   const std::size_t n = u.y.size();
+  const ShapeView sh = shapes_under(chain, ui, u);
   const auto first_nonlinear = std::find_if(
       chain.begin(), chain.end(), [&](const Applied* e) { return e->affects(u) && !e->affine(); });
   const Chain prefix(chain.begin(), first_nonlinear);
@@ -258,8 +283,8 @@ void solve_chain(const Chain& chain, std::size_t ui, const Unit& u, std::size_t 
   w.target.resize(n);
   w.lin.resize(n);
   w.tv.resize(n);
-  w.te.resize(u.En.size());
-  w.gram.resize(u.En.size());
+  w.te.resize(sh.En.size());
+  w.gram.resize(sh.En.size());
   const auto linear = [&](std::span<const double> x, std::vector<double>& out, std::size_t c) {
     out.resize(n);
     run_chain(prefix, ui, u, x, out, w, c, true);
@@ -273,14 +298,14 @@ void solve_chain(const Chain& chain, std::size_t ui, const Unit& u, std::size_t 
       } else {
         w.at_zero = w.off;
       }
-      linear(u.V, w.tv, c);
-      for (std::size_t k = 0; k < u.En.size(); ++k) {
-        linear(u.En[k], w.te[k], c);
+      linear(sh.V, w.tv, c);
+      for (std::size_t k = 0; k < sh.En.size(); ++k) {
+        linear(sh.En[k], w.te[k], c);
         w.gram[k] = gram2(w.te[k], w.tv);
       }
     }
     for (std::size_t i = 0; i < n; ++i) w.target[i] = u.y[i] - w.off[i];
-    for (std::size_t k = 0; k < u.En.size(); ++k) {
+    for (std::size_t k = 0; k < sh.En.size(); ++k) {
       const std::vector<double>& te = w.te[k];
       auto [K, D] = nnls2(w.target, te, w.tv, w.gram[k]);
       if (rest.empty()) {
@@ -320,8 +345,9 @@ double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& 
   UnitSolution best;
   solve_chain(chain, ui, u, choices, w, best);
   if (pred != nullptr) {
+    const ShapeView sh = shapes_under(chain, ui, u);
     for (std::size_t i = 0; i < u.y.size(); ++i) {
-      w.F[i] = best.K * u.En[best.k][i] + best.D * u.V[i];
+      w.F[i] = best.K * sh.En[best.k][i] + best.D * sh.V[i];
     }
     run_chain(chain, ui, u, w.F, w.f, w, best.choice);
     *pred = w.f;
@@ -331,7 +357,7 @@ double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& 
 
 // Per-unit SSE of the chain `fixed` followed by one candidate at theta, in physical order.
 struct Model {
-  std::vector<std::unique_ptr<Applied>> owned;
+  std::vector<std::shared_ptr<const Applied>> owned;
   std::vector<int> stages;
 
   Chain chain() const {
@@ -345,15 +371,19 @@ struct Model {
   }
 };
 
+// An effect at fixed parameters, made ready for the units once where it is evaluated under
+// many others (the first effect under each second candidate): crosstalk's shapes take longer to
+// make than the chain takes to run.
 struct FixedEffect {
   const CandidateSpec* spec;
   std::vector<double> theta;
+  std::shared_ptr<const Applied> made = nullptr;
 };
 
 Model build(const std::vector<Unit>& units, std::span<const FixedEffect> effects) {
   Model m;
   for (const FixedEffect& e : effects) {
-    m.owned.push_back(e.spec->make(units, e.theta));
+    m.owned.push_back(e.made != nullptr ? e.made : e.spec->make(units, e.theta));
     m.stages.push_back(e.spec->stage);
   }
   return m;
@@ -518,6 +548,11 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   const auto check_stop = [&] {
     if (stop.stop_requested()) throw FitStopped();
   };
+  std::vector<FixedEffect> made_base(base.begin(), base.end());
+  for (FixedEffect& e : made_base) {
+    if (e.made == nullptr) e.made = e.spec->make(units, e.theta);
+  }
+  base = made_base;
   const auto grid = grid_of(spec);
   std::vector<Costs> costs(grid.size());
   parallel_for(grid.size(), [&](std::size_t gi) {
@@ -607,6 +642,49 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
 
 // ---- preparation ------------------------------------------------------------------------------
 
+// The unit's area and what the correction took off its force at each coupling the steps were
+// measured again at (Unit::crosstalk_area_mm2, crosstalk_removed_n). A frame whose footprint the
+// corrected readings leave undetermined (the fits over the cells with and without the threshold
+// disagree) takes the unit's own area times the corrected over the own area of the nearest frame
+// that has both: left at 0, the model would have no force there. None where a coupling's area
+// is another source's (the contact ellipse instead of the footprint).
+void crosstalk_series(const DiscrepancyStep& ds, const RegionAnalysis& ra,
+                      std::span<const std::size_t> frames, Unit& u) {
+  if (ds.crosstalk.size() != discrepancy_detail::kCrosstalkGrid.size()) return;
+  const auto r = index_of(u.region);
+  const std::size_t n = frames.size();
+  std::vector<std::vector<double>> areas(ds.crosstalk.size()), removed(ds.crosstalk.size());
+  std::vector<double> ratio(n);
+  for (std::size_t g = 0; g < ds.crosstalk.size(); ++g) {
+    const CrosstalkView& v = ds.crosstalk[g];
+    if (v.source[r] != ra.area || v.area_mm2[r].size() != ra.series.t_s.size() ||
+        v.force_n[r].size() != ra.series.t_s.size()) {
+      return;
+    }
+    std::vector<double>& a = areas[g];
+    for (std::size_t k = 0; k < n; ++k) {
+      a.push_back(v.area_mm2[r][frames[k]]);
+      removed[g].push_back(u.y[k] - v.force_n[r][frames[k]]);
+    }
+    std::fill(ratio.begin(), ratio.end(), std::numeric_limits<double>::quiet_NaN());
+    for (std::size_t k = 0; k < n; ++k) {
+      if (a[k] > 0.0 && u.area[k] > 0.0) ratio[k] = a[k] / u.area[k];
+    }
+    for (std::size_t k = 0; k < n; ++k) {
+      if (!(u.area[k] > 0.0) || a[k] > 0.0) continue;
+      std::optional<double> nearest;
+      for (std::size_t d = 1; d < n && !nearest; ++d) {
+        if (k >= d && std::isfinite(ratio[k - d])) nearest = ratio[k - d];
+        if (k + d < n && std::isfinite(ratio[k + d])) nearest = ratio[k + d];
+      }
+      if (!nearest) return;
+      a[k] = *nearest * u.area[k];
+    }
+  }
+  u.crosstalk_area_mm2 = std::move(areas);
+  u.crosstalk_removed_n = std::move(removed);
+}
+
 struct Prepared {
   std::vector<Unit> units;
   Pooled pooled;
@@ -686,13 +764,22 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
       if (!(u.peak_n > 0.0)) continue;
       const EllipsoidParams p = ra.fit.params();
       const IdentifiableParams id = identifiable(p);
-      shapes(contact, id, p.C_mm, input.model, u);
+      u.shape_model = {id, p.C_mm, input.model};
+      {
+        discrepancy_detail::Shapes sh = discrepancy_detail::shapes_of(u.t, u.area, u.shape_model);
+        u.E = sh.En.front();
+        u.En = std::move(sh.En);
+        u.V = std::move(sh.V);
+        u.d_mm = std::move(sh.d_mm);
+        u.ddot_mm_per_s = std::move(sh.ddot_mm_per_s);
+      }
       std::tie(u.K0, u.D0) = nnls2(u.y, u.E, u.V);
       const std::size_t n = u.t.size();
       u.phase.resize(n);
       for (std::size_t i = 0; i < n; ++i) {
         u.phase[i] = std::clamp((u.t[i] - sa.t_heel_strike_s) / stance, 0.0, 1.0);
       }
+      crosstalk_series(ds, ra, frames, u);
       u.sat.assign(n, 0.0);
       const auto& sat = ds.saturated_cells[index_of(region)];
       for (std::size_t k = 0; k < n; ++k) {
@@ -843,6 +930,9 @@ void check_settings(const DiscrepancySettings& s, const DiscrepancyInput& input)
   if (s.min_ceiling_steps < 0 || !(s.min_ceiling_steps_pct >= 0.0)) {
     throw std::invalid_argument("discrepancy: the ceiling's step counts must be >= 0");
   }
+  if (!std::isfinite(s.min_neighbour_share)) {
+    throw std::invalid_argument("discrepancy: min_neighbour_share must be finite");
+  }
   if (static_cast<int>(input.steps.size()) < s.folds) {
     throw std::invalid_argument("discrepancy: " + std::to_string(input.steps.size()) +
                                 " complete steps, need at least " + std::to_string(s.folds) +
@@ -869,9 +959,26 @@ int ceiling_plateau_steps(const DiscrepancyInput& input) {
 }  // namespace
 
 std::vector<std::string_view> discrepancy_effect_names() {
-  return {"stress_relaxation", "hysteresis",   "impact_transient",
-          "sensor_saturation", "sensor_creep", "thermal_drift"};
+  return {"stress_relaxation", "hysteresis",    "impact_transient", "sensor_saturation",
+          "sensor_creep",      "thermal_drift", kCrosstalk};
 }
+
+namespace {
+
+bool names_crosstalk(std::span<const std::string> effects) {
+  return std::find(effects.begin(), effects.end(), kCrosstalk) != effects.end();
+}
+
+void check_crosstalk_views(const DiscrepancyInput& input, std::span<const std::string> effects) {
+  if (!names_crosstalk(effects)) return;
+  if (std::any_of(input.steps.begin(), input.steps.end(),
+                  [](const DiscrepancyStep& s) { return s.crosstalk.empty(); })) {
+    throw std::invalid_argument(
+        "crosstalk needs every step measured again at its couplings (measure_crosstalk_views)");
+  }
+}
+
+}  // namespace
 
 void check_discrepancy_effect(std::string_view name) {
   std::string known;
@@ -937,8 +1044,83 @@ DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const In
     ContactEllipseCache cache;
     analyses[i] = analyse_step(ok[i], layout, config, settings, &cache);
   });
-  return make_discrepancy_input(ok, std::move(analyses), layout, config);
+  DiscrepancyInput input = make_discrepancy_input(ok, std::move(analyses), layout, config);
+  measure_crosstalk_views(input, ok, layout, config, settings.area);
+  return input;
 }
+
+DiscrepancyInput extended_model_input(std::span<const Step> steps,
+                                      std::vector<StepAnalysis> analyses,
+                                      const InsoleLayout& layout, const Config& config,
+                                      std::span<const std::string> effects, AreaSource area) {
+  DiscrepancyInput input = make_discrepancy_input(steps, std::move(analyses), layout, config);
+  if (names_crosstalk(effects)) measure_crosstalk_views(input, steps, layout, config, area);
+  return input;
+}
+
+void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> steps,
+                             const InsoleLayout& layout, const Config& config, AreaSource area) {
+  if (steps.size() != input.steps.size()) {
+    throw std::invalid_argument("measure_crosstalk_views: one step per analysed step expected");
+  }
+  std::vector<CrosstalkCorrection> corrections;
+  for (double k : discrepancy_detail::kCrosstalkGrid) corrections.emplace_back(layout, k);
+  const CellMeanFootprint cell_mean =
+      area == AreaSource::FootprintMean ? CellMeanFootprint::Fit : CellMeanFootprint::Skip;
+  parallel_for(steps.size(), [&](std::size_t i) {
+    ContactEllipseCache cache;
+    std::vector<CrosstalkView>& views = input.steps[i].crosstalk;
+    views.assign(corrections.size(), {});
+    for (std::size_t g = 0; g < corrections.size(); ++g) {
+      const StanceSeries stance =
+          measure_stance(steps[i], layout, config.calibration, &cache, cell_mean, &corrections[g]);
+      CrosstalkView& v = views[g];
+      v.coupling = corrections[g].coupling();
+      for (Region region : kRegions) {
+        const auto r = index_of(region);
+        std::tie(v.area_mm2[r], v.source[r]) = fit_areas_mm2(stance, region, area);
+        v.force_n[r].resize(stance.size());
+        for (std::size_t f = 0; f < stance.size(); ++f) {
+          v.force_n[r][f] = stance.at(f, region).force_n;
+        }
+      }
+    }
+  });
+}
+
+namespace {
+
+// What a cell reads of its edge neighbours' readings where they read kNeighbourShareBits or
+// more together: its 1st percentile over every such cell and stance frame (zeroed readings,
+// before the threshold). A cell wholly outside a contact reads nothing without crosstalk and
+// its share of its neighbours' with it.
+NeighbourShare neighbour_share(std::span<const Step> steps, const InsoleLayout& layout) {
+  std::vector<double> shares;
+  std::vector<double> r(layout.sensor_count());
+  for (const Step& s : steps) {
+    if (s.sensor_zero_bits.size() != r.size()) continue;
+    for (const Frame& f : s.stance) {
+      if (f.bits.size() != r.size()) continue;
+      for (std::size_t c = 0; c < r.size(); ++c) {
+        r[c] = static_cast<double>(f.bits[c]) - s.sensor_zero_bits[c];
+      }
+      for (std::size_t c = 0; c < r.size(); ++c) {
+        double around = 0.0;
+        for (const Neighbour& n : layout.neighbours(c)) around += n.shared_edge * r[n.sensor];
+        if (around >= kNeighbourShareBits) shares.push_back(r[c] / around);
+      }
+    }
+  }
+  NeighbourShare out;
+  out.cell_frames = static_cast<long>(shares.size());
+  if (shares.empty()) return out;
+  const auto k = static_cast<std::size_t>(0.01 * static_cast<double>(shares.size() - 1));
+  std::nth_element(shares.begin(), shares.begin() + static_cast<std::ptrdiff_t>(k), shares.end());
+  out.floor = shares[k];
+  return out;
+}
+
+}  // namespace
 
 DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
                                         std::vector<StepAnalysis> analyses,
@@ -999,6 +1181,7 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
       }
     }
   }
+  input.neighbour_share = neighbour_share(steps, layout);
   return input;
 }
 
@@ -1039,6 +1222,9 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.diagnostics.effective_sample_fraction = pooled.neff_fraction;
   out.zero_levels = zero_level_drift(input);
   out.ceiling_plateau_steps = ceiling_plateau_steps(input);
+  out.neighbour_share = input.neighbour_share;
+  const bool crosstalk_seen = input.neighbour_share.cell_frames < kMinNeighbourShareCellFrames ||
+                              input.neighbour_share.floor >= settings.min_neighbour_share;
   const bool ceiling_seen =
       out.ceiling_plateau_steps < 0 ||
       (out.ceiling_plateau_steps >= settings.min_ceiling_steps &&
@@ -1061,7 +1247,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   // agrees. Of those, the one whose held-out likelihood gains most over both channels.
   // Its parameters must be determined, too: an optimum on a bound of the plausible range or
   // along a flat direction (no finite standard error) is not an effect the data show. And a
-  // ceiling must show in the readings themselves (ceiling_seen).
+  // ceiling or crosstalk must show in the readings themselves (ceiling_seen, crosstalk_seen).
   // Why a candidate is not named, in words; empty where it is.
   const auto verdict = [&](const CandidateResult& r) {
     std::vector<std::string> reasons;
@@ -1088,6 +1274,12 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
     }
     if (spec_named(specs, r.name).needs_ceiling && !ceiling_seen) {
       reasons.push_back("the readings show no ceiling");
+    }
+    if (r.name == kCrosstalk && !crosstalk_seen) {
+      reasons.push_back(fmt::format(
+          "the readings show no crosstalk (1 % of the cells next to loaded ones read under "
+          "{:.2g} of their neighbours' readings, where {:g} is needed)",
+          input.neighbour_share.floor, settings.min_neighbour_share));
     }
     return fmt::format("{}", fmt::join(reasons, "; "));
   };
@@ -1195,6 +1387,7 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
       }
     }
   }
+  check_crosstalk_views(input, effects);
   const Prepared prep = prepare(input, settings.folds);
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   ExtendedModelFit out;
@@ -1229,6 +1422,7 @@ FixedEffectEvaluation evaluate_effect_at(const DiscrepancyInput& input, std::str
                                          const DiscrepancySettings& settings) {
   check_settings(settings, input);
   check_discrepancy_effect(effect);
+  check_crosstalk_views(input, std::vector<std::string>{std::string(effect)});
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   const CandidateSpec& spec = spec_named(specs, effect);
   for (const auto& given : params) {

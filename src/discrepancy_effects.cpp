@@ -1,6 +1,6 @@
 // The candidate effects of the discrepancy workflow: each transforms the baseline's force of a
 // unit with its shared parameters fixed (tissue memory, hysteresis, heel impact, cell ceiling,
-// sensor creep, thermal drift).
+// sensor creep, thermal drift, crosstalk).
 #include "discrepancy_effects.hpp"
 
 #include <algorithm>
@@ -287,6 +287,65 @@ class ThermalDriftEffect final : public Applied {
   std::vector<double> level_;
 };
 
+// Each cell also reads a share k of what the cells it shares an edge with read. That reaches the
+// model through the area as well as the force: the cells around a contact read their neighbours'
+// share, and the footprint fitted to the readings widens, most where the contact is small. So
+// the steps were measured again with the readings corrected at couplings of kCrosstalkGrid
+// (CrosstalkCorrection, measure_crosstalk_views), and at k the unit's area and what the
+// correction took off its force are interpolated between them. The model is driven by the
+// corrected area, and predicts the measured force as its force plus what was taken off.
+class CrosstalkEffect final : public Applied {
+ public:
+  CrosstalkEffect(const std::vector<Unit>& units, double coupling)
+      : k_(coupling), shapes_(units.size()), removed_(units.size()) {
+    if (k_ == 0.0) return;
+    const auto hi = std::upper_bound(kCrosstalkGrid.begin(), kCrosstalkGrid.end(), k_);
+    const std::size_t g1 = std::clamp<std::size_t>(
+        static_cast<std::size_t>(hi - kCrosstalkGrid.begin()), 1, kCrosstalkGrid.size() - 1);
+    // Below the grid's first coupling the uncorrected series (k = 0) is the other end.
+    const bool from_zero = k_ < kCrosstalkGrid.front();
+    const double k0 = from_zero ? 0.0 : kCrosstalkGrid[g1 - 1];
+    const double k1 = from_zero ? kCrosstalkGrid.front() : kCrosstalkGrid[g1];
+    const double w = std::clamp((k_ - k0) / (k1 - k0), 0.0, 1.0);
+    std::vector<double> area;
+    for (std::size_t ui = 0; ui < units.size(); ++ui) {
+      const Unit& u = units[ui];
+      if (u.crosstalk_area_mm2.size() != kCrosstalkGrid.size()) continue;
+      const std::size_t n = u.y.size();
+      const std::vector<double>& a1 = u.crosstalk_area_mm2[from_zero ? 0 : g1];
+      const std::vector<double>& r1 = u.crosstalk_removed_n[from_zero ? 0 : g1];
+      area.resize(n);
+      removed_[ui].resize(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        const double a0 = from_zero ? u.area[i] : u.crosstalk_area_mm2[g1 - 1][i];
+        const double r0 = from_zero ? 0.0 : u.crosstalk_removed_n[g1 - 1][i];
+        area[i] = (1.0 - w) * a0 + w * a1[i];
+        removed_[ui][i] = (1.0 - w) * r0 + w * r1[i];
+      }
+      shapes_[ui] = shapes_of(u.t, area, u.shape_model);
+    }
+  }
+  bool affects(const Unit& u) const override {
+    return k_ != 0.0 && u.crosstalk_area_mm2.size() == kCrosstalkGrid.size();
+  }
+  bool additive() const override { return true; }
+  void apply(std::size_t ui, const Unit&, std::span<const double> F, std::span<double> out,
+             std::size_t /*choice*/) const override {
+    const std::vector<double>& removed = removed_[ui];
+    for (std::size_t i = 0; i < F.size(); ++i) {
+      out[i] = F[i] + (i < removed.size() ? removed[i] : 0.0);
+    }
+  }
+  const Shapes* shapes(std::size_t ui) const override {
+    return shapes_[ui].En.empty() ? nullptr : &shapes_[ui];
+  }
+
+ private:
+  double k_;
+  std::vector<Shapes> shapes_;
+  std::vector<std::vector<double>> removed_;
+};
+
 std::vector<double> linspace(double lo, double hi, int n) {
   std::vector<double> v;
   for (int i = 0; i < n; ++i) v.push_back(lo + (hi - lo) * i / (n - 1));
@@ -346,6 +405,13 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
        [newtons_per_bit](const std::vector<Unit>& units, std::span<const double> th) {
          return std::make_unique<ThermalDriftEffect>(units, th[0], newtons_per_bit);
        }});
+  specs.push_back({std::string(kCrosstalk),
+                   1,
+                   {{"coupling", 0.0, kCrosstalkGrid.back(),
+                     std::vector<double>(kCrosstalkGrid.begin(), kCrosstalkGrid.end())}},
+                   [](const std::vector<Unit>& units, std::span<const double> th) {
+                     return std::make_unique<CrosstalkEffect>(units, th[0]);
+                   }});
   return specs;
 }
 

@@ -3,17 +3,44 @@
 // them. Internal: not part of the public API.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <functional>
 #include <limits>
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "gaitmon/tissue_model.hpp"
 #include "gaitmon/types.hpp"
 
 namespace gaitmon::discrepancy_detail {
+
+// The baseline's shapes of one region's series, F = K En[k] + D V: the elastic shape for the
+// step fit's n (first) and for a grid of n, the damping shape, and the deformation and its rate.
+struct Shapes {
+  std::vector<std::vector<double>> En;
+  std::vector<double> V, d_mm, ddot_mm_per_s;
+};
+
+// What the shapes of a unit are computed from besides its series: its step fit's parameters.
+struct ShapeModel {
+  IdentifiableParams id{};
+  double C_mm = 0.0;
+  ModelVariant model = ModelVariant::Correct;
+};
+
+Shapes shapes_of(std::span<const double> t_s, std::span<const double> area_mm2,
+                 const ShapeModel& m);
+
+inline constexpr std::string_view kCrosstalk = "crosstalk";
+
+// Couplings at which each step was measured again with its readings corrected for crosstalk
+// (DiscrepancyStep::crosstalk); between them the areas and forces are interpolated.
+inline constexpr std::array<double, 8> kCrosstalkGrid{0.01,  0.02, 0.035, 0.05,
+                                                      0.075, 0.1,  0.15,  0.2};
 
 // One region of one step: the measured series and the baseline's shapes.
 struct Unit {
@@ -26,6 +53,10 @@ struct Unit {
   // Elastic shapes for the fit's n (first) and a grid of n: the exponent is re-chosen with every
   // effect, since a per-step fit bends n to absorb what the model lacks.
   std::vector<std::vector<double>> En;
+  ShapeModel shape_model;
+  // The unit's area and what the correction took off its force (N), per coupling of
+  // kCrosstalkGrid and frame; empty where the steps were not measured again.
+  std::vector<std::vector<double>> crosstalk_area_mm2, crosstalk_removed_n;
   double K0 = 0.0, D0 = 0.0;
   double base_sse = 0.0;
   std::vector<double> base_pred;
@@ -77,6 +108,9 @@ class Applied {
   virtual double swing_reading(std::size_t /*ui*/) const { return 0.0; }
   /// What it adds there per unit of lag at the start of the unit's chain, where that is unknown.
   virtual double swing_reading_per_start_lag(std::size_t /*ui*/) const { return 0.0; }
+  /// An effect of the measurement on the area the model is driven by gives the unit's shapes
+  /// from the area it corrects; nullptr keeps the unit's own.
+  virtual const Shapes* shapes(std::size_t /*ui*/) const { return nullptr; }
 };
 
 struct ParamSpec {

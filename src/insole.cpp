@@ -105,6 +105,23 @@ InsoleLayout::InsoleLayout(const InsoleSpec& spec, const SensorGeometry& geometr
       sensors_.push_back(s);
     }
   }
+
+  // In the grid frame the cells tile the insole: two cells in one row touch along their height,
+  // and two in rows next to each other along the width they overlap by.
+  const double w = geometry_.width_mm;
+  neighbours_.resize(sensors_.size());
+  for (const Sensor& a : sensors_) {
+    for (const Sensor& b : sensors_) {
+      const double dx = std::abs(a.grid_x_mm - b.grid_x_mm);
+      double shared = 0.0;
+      if (a.row == b.row) {
+        shared = std::abs(dx - w) < 1e-6 * w ? 1.0 : 0.0;
+      } else if (std::abs(a.row - b.row) == 1) {
+        shared = std::max(0.0, 1.0 - dx / w);
+      }
+      if (shared > 1e-9) neighbours_[a.index].push_back({b.index, shared});
+    }
+  }
 }
 
 double InsoleLayout::region_box_aspect(Region region) const {

@@ -691,7 +691,8 @@ struct Monitor::Impl {
         effect_window.fresh = 0;
       }
       const ExtendedModelFit fit =
-          fit_extended_model(make_discrepancy_input(steps, std::move(analyses), *layout, config),
+          fit_extended_model(extended_model_input(steps, std::move(analyses), *layout, config,
+                                                  config.model.effects, options.analysis.area),
                              config.model.effects, {}, effects_stop.get_token());
       report = effects_report(fit, steps);
       report->final_estimate = final_estimate;

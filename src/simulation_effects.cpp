@@ -32,6 +32,14 @@
 //   (a thin insole in a shoe reaches skin temperature over minutes). Assumed sizes: no thermal
 //   specification of the Medilogic cells was at hand.
 //
+// Frame stage (one foot's whole frame of readings, after the sensor stage):
+// - crosstalk: part of each cell's signal shows in the cells next to it (the row and column lines
+//   a scanned resistive matrix shares, and a cover that spreads the load past a cell's edge):
+//   bits_out_i = bits_i + k sum_j e_ij bits_j over the cells j that share an edge with i, e_ij
+//   the share of the edge (InsoleLayout::neighbours). coupling k in [0.01, 0.15] per whole edge:
+//   unisolated resistive arrays are reported to couple a few to over ten per cent into their
+//   neighbours. Assumed sizes, as thermal_drift's.
+//
 // The filters use the exact step response of a first-order lag between successive samples, with
 // the newer input held over the interval. That is exact for an input that steps at the samples;
 // for a smoothly changing one it leads by half a sample, as a lag shorter by that much would (5 ms
@@ -41,6 +49,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -198,6 +207,23 @@ class ThermalDrift final : public SimulationEffect {
   double tau_s_;
 };
 
+class Crosstalk final : public SimulationEffect {
+ public:
+  explicit Crosstalk(const EffectParams& p) : coupling_(p.at("coupling")) {}
+  void sensor_frame(const InsoleLayout& layout, std::span<double> bits) override {
+    own_.assign(bits.begin(), bits.end());
+    for (std::size_t s = 0; s < bits.size(); ++s) {
+      for (const Neighbour& n : layout.neighbours(s)) {
+        bits[s] += coupling_ * n.shared_edge * own_[n.sensor];
+      }
+    }
+  }
+
+ private:
+  double coupling_;
+  std::vector<double> own_;
+};
+
 struct EffectEntry {
   std::string_view name;
   std::vector<EffectParamSpec> params;
@@ -237,6 +263,10 @@ const std::vector<EffectEntry>& registry() {
        {{"offset_bits", 5.0, 0.5, 20.0, "rise of every cell's unloaded reading, bits"},
         {"tau_s", 300.0, 30.0, 1800.0, "warm-up time constant, s"}},
        make<ThermalDrift>},
+      {"crosstalk",
+       {{"coupling", 0.05, 0.01, 0.15,
+         "share of a cell's reading that a neighbour across a whole edge also reads"}},
+       make<Crosstalk>},
   };
   return entries;
 }

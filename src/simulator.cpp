@@ -520,6 +520,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
   const double t_last_s = static_cast<double>(truth.frames_per_foot - 1) / config.sample_rate_hz;
   std::array<std::size_t, 2> cursor{0, 0};
   std::vector<double> cell_n(sensor_count);
+  std::vector<double> readings(sensor_count);
   std::vector<double> region_n;
   Frame frame;
   frame.bits.resize(sensor_count);
@@ -576,10 +577,14 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
 
       const auto& bias = truth.dc_bias_bits[fi];
       for (std::size_t s = 0; s < sensor_count; ++s) {
-        double reading = cell_n[s] / truth.newtons_per_bit;
+        double& reading = readings[s];
+        reading = cell_n[s] / truth.newtons_per_bit;
         const SensorSample sample{foot, s, t};
         for (auto& effect : effects) reading = effect->sensor_bits(sample, reading);
-        reading += bias[s];
+      }
+      for (auto& effect : effects) effect->sensor_frame(layout, readings);
+      for (std::size_t s = 0; s < sensor_count; ++s) {
+        double reading = readings[s] + bias[s];
         if (options.noise_sd_bits > 0.0) reading += options.noise_sd_bits * rng.normal();
         frame.bits[s] = quantise(reading, truth);
       }

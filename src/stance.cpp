@@ -3,6 +3,10 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gaitmon/crosstalk.hpp"
 
 namespace gaitmon {
 namespace {
@@ -16,25 +20,26 @@ namespace {
 // term turned that one-frame spike into 40-76 N of residual).
 constexpr double kMaxUnthresholdedChange = 0.15;
 
-}  // namespace
-
-std::array<RegionSample, kRegionCount> measure_frame(
-    std::span<const std::uint8_t> raw, std::span<const double> zero, double threshold_bits,
-    const InsoleLayout& layout, const Calibration& calibration, bool first_instant,
-    ContactEllipseCache* cache, FrameScratch& scratch) {
-  const std::size_t sensors = layout.sensor_count();
-  if (raw.size() != sensors || zero.size() != sensors) {
-    throw std::invalid_argument("measure_frame: a frame of " + std::to_string(raw.size()) +
-                                " sensors with a zero of " + std::to_string(zero.size()) +
-                                ", the layout has " + std::to_string(sensors));
+// Applies the threshold to readings already zeroed (and corrected, where asked).
+void threshold(std::span<const double> readings, double threshold_bits, std::span<double> out) {
+  for (std::size_t i = 0; i < readings.size(); ++i) {
+    out[i] = readings[i] < threshold_bits ? 0.0 : readings[i];
   }
+}
+
+// measure_frame from the zeroed readings before the threshold.
+std::array<RegionSample, kRegionCount> measure_readings(
+    std::span<const double> readings, double threshold_bits, const InsoleLayout& layout,
+    const Calibration& calibration, bool first_instant, ContactEllipseCache* cache,
+    FrameScratch& scratch) {
+  const std::size_t sensors = layout.sensor_count();
   const double sensor_area_mm2 = layout.geometry().area_mm2();
   const double newtons_per_bit = calibration.newtons_per_bit(sensor_area_mm2);
   const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
   scratch.zeroed.resize(sensors);
   scratch.cells.reserve(sensors);
   scratch.loaded.reserve(sensors);
-  zero_and_threshold(raw, zero, threshold_bits, scratch.zeroed);
+  threshold(readings, threshold_bits, scratch.zeroed);
   std::array<RegionSample, kRegionCount> samples{};
   for (Region region : kRegions) {
     RegionSample& sample = samples[index_of(region)];
@@ -68,13 +73,35 @@ std::array<RegionSample, kRegionCount> measure_frame(
   return samples;
 }
 
+}  // namespace
+
+std::array<RegionSample, kRegionCount> measure_frame(
+    std::span<const std::uint8_t> raw, std::span<const double> zero, double threshold_bits,
+    const InsoleLayout& layout, const Calibration& calibration, bool first_instant,
+    ContactEllipseCache* cache, FrameScratch& scratch) {
+  const std::size_t sensors = layout.sensor_count();
+  if (raw.size() != sensors || zero.size() != sensors) {
+    throw std::invalid_argument("measure_frame: a frame of " + std::to_string(raw.size()) +
+                                " sensors with a zero of " + std::to_string(zero.size()) +
+                                ", the layout has " + std::to_string(sensors));
+  }
+  scratch.readings.resize(sensors);
+  for (std::size_t i = 0; i < sensors; ++i) {
+    scratch.readings[i] = static_cast<double>(raw[i]) - zero[i];
+  }
+  return measure_readings(scratch.readings, threshold_bits, layout, calibration, first_instant,
+                          cache, scratch);
+}
+
 namespace {
 
-/// Fits every frame's footprint of each region again: at the aspect the stance's free fits share
-/// (the region's box where none has one), and then over the cells under the threshold too; and,
-/// where asked, the footprint of averaging cells at that aspect.
-void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries& series,
-                      FrameScratch& scratch, CellMeanFootprint cell_mean) {
+/// Fits every frame's footprint of each region again, from its zeroed readings before the
+/// threshold: at the aspect the stance's free fits share (the region's box where none has one),
+/// and then over the cells under the threshold too; and, where asked, the footprint of averaging
+/// cells at that aspect.
+void refit_footprints(const Step& step, std::span<const std::vector<double>> readings,
+                      const InsoleLayout& layout, StanceSeries& series, FrameScratch& scratch,
+                      CellMeanFootprint cell_mean) {
   const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
   std::array<double, kRegionCount> aspect{};
   std::vector<Footprint> fits;
@@ -86,8 +113,8 @@ void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries
     aspect[index_of(region)] = shared_aspect(fits).value_or(layout.region_box_aspect(region));
   }
   for (std::size_t f = 0; f < series.size(); ++f) {
-    const auto& raw = step.stance[f].bits;
-    zero_and_threshold(raw, step.sensor_zero_bits, step.adaptive_threshold_bits, scratch.zeroed);
+    const std::vector<double>& frame = readings[f];
+    threshold(frame, step.adaptive_threshold_bits, scratch.zeroed);
     for (Region region : kRegions) {
       RegionSample& sample = series.frames[f][index_of(region)];
       if (sample.active_sensors == 0) continue;
@@ -101,8 +128,7 @@ void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries
         } else {
           scratch.loaded.push_back({s.grid_x_mm, s.grid_y_mm, scratch.zeroed[i]});
         }
-        scratch.region.push_back(
-            {s.grid_x_mm, s.grid_y_mm, static_cast<double>(raw[i]) - step.sensor_zero_bits[i]});
+        scratch.region.push_back({s.grid_x_mm, s.grid_y_mm, frame[i]});
       }
       const double a = aspect[index_of(region)];
       if (cell_mean == CellMeanFootprint::Fit) {
@@ -130,7 +156,7 @@ void refit_footprints(const Step& step, const InsoleLayout& layout, StanceSeries
 
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             const Calibration& calibration, ContactEllipseCache* cache,
-                            CellMeanFootprint cell_mean) {
+                            CellMeanFootprint cell_mean, const CrosstalkCorrection* crosstalk) {
   const std::size_t sensors = layout.sensor_count();
   if (step.sensor_zero_bits.size() != sensors) {
     throw std::invalid_argument("measure_stance: the step's zero has " +
@@ -142,6 +168,7 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
   series.frames.reserve(step.stance.size());
   series.total_force_n.reserve(step.stance.size());
   FrameScratch scratch;
+  std::vector<std::vector<double>> readings(step.stance.size());
   for (std::size_t f = 0; f < step.stance.size(); ++f) {
     const Frame& frame = step.stance[f];
     if (frame.bits.size() != sensors) {
@@ -149,16 +176,21 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                                   std::to_string(frame.bits.size()) + " sensors, the layout " +
                                   std::to_string(sensors));
     }
-    const auto samples =
-        measure_frame(frame.bits, step.sensor_zero_bits, step.adaptive_threshold_bits, layout,
-                      calibration, f == 0, cache, scratch);
+    std::vector<double>& r = readings[f];
+    r.resize(sensors);
+    for (std::size_t i = 0; i < sensors; ++i) {
+      r[i] = static_cast<double>(frame.bits[i]) - step.sensor_zero_bits[i];
+    }
+    if (crosstalk != nullptr) crosstalk->undo(r);
+    const auto samples = measure_readings(r, step.adaptive_threshold_bits, layout, calibration,
+                                          f == 0, cache, scratch);
     double total = 0.0;
     for (const RegionSample& sample : samples) total += sample.force_n;
     series.t_s.push_back(frame.t_s);
     series.frames.push_back(samples);
     series.total_force_n.push_back(total);
   }
-  refit_footprints(step, layout, series, scratch, cell_mean);
+  refit_footprints(step, readings, layout, series, scratch, cell_mean);
   return series;
 }
 

@@ -784,8 +784,8 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   EXPECT_EQ(load_config(shipped_config()).model.effects_window_steps, 100);
   EXPECT_EQ(ModelSettings{}.effects_window_steps, 100);
   const std::vector<Refusal> cases = {
-      {"ModelUnknownEffect", kMain, replace("effects = []", R"(effects = ["crosstalk"])"),
-       "model.effects[0]", "unknown effect 'crosstalk'"},
+      {"ModelUnknownEffect", kMain, replace("effects = []", R"(effects = ["ghosting"])"),
+       "model.effects[0]", "unknown effect 'ghosting'"},
       {"ModelEffectTwice", kMain,
        replace("effects = []", R"(effects = ["hysteresis", "hysteresis"])"), "model.effects[1]",
        "listed twice"},

@@ -42,6 +42,18 @@ Unit stance(Region region, int step, double t0_s) {
     u.y.push_back(400.0 * s * s);
   }
   u.peak_n = 400.0;
+  u.shape_model.id = {3000.0, 0.0, 0.3, 0.0, 1.0};
+  // As if measured again for crosstalk: the correction shrinks the area and takes a share of
+  // the force off, both growing with the coupling.
+  for (double k : kCrosstalkGrid) {
+    std::vector<double> area, removed;
+    for (std::size_t i = 0; i < kFrames; ++i) {
+      area.push_back(u.area[i] * (1.0 - 2.0 * k));
+      removed.push_back(3.0 * k * u.y[i]);
+    }
+    u.crosstalk_area_mm2.push_back(area);
+    u.crosstalk_removed_n.push_back(removed);
+  }
   return u;
 }
 
@@ -139,8 +151,9 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyAreAffineInTheForceAre) {
       }
     }
   }
-  // Relaxation, hysteresis and creep on 3 units, 1 choice each; impact on 2 heels x 21 onsets.
-  EXPECT_EQ(checked, 3 * 3 + 2 * 21);
+  // Relaxation, hysteresis, creep and crosstalk on 3 units, 1 choice each; impact on 2 heels x
+  // 21 onsets.
+  EXPECT_EQ(checked, 4 * 3 + 2 * 21);
 }
 
 TEST(DiscrepancyEffects, TheAffineCheckCatchesTheCeilingThatIsNot) {
@@ -182,7 +195,7 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {
       EXPECT_TRUE(depends_on_force) << m.name;
     }
   }
-  EXPECT_EQ(additive, std::vector<std::string>{"impact_transient"});
+  EXPECT_EQ(additive, (std::vector<std::string>{"impact_transient", "crosstalk"}));
   // The drift reads in the zero windows only; the zeroing takes it off the stance.
   EXPECT_EQ(force_untouched, std::vector<std::string>{"thermal_drift"});
 }
@@ -412,6 +425,50 @@ TEST(DiscrepancyEffects, ThermalDriftMovesEachZeroByItsCellsTimesTheDrift) {
   units[1].t_post_zero_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_EQ(candidate("thermal_drift", units, {rate_bits_per_min}, 112.5, npb)->swing_reading(1),
             0.0);
+}
+
+// The units of two_steps were measured again with areas (1 - 2 k) and takings 3 k y, linear in
+// the coupling k, so interpolation between the couplings measured (and the unit's own area at
+// k = 0 below the first) gives them exactly at any k.
+TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling) {
+  const std::vector<Unit> units = two_steps();
+  for (const double k : {0.005, 0.0425, 0.2}) {
+    SCOPED_TRACE(k);
+    const auto applied = candidate("crosstalk", units, {k}, 112.5, 0.2824);
+    for (std::size_t ui = 0; ui < units.size(); ++ui) {
+      const Unit& u = units[ui];
+      ASSERT_TRUE(applied->affects(u));
+      std::vector<double> area(u.area.size());
+      for (std::size_t i = 0; i < area.size(); ++i) area[i] = u.area[i] * (1.0 - 2.0 * k);
+      const Shapes expected = shapes_of(u.t, area, u.shape_model);
+      const Shapes* got = applied->shapes(ui);
+      ASSERT_NE(got, nullptr);
+      ASSERT_EQ(got->En.size(), expected.En.size());
+      for (std::size_t n = 0; n < expected.En.size(); ++n) {
+        for (std::size_t i = 0; i < area.size(); ++i) {
+          EXPECT_NEAR(got->En[n][i], expected.En[n][i], 1e-9 * (1.0 + expected.En[n][i]));
+        }
+      }
+      for (std::size_t i = 0; i < area.size(); ++i) {
+        EXPECT_NEAR(got->V[i], expected.V[i], 1e-9 * (1.0 + std::abs(expected.V[i])));
+      }
+      // A smaller area, a smaller model force at the same stiffness.
+      EXPECT_LT(got->En[0][kFrames / 2], shapes_of(u.t, u.area, u.shape_model).En[0][kFrames / 2]);
+      const std::vector<double> F = force(300.0, 1.0);
+      std::vector<double> out(F.size());
+      applied->apply(ui, u, F, out, 0);
+      for (std::size_t i = 0; i < F.size(); ++i) EXPECT_NEAR(out[i], F[i] + 3.0 * k * u.y[i], 1e-9);
+    }
+  }
+  // No coupling, no correction; and a unit that was not measured again is left alone.
+  EXPECT_FALSE(candidate("crosstalk", units, {0.0}, 112.5, 0.2824)->affects(units[0]));
+  std::vector<Unit> unmeasured = two_steps();
+  unmeasured[0].crosstalk_area_mm2.clear();
+  unmeasured[0].crosstalk_removed_n.clear();
+  const auto applied = candidate("crosstalk", unmeasured, {0.05}, 112.5, 0.2824);
+  EXPECT_FALSE(applied->affects(unmeasured[0]));
+  EXPECT_EQ(applied->shapes(0), nullptr);
+  EXPECT_TRUE(applied->affects(unmeasured[1]));
 }
 
 // Closed forms on simple inputs, whatever the simulator does. Hysteresis on a triangle of

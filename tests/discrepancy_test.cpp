@@ -289,6 +289,48 @@ TEST(Discrepancy, SaturationIsNamedOnlyWhereTheReadingsShowACeiling) {
   EXPECT_THROW(find_discrepancy(clean, bad), std::invalid_argument);
 }
 
+// A cell wholly outside a contact reads nothing without crosstalk, and its share of its
+// neighbours' readings with it: the floor of that share is 0 for a block of cells loaded alone,
+// and just under the coupling where the block's readings were mixed into the cells around it.
+TEST(Discrepancy, TheNeighbourShareIsWhatCellsBesideALoadReadOfTheirNeighbours) {
+  const InsoleLayout layout(shipped_config().insole(InsoleSize::S37_38), shipped_config().sensor);
+  const std::span<const std::size_t> heel = layout.region_sensors(Region::Heel);
+  std::vector<double> own(layout.sensor_count(), 0.0);
+  for (std::size_t i = 4; i < 8; ++i) own[heel[i]] = 200.0;
+  const auto share_of = [&](double coupling) {
+    std::vector<std::uint8_t> bits(own.size());
+    for (std::size_t c = 0; c < own.size(); ++c) {
+      double reading = own[c];
+      for (const Neighbour& n : layout.neighbours(c)) {
+        reading += coupling * n.shared_edge * own[n.sensor];
+      }
+      bits[c] = static_cast<std::uint8_t>(std::lround(reading));
+    }
+    std::vector<Step> steps(2);
+    for (Step& step : steps) {
+      step.sensor_zero_bits.assign(own.size(), 0.0);
+      step.stance.assign(3, Frame{0.0, Foot::Left, bits});
+    }
+    return make_discrepancy_input(steps, std::vector<StepAnalysis>(2), layout, shipped_config())
+        .neighbour_share;
+  };
+  const NeighbourShare plain = share_of(0.0);
+  const NeighbourShare mixed = share_of(0.05);
+  fmt::print("neighbour share: {} without crosstalk, {} with 0.05 ({} and {} cell-frames)\n",
+             plain.floor, mixed.floor, plain.cell_frames, mixed.cell_frames);
+  EXPECT_GT(plain.cell_frames, 6 * 4);
+  EXPECT_EQ(plain.floor, 0.0);
+  EXPECT_GT(mixed.floor, 0.025);
+  EXPECT_LT(mixed.floor, 0.05);
+  // No cells, no share.
+  const NeighbourShare none =
+      make_discrepancy_input(std::vector<Step>(2), std::vector<StepAnalysis>(2), layout,
+                             shipped_config())
+          .neighbour_share;
+  EXPECT_EQ(none.cell_frames, 0);
+  EXPECT_TRUE(std::isnan(none.floor));
+}
+
 // The baseline's damping shape is the fits' own: on a material-rate session the material rate's
 // shape leaves less than eq 15's, which misses the damping's rise with the contact.
 TEST(Discrepancy, BaselineTakesTheDampingFormTheStepsWereFittedWith) {
@@ -334,8 +376,16 @@ TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
 
   const std::vector<std::string> twice{"hysteresis", "hysteresis"};
   EXPECT_THROW(fit_extended_model(input, twice), std::invalid_argument);
-  const std::vector<std::string> unknown{"crosstalk"};
+  const std::vector<std::string> unknown{"ghosting"};
   EXPECT_THROW(fit_extended_model(input, unknown), std::invalid_argument);
+  // Crosstalk needs the steps measured again at its couplings; these were made without cells.
+  const std::vector<std::string> crosstalk{"crosstalk"};
+  try {
+    fit_extended_model(input, crosstalk);
+    ADD_FAILURE() << "crosstalk fitted to steps not measured again";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("measure_crosstalk_views"), std::string::npos) << e.what();
+  }
 
   // A stop request (the live monitor's shutdown on a signal) ends the fit with FitStopped; an
   // unrequested token changes nothing, nor does a second effect fitted on top of the first. The
@@ -390,6 +440,7 @@ TEST(Discrepancy, AnEffectAtItsTrueParametersExplainsWhatItAdded) {
   EXPECT_EQ(no_impact.extended_nrmse_pct, no_impact.baseline_nrmse_pct);
   EXPECT_LT(at_impact.extended_nrmse_pct, 0.25 * at_impact.baseline_nrmse_pct);
 
+  EXPECT_THROW(evaluate_effect_at(input, "ghosting", {}), std::invalid_argument);
   EXPECT_THROW(evaluate_effect_at(input, "crosstalk", {}), std::invalid_argument);
   EXPECT_THROW(evaluate_effect_at(input, c.effect, {{"gain", 0.2}}), std::invalid_argument);
   EXPECT_THROW(evaluate_effect_at(input, c.effect, {{"strength", 2.0}}), std::invalid_argument);

@@ -10,6 +10,7 @@
 namespace gaitmon {
 namespace {
 
+using ::testing::Contains;
 using ::testing::ElementsAre;
 
 struct Xy {
@@ -182,6 +183,33 @@ TEST(InsoleLayout, RegionBoxAspectSpansTheCellsEdgeToEdge) {
   const InsoleLayout wide(spec_2_4_3(), geometry(RowAlignment::Centred, 9.0, 20.0));
   EXPECT_DOUBLE_EQ(wide.region_box_aspect(Region::Heel), 1.0);
   EXPECT_DOUBLE_EQ(wide.region_box_aspect(Region::Met1_2), 0.5);
+}
+
+std::vector<std::pair<std::size_t, double>> neighbours_of(const InsoleLayout& layout,
+                                                          std::size_t sensor) {
+  std::vector<std::pair<std::size_t, double>> out;
+  for (const Neighbour& n : layout.neighbours(sensor)) out.emplace_back(n.sensor, n.shared_edge);
+  return out;
+}
+
+TEST(InsoleLayout, NeighboursShareAWholeEdgeInARowAndTheirOverlapAcrossRows) {
+  // Centred 3-2-3: the row of two sits half a cell off the rows of three, so each of its cells
+  // overlaps two cells above and two below by half a width; a corner touch is no neighbour.
+  using P = std::pair<std::size_t, double>;
+  const InsoleLayout centred(spec_3_2_3(), geometry(RowAlignment::Centred, 9.0, 20.0));
+  EXPECT_THAT(neighbours_of(centred, 0), ElementsAre(P{1, 1.0}, P{3, 0.5}));
+  EXPECT_THAT(neighbours_of(centred, 1), ElementsAre(P{0, 1.0}, P{2, 1.0}, P{3, 0.5}, P{4, 0.5}));
+  EXPECT_THAT(neighbours_of(centred, 3),
+              ElementsAre(P{0, 0.5}, P{1, 0.5}, P{4, 1.0}, P{5, 0.5}, P{6, 0.5}));
+  // Lateral alignment lines the rows up: whole edges only.
+  const InsoleLayout lateral(spec_3_2_3(), geometry(RowAlignment::Lateral, 9.0, 20.0));
+  EXPECT_THAT(neighbours_of(lateral, 3), ElementsAre(P{0, 1.0}, P{4, 1.0}, P{5, 1.0}));
+  EXPECT_THAT(neighbours_of(lateral, 2), ElementsAre(P{1, 1.0}));
+  for (std::size_t s = 0; s < centred.sensor_count(); ++s) {
+    for (const Neighbour& n : centred.neighbours(s)) {
+      EXPECT_THAT(neighbours_of(centred, n.sensor), Contains(P{s, n.shared_edge}));
+    }
+  }
 }
 
 TEST(InsoleLayout, RegionSensorsComeInSensorOrderWhateverTheSpanOrder) {

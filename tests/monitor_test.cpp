@@ -424,11 +424,14 @@ TEST(Monitor, OffersAfterCloseAreRefusedAndCounted) {
 }
 
 // [model] effects in the config: the monitor fits the extended model to its latest complete
-// steps as `gaitmon analyze --effects` fits it to a session (make_discrepancy_input and
-// fit_extended_model over the same analyses), now and then and once more at shutdown.
-TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
+// steps as `gaitmon analyze --effects` fits it to a session (extended_model_input and
+// fit_extended_model over the same analyses), now and then and once more at shutdown. Crosstalk
+// also needs the steps measured again at its couplings, which the monitor must do too.
+class MonitorEffects : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(MonitorEffects, OfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
   Config config = shipped_config();
-  config.model.effects = {"impact_transient"};
+  config.model.effects = {GetParam()};
   SessionHeader header;
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
   std::vector<Step> ok;
@@ -449,8 +452,10 @@ TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
     std::vector<StepAnalysis> analyses;
     for (const Step& step : latest)
       analyses.push_back(analyse_step(step, layout, config, quick_fits()));
-    const ExtendedModelFit expected = fit_extended_model(
-        make_discrepancy_input(latest, std::move(analyses), layout, config), config.model.effects);
+    const ExtendedModelFit expected =
+        fit_extended_model(extended_model_input(latest, std::move(analyses), layout, config,
+                                                config.model.effects, quick_fits().area),
+                           config.model.effects);
 
     RecordingPublisher publisher;
     MonitorOptions options = quick_replay();
@@ -481,7 +486,7 @@ TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
     const std::vector<ParamEstimate>& params = expected.effects.front().params;
     ASSERT_EQ(last.params.size(), params.size());
     for (std::size_t i = 0; i < params.size(); ++i) {
-      EXPECT_EQ(last.params[i].effect, "impact_transient");
+      EXPECT_EQ(last.params[i].effect, GetParam());
       EXPECT_EQ(last.params[i].name, params[i].name);
       expect_close(last.params[i].value, params[i].value, params[i].name);
       if (std::isnan(params[i].se)) {
@@ -499,6 +504,9 @@ TEST(Monitor, EffectsOfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
     EXPECT_EQ(order.back(), RecordingPublisher::Kind::Status);
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(ImpactAndCrosstalk, MonitorEffects,
+                         ::testing::Values("impact_transient", "crosstalk"));
 
 // close() (the commands' SIGINT and SIGTERM) makes the shutdown publish the latest estimate as
 // the final one instead of fitting the window again, which could outlast the 2-s shutdown.

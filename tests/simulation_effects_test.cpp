@@ -131,6 +131,76 @@ TEST(SimulationEffects, ThermalDriftRaisesEveryReadingLoadedOrNotAlongTheWarmUp)
                std::invalid_argument);
 }
 
+TEST(SimulationEffects, CrosstalkAddsItsShareOfEachEdgeNeighboursReading) {
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const InsoleLayout layout(config.insole(InsoleSize::S41_42), config.sensor);
+  auto e = make_simulation_effect("crosstalk", {{"coupling", 0.1}});
+  // One loaded cell: it keeps its reading, each neighbour reads 0.1 of it per whole edge, and
+  // no other cell reads anything.
+  const std::size_t loaded = layout.region_sensors(Region::Heel)[5];
+  std::vector<double> bits(layout.sensor_count(), 0.0);
+  bits[loaded] = 100.0;
+  e->sensor_frame(layout, bits);
+  std::vector<double> expected(bits.size(), 0.0);
+  expected[loaded] = 100.0;
+  int neighbours = 0;
+  for (const Neighbour& n : layout.neighbours(loaded)) {
+    expected[n.sensor] = 10.0 * n.shared_edge;
+    ++neighbours;
+  }
+  EXPECT_GE(neighbours, 3);
+  for (std::size_t c = 0; c < bits.size(); ++c) EXPECT_NEAR(bits[c], expected[c], 1e-12) << c;
+  // Two loaded cells next to each other: each reads the other's share on top of its own.
+  const std::size_t other = layout.neighbours(loaded).front().sensor;
+  const double shared = layout.neighbours(loaded).front().shared_edge;
+  std::fill(bits.begin(), bits.end(), 0.0);
+  bits[loaded] = 100.0;
+  bits[other] = 40.0;
+  e->sensor_frame(layout, bits);
+  EXPECT_NEAR(bits[loaded], 100.0 + 0.1 * shared * 40.0, 1e-12);
+  EXPECT_NEAR(bits[other], 40.0 + 0.1 * shared * 100.0, 1e-12);
+  EXPECT_THROW(make_simulation_effect("crosstalk", {{"coupling", 0.3}}), std::invalid_argument);
+}
+
+// A session with crosstalk against the same seed without it, noise and dc bias off: every
+// reading is the plain one plus its share of the neighbours' (to the rounding of both to bits),
+// and the ring of cells around a contact reads where the plain session reads nothing.
+TEST(SimulationEffects, ACrosstalkSessionReadsEachCellPlusItsNeighboursShare) {
+  const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const InsoleLayout layout(config.insole(InsoleSize::S41_42), config.sensor);
+  const auto dir = test::scratch_dir("sim-effects-crosstalk");
+  SimulationOptions o;
+  o.duration_s = 3.0;
+  o.seed = 17;
+  o.size = InsoleSize::S41_42;
+  o.noise_sd_bits = 0.0;
+  o.max_bias_bits = 0;
+  simulate_session(config, o, dir / "plain.csv", dir / "plain.truth.json");
+  o.effects = {"crosstalk"};
+  o.effect_params["crosstalk"] = {{"coupling", 0.06}};
+  simulate_session(config, o, dir / "xt.csv", dir / "xt.truth.json");
+  SessionReader plain(dir / "plain.csv");
+  SessionReader xt(dir / "xt.csv");
+  Frame p, x;
+  double worst = 0.0;
+  long ring = 0;
+  while (plain.next(p)) {
+    ASSERT_TRUE(xt.next(x));
+    for (std::size_t c = 0; c < p.bits.size(); ++c) {
+      double expected = p.bits[c];
+      for (const Neighbour& n : layout.neighbours(c))
+        expected += 0.06 * n.shared_edge * p.bits[n.sensor];
+      worst = std::max(worst, std::abs(x.bits[c] - std::min(255.0, expected)));
+      if (p.bits[c] == 0 && x.bits[c] >= 3) ++ring;
+    }
+  }
+  EXPECT_FALSE(xt.next(x));
+  // Half a bit of the plain reading's rounding, its share of the neighbours' (at most 0.06 x 4
+  // x 0.5), and half a bit of the crosstalk reading's own.
+  EXPECT_LE(worst, 1.12);
+  EXPECT_GT(ring, 100);
+}
+
 TEST(SimulationEffects, UnknownNamesAndParametersAndOutOfRangeValuesFailClearly) {
   try {
     make_simulation_effect("stress_relaxation", {{"tau", 0.1}});

@@ -9,6 +9,7 @@
 #include <numbers>
 #include <vector>
 
+#include "gaitmon/crosstalk.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -269,6 +270,46 @@ TEST_F(StanceTest, TheRimUnderTheThresholdCountsInTheFootprint) {
   EXPECT_NEAR(shared, aspect, 0.1);
   EXPECT_LT(std::abs(fp / truth - 1.0), std::abs(*above / truth - 1.0));
   EXPECT_LT(std::abs(fp / truth - 1.0), 0.02);  // 0.75 % measured
+}
+
+// Crosstalk of 8 % per edge spreads a heel cap's readings into the ring of cells around it and
+// widens the footprint; measured with the correction at that coupling, the stance reads the
+// cap's own force and footprint again, to within the rounding of the mixed readings to bits.
+TEST_F(StanceTest, UndoingTheCrosstalkGivesBackTheFootprintOfTheCellsOwnReadings) {
+  const double coupling = 0.08;
+  const std::vector<std::uint8_t> own = heel_cap(*layout_, 0.8, 20.0, 150.0);
+  std::vector<std::uint8_t> mixed(own.size());
+  for (std::size_t c = 0; c < own.size(); ++c) {
+    double reading = own[c] - 2.0;
+    for (const Neighbour& n : layout_->neighbours(c)) {
+      reading += coupling * n.shared_edge * (own[n.sensor] - 2.0);
+    }
+    mixed[c] = static_cast<std::uint8_t>(2.0 + std::round(reading));
+  }
+  const Step plain = make_step({own, own});
+  const Step step = make_step({mixed, mixed});
+  const CrosstalkCorrection correction(*layout_, coupling);
+  const StanceSeries truth = measure_stance(plain, *layout_, config_.calibration);
+  const StanceSeries as_read = measure_stance(step, *layout_, config_.calibration);
+  const StanceSeries undone = measure_stance(step, *layout_, config_.calibration, nullptr,
+                                             CellMeanFootprint::Skip, &correction);
+  const RegionSample& t = truth.at(1, Region::Heel);
+  const RegionSample& r = as_read.at(1, Region::Heel);
+  const RegionSample& u = undone.at(1, Region::Heel);
+  ASSERT_TRUE(t.footprint_area_mm2 && r.footprint_area_mm2 && u.footprint_area_mm2);
+  std::printf(
+      "heel footprint %.0f mm2 own, %.0f with crosstalk, %.0f undone; force %.1f, %.1f, "
+      "%.1f N\n",
+      *t.footprint_area_mm2, *r.footprint_area_mm2, *u.footprint_area_mm2, t.force_n, r.force_n,
+      u.force_n);
+  EXPECT_GT(*r.footprint_area_mm2, 1.1 * *t.footprint_area_mm2);
+  EXPECT_GT(r.force_n, 1.2 * t.force_n);
+  EXPECT_NEAR(*u.footprint_area_mm2 / *t.footprint_area_mm2, 1.0, 0.01);
+  // Rounding: half a bit on each cell the readings were mixed into, at most.
+  const double newtons_per_bit =
+      config_.calibration.newtons_per_bit(layout_->geometry().area_mm2());
+  EXPECT_NEAR(u.force_n, t.force_n,
+              0.5 * newtons_per_bit * layout_->region_sensors(Region::Heel).size());
 }
 
 // A sensor that still reads after its load has gone (creep) reads a few bits more on every cell

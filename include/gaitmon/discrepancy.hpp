@@ -24,6 +24,12 @@
 //                      p = 2 F / cells / N-per-bit is the peak reading of a paraboloid pressure
 //                      over the measured contact and phi(L) = (1 + L + L^2) / (1 + L) how much
 //                      wider the footprint fitted to capped cells is (ceiling_bits c; n = 0.3)
+//   thermal_drift      the zeros only: a region's zero moves by its cells x r x the time between
+//                      the steps' zero windows (rate_bits_per_min r)
+//   crosstalk          the model driven by the area of readings corrected for a coupling k to
+//                      the cells' edge neighbours, F_meas = F(A_k) + what the correction took
+//                      off the force (coupling k; the steps measured again at 8 couplings from 0.01
+//                      to 0.2, measure_crosstalk_views, and interpolated between them)
 // LP_tau is a first-order lag running through the foot's steps in time order (the lag carried
 // into a step is that of the measured force of the foot's earlier steps, decayed over the
 // swing).
@@ -49,12 +55,14 @@
 //
 // Choice. Steps are split into k folds (by time order, step i in fold i mod k); a candidate's
 // held-out error is that of each fold's steps under the parameters fitted on the other folds.
-// The best candidate is the one whose held-out deviance falls most below the baseline's; it is
-// named when its held-out NRMSE of the force is at least min_shrink_pct below the baseline's, or
-// that of the zero changes at least min_zero_shrink_pct, its BIC (both channels) is at least
-// min_delta_bic below, AND every parameter has a finite standard error (an optimum on a bound or
-// along a flat direction is not an effect the data show). A second effect is named on top of the
-// first by the same rules against the first at its all-steps parameters (which it runs on).
+// A candidate passes when its held-out NRMSE of the force is at least min_shrink_pct below the
+// baseline's, or that of the zero changes at least min_zero_shrink_pct, its BIC (both channels)
+// is at least min_delta_bic below, every parameter has a finite standard error (an optimum on a
+// bound or along a flat direction is not an effect the data show), and, for sensor_saturation and
+// crosstalk, the readings show a ceiling or cells beside a contact reading a share of their
+// neighbours'. Of those that pass, the one whose held-out deviance falls most below the
+// baseline's is named. A second effect is named on top of the first by the same rules against
+// the first at its all-steps parameters (which it runs on).
 //
 // Region-steps fitted on the contact ellipse (a toe whose cells never determine its footprint)
 // are left out when the session has footprints: the ellipse moves in whole cells, and its misfit
@@ -93,11 +101,23 @@ std::vector<std::string_view> discrepancy_effect_names();
 void check_discrepancy_effect(std::string_view name);
 
 /// One analysed step and what the workflow needs beyond the fits.
+/// One step measured again with its readings corrected for crosstalk of one coupling
+/// (CrosstalkCorrection): per region and stance frame, the area the analysis's area source gives
+/// (fit_areas_mm2) and the force; and per region which area that is.
+struct CrosstalkView {
+  double coupling = 0.0;
+  std::array<std::vector<double>, kRegionCount> area_mm2, force_n;
+  std::array<AreaSource, kRegionCount> source{};
+};
+
 struct DiscrepancyStep {
   StepAnalysis analysis;
   /// Per region and stance frame: cells within kSaturationBandBits of the session's highest
   /// zeroed reading (a reading that has stopped rising). Empty means unknown (all zero).
   std::array<std::vector<int>, kRegionCount> saturated_cells;
+  /// At each coupling the crosstalk candidate interpolates between (measure_crosstalk_views);
+  /// empty if the step was not measured again, and the candidate then leaves it alone.
+  std::vector<CrosstalkView> crosstalk;
   double zero_bits = 0.0;         ///< the step's summed-bits zero (Step::bias_bits)
   double peak_summed_bits = 0.0;  ///< its highest zeroed summed bits (Step::max_summed_bits)
   /// Per region: its cells' zero summed (N), what the per-step zeroing took off the region.
@@ -110,6 +130,21 @@ struct DiscrepancyStep {
 /// A cell counts as saturated within this many bits of the session's highest zeroed reading.
 inline constexpr double kSaturationBandBits = 3.0;
 
+/// Cells count in NeighbourShare where their edge neighbours read this much together (zeroed):
+/// a crosstalk of 1 % then gives them 0.6 bits, twice the noise of one reading's rounding.
+inline constexpr double kNeighbourShareBits = 60.0;
+/// Fewer such cell-frames, and the share is not judged.
+inline constexpr long kMinNeighbourShareCellFrames = 1000;
+
+/// What a cell reads of its edge neighbours' readings (InsoleLayout::neighbours, shares of the
+/// edge as weights), where they read kNeighbourShareBits or more together: the 1st percentile
+/// over every such cell and stance frame. A cell wholly outside a contact reads nothing (noise
+/// about 0) without crosstalk, and its coupling's share of its neighbours' readings with it.
+struct NeighbourShare {
+  double floor = std::numeric_limits<double>::quiet_NaN();
+  long cell_frames = 0;
+};
+
 struct DiscrepancyInput {
   std::vector<DiscrepancyStep> steps;  ///< complete steps of both feet, any order
   double sample_rate_hz = 100.0;
@@ -119,6 +154,7 @@ struct DiscrepancyInput {
   /// Cells of each region (both feet share the layout): a drift of every cell's unloaded
   /// reading moves a region's zero by that many times its own. 0 where unknown.
   std::array<int, kRegionCount> region_cells{};
+  NeighbourShare neighbour_share;  ///< of every step's readings
 };
 
 /// The analysis settings of the workflow's baseline: the raw series (Smoothing::None), because
@@ -138,6 +174,21 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
                                         std::vector<StepAnalysis> analyses,
                                         const InsoleLayout& layout, const Config& config);
 
+/// Measures each step of `input` (made from `steps`, in the same order) again at each coupling
+/// the crosstalk candidate interpolates between, with the area source the steps were analysed
+/// with, on all cores. Only that candidate needs it: prepare_discrepancy_input calls it, and a
+/// caller of make_discrepancy_input whose effects name crosstalk does. Throws
+/// std::invalid_argument if the counts differ.
+void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> steps,
+                             const InsoleLayout& layout, const Config& config, AreaSource area);
+
+/// What fit_extended_model needs for `effects`: make_discrepancy_input, and
+/// measure_crosstalk_views where the effects name crosstalk.
+DiscrepancyInput extended_model_input(std::span<const Step> steps,
+                                      std::vector<StepAnalysis> analyses,
+                                      const InsoleLayout& layout, const Config& config,
+                                      std::span<const std::string> effects, AreaSource area);
+
 struct DiscrepancySettings {
   int folds = 5;                ///< k of the k-fold over steps, >= 2
   int phase_bins = 10;          ///< bins of normalised stance time, >= 10
@@ -153,6 +204,12 @@ struct DiscrepancySettings {
   /// loads in sessions that had no ceiling (5.3 and 7.6 % held-out, size 45-46, no such frame).
   int min_ceiling_steps = 3;
   double min_ceiling_steps_pct = 10.0;
+  /// crosstalk is named only where the readings show it: NeighbourShare::floor at least this.
+  /// Simulated sessions without crosstalk gave -0.012 to -0.003 (noise about 0: the cells
+  /// outside a contact), with a coupling of 0.02 0.0085 to 0.0105, of 0.05 0.028. Without it
+  /// the candidate took up misfit of the footprint in size 35-36 (5.4 and 9.8 % held-out) and
+  /// in a creep session.
+  double min_neighbour_share = 0.005;
   bool second_effect = true;  ///< look for a second effect on top of the first
   int top_cells = 10;         ///< region x phase cells listed under `where`
 };
@@ -291,6 +348,7 @@ struct DiscrepancyResult {
   /// Steps with a frame in which two or more cells of one region read at the session's top
   /// (DiscrepancySettings::min_ceiling_steps); -1 where the input has no cell counts.
   int ceiling_plateau_steps = -1;
+  NeighbourShare neighbour_share;  ///< the input's (DiscrepancySettings::min_neighbour_share)
   std::vector<EffectEstimate> named_effects;
   /// The candidate whose held-out deviance falls most below the baseline's, and why it was not
   /// named, in words (empty where it was): a clear gain can still leave a parameter
@@ -336,7 +394,8 @@ class FitStopped : public std::runtime_error {
   FitStopped() : std::runtime_error("the fit was stopped") {}
 };
 
-/// Throws std::invalid_argument for an unknown or repeated name or fewer steps than folds, and
+/// Throws std::invalid_argument for an unknown or repeated name, fewer steps than folds, or
+/// crosstalk named for steps not measured again for it (extended_model_input does), and
 /// FitStopped soon after `stop` is requested (the live monitor's shutdown on a signal).
 /// `on_progress`, if set, receives the fraction of the effects fitted after each, on the
 /// calling thread.

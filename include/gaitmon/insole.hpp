@@ -26,6 +26,14 @@ struct Sensor {
   double grid_y_mm = 0.0;
 };
 
+/// A sensor next to another across an edge of their cells in the grid frame.
+struct Neighbour {
+  std::size_t sensor = 0;
+  /// The share of the edge the two cells have in common: 1 for a whole edge; less between rows
+  /// of different lengths, whose cells sit half a cell apart.
+  double shared_edge = 0.0;
+};
+
 /// Invariant: sensors are numbered row by row from the most anterior row, lateral to medial,
 /// every sensor belongs to exactly one region, and every region has at least one sensor.
 class InsoleLayout {
@@ -52,6 +60,9 @@ class InsoleLayout {
     return region_sensors_[index_of(region)];
   }
 
+  /// The sensors whose cells share an edge with this one's, in sensor order.
+  std::span<const Neighbour> neighbours(std::size_t sensor) const { return neighbours_.at(sensor); }
+
   /// Width over height of the bounding box of a region's cells in the grid frame, cell edges
   /// included: the shape a footprint grows into where its loads cannot give its aspect.
   double region_box_aspect(Region region) const;
@@ -63,6 +74,7 @@ class InsoleLayout {
   std::vector<int> row_lengths_;
   std::vector<Sensor> sensors_;
   std::array<std::vector<std::size_t>, kRegionCount> region_sensors_;
+  std::vector<std::vector<Neighbour>> neighbours_;
 };
 
 }  // namespace gaitmon

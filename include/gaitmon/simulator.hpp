@@ -4,7 +4,8 @@
 // Pipeline, per frame and foot: contact-area trajectory per region -> tissue force per region
 // (the shared model, then any tissue-stage effect) -> pressure field rasterised onto the
 // region's cells, rescaled to the force -> sensor reading (bits, then any sensor-stage effect,
-// then dc bias, Gaussian noise, rounding and clipping to 0..255).
+// then any frame-stage effect over the foot's cells together, then dc bias, Gaussian noise,
+// rounding and clipping to 0..255).
 //
 // Gait: the right foot's stance starts half a stride after the left's; each stride and each
 // stance duration is the nominal one times (1 + z jitter_pct/100), z standard normal truncated
@@ -40,6 +41,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -218,6 +220,9 @@ class SimulationEffect {
   virtual double tissue_force_n(const TissueSample& /*sample*/, double force_n) { return force_n; }
   /// Sensor stage: a reading (bits, unrounded) before dc bias, noise, rounding and clipping.
   virtual double sensor_bits(const SensorSample& /*sample*/, double bits) { return bits; }
+  /// Frame stage: one foot's whole frame of readings (bits, unrounded, in sensor order) after
+  /// the sensor stage, for an effect that couples cells.
+  virtual void sensor_frame(const InsoleLayout& /*layout*/, std::span<double> /*bits*/) {}
 };
 
 /// The effect names simulate_session accepts; "none" is the model alone. The effects and their

@@ -40,6 +40,8 @@ struct RegionSample {
 /// and frame, so only where the analysis will use it.
 enum class CellMeanFootprint { Skip, Fit };
 
+class CrosstalkCorrection;  // crosstalk.hpp
+
 /// Every frame of one stance, heel strike to toe off inclusive.
 struct StanceSeries {
   std::vector<double> t_s;                                     ///< per frame, the session's clock
@@ -59,6 +61,7 @@ struct FrameScratch {
   std::vector<LoadedCell> loaded;
   std::vector<CellCentre> unloaded;
   std::vector<LoadedCell> region;  ///< every cell of a region, zeroed but not thresholded
+  std::vector<double> readings;    ///< the frame zeroed, before the threshold
 };
 
 /// One frame: zeroes the raw bits with `zero`, applies the adaptive threshold and measures every
@@ -80,8 +83,10 @@ std::array<RegionSample, kRegionCount> measure_frame(
 /// averaging cells at the same shared aspect.
 /// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
 /// steps passes one cache for all of them (results are identical with or without it).
+/// With `crosstalk`, each frame's zeroed readings are corrected for it before the threshold.
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             const Calibration& calibration, ContactEllipseCache* cache = nullptr,
-                            CellMeanFootprint cell_mean = CellMeanFootprint::Skip);
+                            CellMeanFootprint cell_mean = CellMeanFootprint::Skip,
+                            const CrosstalkCorrection* crosstalk = nullptr);
 
 }  // namespace gaitmon

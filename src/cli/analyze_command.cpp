@@ -441,8 +441,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     if (!names.empty()) {
       const auto effects_start = std::chrono::steady_clock::now();
       extended = fit_extended_model(
-          make_discrepancy_input(ok_steps, analyses, layout, config), names, {}, {},
-          [&](double fraction) { progress.update(steps_end + (0.95 - steps_end) * fraction); });
+          extended_model_input(ok_steps, analyses, layout, config, names, settings.area), names, {},
+          {}, [&](double fraction) { progress.update(steps_end + (0.95 - steps_end) * fraction); });
       spdlog::debug(
           "fitted the extended model in {:.2f} s",
           std::chrono::duration<double>(std::chrono::steady_clock::now() - effects_start).count());

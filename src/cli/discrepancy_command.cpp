@@ -128,6 +128,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
       {"min_delta_bic", args.settings.min_delta_bic},
       {"min_ceiling_steps", args.settings.min_ceiling_steps},
       {"min_ceiling_steps_pct", args.settings.min_ceiling_steps_pct},
+      {"min_neighbour_share", args.settings.min_neighbour_share},
       {"second_effect", args.settings.second_effect},
       {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
   j["data"] = {{"steps", r.steps},
@@ -165,7 +166,11 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
                       {"runs_test_z", d.runs_z},
                       {"effective_sample_fraction", d.effective_sample_fraction},
                       {"correlation_with_state", corr},
-                      {"ceiling_plateau_steps", r.ceiling_plateau_steps}};
+                      {"ceiling_plateau_steps", r.ceiling_plateau_steps},
+                      {"neighbour_share",
+                       {{"floor", r.neighbour_share.floor},
+                        {"cell_frames", r.neighbour_share.cell_frames},
+                        {"neighbours_read_at_least_bits", kNeighbourShareBits}}}};
   nlohmann::json zeros = nlohmann::json::array();
   for (const ZeroLevelDrift& z : r.zero_levels) {
     zeros.push_back({{"foot", foot_name(z.foot)},
@@ -239,6 +244,14 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
         "region at the session's top reading (sensor_saturation needs {} and {:.0f} %)\n",
         result.ceiling_plateau_steps, result.steps, args.settings.min_ceiling_steps,
         args.settings.min_ceiling_steps_pct);
+  }
+  if (result.neighbour_share.cell_frames > 0) {
+    fmt::print(
+        "crosstalk in the readings: 1 % of {} cells next to loaded ones (their neighbours read "
+        "{:g} bits or more) read under {:.3f} of their neighbours' readings (crosstalk needs "
+        "{:g})\n",
+        result.neighbour_share.cell_frames, kNeighbourShareBits, result.neighbour_share.floor,
+        args.settings.min_neighbour_share);
   }
   std::string named;
   for (const EffectEstimate& e : result.named_effects) {

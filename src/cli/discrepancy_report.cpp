@@ -275,6 +275,13 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
         "do).</p>",
         r.ceiling_plateau_steps, r.steps);
   }
+  if (r.neighbour_share.cell_frames > 0) {
+    html += fmt::format(
+        "<p>Crosstalk in the readings: 1 % of the cells next to loaded ones read under {:.3f} of "
+        "their neighbours' readings (a cell wholly outside a contact reads nothing without "
+        "crosstalk; crosstalk is named only where this share shows).</p>",
+        r.neighbour_share.floor);
+  }
   html += "<h2>Named effects</h2><ul>" + named + "</ul>";
   html += fmt::format(
       "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.</p>",

@@ -137,7 +137,7 @@ TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
     const char* args;
     const char* says;
   } bad[] = {
-      {"--effect crosstalk", "--effect: unknown simulation effect 'crosstalk'"},
+      {"--effect ghosting", "--effect: unknown simulation effect 'ghosting'"},
       {"--effect hysteresis --effect sensor_creep --effect hysteresis",
        "--effect: 'hysteresis' is given twice"},
       {R"(--effect hysteresis --effect-params '{"strength":')", "--effect-params: not valid JSON"},
