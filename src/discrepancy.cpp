@@ -1049,45 +1049,6 @@ DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const In
   return input;
 }
 
-DiscrepancyInput extended_model_input(std::span<const Step> steps,
-                                      std::vector<StepAnalysis> analyses,
-                                      const InsoleLayout& layout, const Config& config,
-                                      std::span<const std::string> effects, AreaSource area) {
-  DiscrepancyInput input = make_discrepancy_input(steps, std::move(analyses), layout, config);
-  if (names_crosstalk(effects)) measure_crosstalk_views(input, steps, layout, config, area);
-  return input;
-}
-
-void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> steps,
-                             const InsoleLayout& layout, const Config& config, AreaSource area) {
-  if (steps.size() != input.steps.size()) {
-    throw std::invalid_argument("measure_crosstalk_views: one step per analysed step expected");
-  }
-  std::vector<CrosstalkCorrection> corrections;
-  for (double k : discrepancy_detail::kCrosstalkGrid) corrections.emplace_back(layout, k);
-  const CellMeanFootprint cell_mean =
-      area == AreaSource::FootprintMean ? CellMeanFootprint::Fit : CellMeanFootprint::Skip;
-  parallel_for(steps.size(), [&](std::size_t i) {
-    ContactEllipseCache cache;
-    std::vector<CrosstalkView>& views = input.steps[i].crosstalk;
-    views.assign(corrections.size(), {});
-    for (std::size_t g = 0; g < corrections.size(); ++g) {
-      const StanceSeries stance =
-          measure_stance(steps[i], layout, config.calibration, &cache, cell_mean, &corrections[g]);
-      CrosstalkView& v = views[g];
-      v.coupling = corrections[g].coupling();
-      for (Region region : kRegions) {
-        const auto r = index_of(region);
-        std::tie(v.area_mm2[r], v.source[r]) = fit_areas_mm2(stance, region, area);
-        v.force_n[r].resize(stance.size());
-        for (std::size_t f = 0; f < stance.size(); ++f) {
-          v.force_n[r][f] = stance.at(f, region).force_n;
-        }
-      }
-    }
-  });
-}
-
 namespace {
 
 // What a cell reads of its edge neighbours' readings where they read kNeighbourShareBits or
@@ -1121,6 +1082,46 @@ NeighbourShare neighbour_share(std::span<const Step> steps, const InsoleLayout& 
 }
 
 }  // namespace
+
+DiscrepancyInput extended_model_input(std::span<const Step> steps,
+                                      std::vector<StepAnalysis> analyses,
+                                      const InsoleLayout& layout, const Config& config,
+                                      std::span<const std::string> effects, AreaSource area) {
+  DiscrepancyInput input = make_discrepancy_input(steps, std::move(analyses), layout, config);
+  if (names_crosstalk(effects)) measure_crosstalk_views(input, steps, layout, config, area);
+  return input;
+}
+
+void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> steps,
+                             const InsoleLayout& layout, const Config& config, AreaSource area) {
+  if (steps.size() != input.steps.size()) {
+    throw std::invalid_argument("measure_crosstalk_views: one step per analysed step expected");
+  }
+  input.neighbour_share = neighbour_share(steps, layout);
+  std::vector<CrosstalkCorrection> corrections;
+  for (double k : discrepancy_detail::kCrosstalkGrid) corrections.emplace_back(layout, k);
+  const CellMeanFootprint cell_mean =
+      area == AreaSource::FootprintMean ? CellMeanFootprint::Fit : CellMeanFootprint::Skip;
+  parallel_for(steps.size(), [&](std::size_t i) {
+    ContactEllipseCache cache;
+    std::vector<CrosstalkView>& views = input.steps[i].crosstalk;
+    views.assign(corrections.size(), {});
+    for (std::size_t g = 0; g < corrections.size(); ++g) {
+      const StanceSeries stance =
+          measure_stance(steps[i], layout, config.calibration, &cache, cell_mean, &corrections[g]);
+      CrosstalkView& v = views[g];
+      v.coupling = corrections[g].coupling();
+      for (Region region : kRegions) {
+        const auto r = index_of(region);
+        std::tie(v.area_mm2[r], v.source[r]) = fit_areas_mm2(stance, region, area);
+        v.force_n[r].resize(stance.size());
+        for (std::size_t f = 0; f < stance.size(); ++f) {
+          v.force_n[r][f] = stance.at(f, region).force_n;
+        }
+      }
+    }
+  });
+}
 
 DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
                                         std::vector<StepAnalysis> analyses,
@@ -1181,7 +1182,6 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
       }
     }
   }
-  input.neighbour_share = neighbour_share(steps, layout);
   return input;
 }
 

@@ -311,8 +311,11 @@ TEST(Discrepancy, TheNeighbourShareIsWhatCellsBesideALoadReadOfTheirNeighbours) 
       step.sensor_zero_bits.assign(own.size(), 0.0);
       step.stance.assign(3, Frame{0.0, Foot::Left, bits});
     }
-    return make_discrepancy_input(steps, std::vector<StepAnalysis>(2), layout, shipped_config())
-        .neighbour_share;
+    DiscrepancyInput input =
+        make_discrepancy_input(steps, std::vector<StepAnalysis>(2), layout, shipped_config());
+    EXPECT_EQ(input.neighbour_share.cell_frames, 0) << "measured only with the crosstalk views";
+    measure_crosstalk_views(input, steps, layout, shipped_config(), AreaSource::Footprint);
+    return input.neighbour_share;
   };
   const NeighbourShare plain = share_of(0.0);
   const NeighbourShare mixed = share_of(0.05);
@@ -322,13 +325,14 @@ TEST(Discrepancy, TheNeighbourShareIsWhatCellsBesideALoadReadOfTheirNeighbours) 
   EXPECT_EQ(plain.floor, 0.0);
   EXPECT_GT(mixed.floor, 0.025);
   EXPECT_LT(mixed.floor, 0.05);
-  // No cells, no share.
-  const NeighbourShare none =
-      make_discrepancy_input(std::vector<Step>(2), std::vector<StepAnalysis>(2), layout,
-                             shipped_config())
-          .neighbour_share;
-  EXPECT_EQ(none.cell_frames, 0);
-  EXPECT_TRUE(std::isnan(none.floor));
+  // No frames, no share.
+  std::vector<Step> empty(2);
+  for (Step& step : empty) step.sensor_zero_bits.assign(own.size(), 0.0);
+  DiscrepancyInput none =
+      make_discrepancy_input(empty, std::vector<StepAnalysis>(2), layout, shipped_config());
+  measure_crosstalk_views(none, empty, layout, shipped_config(), AreaSource::Footprint);
+  EXPECT_EQ(none.neighbour_share.cell_frames, 0);
+  EXPECT_TRUE(std::isnan(none.neighbour_share.floor));
 }
 
 // The baseline's damping shape is the fits' own: on a material-rate session the material rate's

@@ -154,7 +154,7 @@ struct DiscrepancyInput {
   /// Cells of each region (both feet share the layout): a drift of every cell's unloaded
   /// reading moves a region's zero by that many times its own. 0 where unknown.
   std::array<int, kRegionCount> region_cells{};
-  NeighbourShare neighbour_share;  ///< of every step's readings
+  NeighbourShare neighbour_share;  ///< of every step's readings (measure_crosstalk_views)
 };
 
 /// The analysis settings of the workflow's baseline: the raw series (Smoothing::None), because
@@ -176,9 +176,9 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
 
 /// Measures each step of `input` (made from `steps`, in the same order) again at each coupling
 /// the crosstalk candidate interpolates between, with the area source the steps were analysed
-/// with, on all cores. Only that candidate needs it: prepare_discrepancy_input calls it, and a
-/// caller of make_discrepancy_input whose effects name crosstalk does. Throws
-/// std::invalid_argument if the counts differ.
+/// with, on all cores; and the readings' NeighbourShare, which the candidate is named by. Only that
+/// candidate needs it: prepare_discrepancy_input calls it, and a caller of make_discrepancy_input
+/// whose effects name crosstalk does. Throws std::invalid_argument if the counts differ.
 void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> steps,
                              const InsoleLayout& layout, const Config& config, AreaSource area);
 
