@@ -643,7 +643,8 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
 // ---- preparation ------------------------------------------------------------------------------
 
 // The unit's area and what the correction took off its force at each coupling the steps were
-// measured again at (Unit::crosstalk_area_mm2, crosstalk_removed_n). A frame whose footprint the
+// measured again at (Unit::crosstalk_area_mm2, crosstalk_removed_n), and what its cells read of
+// other regions' cells there (crosstalk_spill_in_n). A frame whose footprint the
 // corrected readings leave undetermined (the fits over the cells with and without the threshold
 // disagree) takes the unit's own area times the corrected over the own area of the nearest frame
 // that has both: left at 0, the model would have no force there. None where a coupling's area
@@ -653,18 +654,21 @@ void crosstalk_series(const DiscrepancyStep& ds, const RegionAnalysis& ra,
   if (ds.crosstalk.size() != discrepancy_detail::kCrosstalkGrid.size()) return;
   const auto r = index_of(u.region);
   const std::size_t n = frames.size();
-  std::vector<std::vector<double>> areas(ds.crosstalk.size()), removed(ds.crosstalk.size());
+  std::vector<std::vector<double>> areas(ds.crosstalk.size()), removed(ds.crosstalk.size()),
+      spill(ds.crosstalk.size());
   std::vector<double> ratio(n);
   for (std::size_t g = 0; g < ds.crosstalk.size(); ++g) {
     const CrosstalkView& v = ds.crosstalk[g];
     if (v.source[r] != ra.area || v.area_mm2[r].size() != ra.series.t_s.size() ||
-        v.force_n[r].size() != ra.series.t_s.size()) {
+        v.force_n[r].size() != ra.series.t_s.size() ||
+        v.spill_in_n[r].size() != ra.series.t_s.size()) {
       return;
     }
     std::vector<double>& a = areas[g];
     for (std::size_t k = 0; k < n; ++k) {
       a.push_back(v.area_mm2[r][frames[k]]);
       removed[g].push_back(u.y[k] - v.force_n[r][frames[k]]);
+      spill[g].push_back(v.spill_in_n[r][frames[k]]);
     }
     std::fill(ratio.begin(), ratio.end(), std::numeric_limits<double>::quiet_NaN());
     for (std::size_t k = 0; k < n; ++k) {
@@ -683,6 +687,7 @@ void crosstalk_series(const DiscrepancyStep& ds, const RegionAnalysis& ra,
   }
   u.crosstalk_area_mm2 = std::move(areas);
   u.crosstalk_removed_n = std::move(removed);
+  u.crosstalk_spill_in_n = std::move(spill);
 }
 
 struct Prepared {
@@ -1115,8 +1120,10 @@ void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> step
         const auto r = index_of(region);
         std::tie(v.area_mm2[r], v.source[r]) = fit_areas_mm2(stance, region, area);
         v.force_n[r].resize(stance.size());
+        v.spill_in_n[r].resize(stance.size());
         for (std::size_t f = 0; f < stance.size(); ++f) {
           v.force_n[r][f] = stance.at(f, region).force_n;
+          v.spill_in_n[r][f] = stance.at(f, region).spill_in_n;
         }
       }
     }

@@ -291,13 +291,19 @@ class ThermalDriftEffect final : public Applied {
 // model through the area as well as the force: the cells around a contact read their neighbours'
 // share, and the footprint fitted to the readings widens, most where the contact is small. So
 // the steps were measured again with the readings corrected at couplings of kCrosstalkGrid
-// (CrosstalkCorrection, measure_crosstalk_views), and at k the unit's area and what the
-// correction took off its force are interpolated between them. The model is driven by the
-// corrected area, and predicts the measured force as its force plus what was taken off.
+// (CrosstalkCorrection, measure_crosstalk_views), and at k the unit's area, its corrected force
+// and what its cells read of other regions' cells (the spill) are interpolated between them. The
+// model is driven by the corrected area and predicts the corrected force. What the region's cells
+// read of each other grows with that load, so the measured force is the model's times the gain
+// (measured - spill) / corrected, plus the spill, another region's load: the residual is on the
+// measured force's scale. (Predicting the measured force as the model's plus all the correction
+// took off left it on the corrected force's: a correction that only shrank every force by c
+// lowered the squared error by c^2 and looked like a gain.) A frame whose corrected force is not
+// positive keeps a gain of 1.
 class CrosstalkEffect final : public Applied {
  public:
   CrosstalkEffect(const std::vector<Unit>& units, double coupling)
-      : k_(coupling), shapes_(units.size()), removed_(units.size()) {
+      : k_(coupling), shapes_(units.size()), gain_(units.size()), spill_(units.size()) {
     if (k_ == 0.0) return;
     const auto hi = std::upper_bound(kCrosstalkGrid.begin(), kCrosstalkGrid.end(), k_);
     const std::size_t g1 = std::clamp<std::size_t>(
@@ -307,33 +313,39 @@ class CrosstalkEffect final : public Applied {
     const double k0 = from_zero ? 0.0 : kCrosstalkGrid[g1 - 1];
     const double k1 = from_zero ? kCrosstalkGrid.front() : kCrosstalkGrid[g1];
     const double w = std::clamp((k_ - k0) / (k1 - k0), 0.0, 1.0);
+    const auto between = [&](const std::vector<std::vector<double>>& at, std::size_t i,
+                             double at_zero) {
+      const double lo = from_zero ? at_zero : at[g1 - 1][i];
+      return (1.0 - w) * lo + w * at[from_zero ? 0 : g1][i];
+    };
     std::vector<double> area;
     for (std::size_t ui = 0; ui < units.size(); ++ui) {
       const Unit& u = units[ui];
-      if (u.crosstalk_area_mm2.size() != kCrosstalkGrid.size()) continue;
+      if (!affects(u)) continue;
       const std::size_t n = u.y.size();
-      const std::vector<double>& a1 = u.crosstalk_area_mm2[from_zero ? 0 : g1];
-      const std::vector<double>& r1 = u.crosstalk_removed_n[from_zero ? 0 : g1];
       area.resize(n);
-      removed_[ui].resize(n);
+      gain_[ui].resize(n);
+      spill_[ui].resize(n);
       for (std::size_t i = 0; i < n; ++i) {
-        const double a0 = from_zero ? u.area[i] : u.crosstalk_area_mm2[g1 - 1][i];
-        const double r0 = from_zero ? 0.0 : u.crosstalk_removed_n[g1 - 1][i];
-        area[i] = (1.0 - w) * a0 + w * a1[i];
-        removed_[ui][i] = (1.0 - w) * r0 + w * r1[i];
+        area[i] = between(u.crosstalk_area_mm2, i, u.area[i]);
+        const double corrected = u.y[i] - between(u.crosstalk_removed_n, i, 0.0);
+        spill_[ui][i] = between(u.crosstalk_spill_in_n, i, 0.0);
+        gain_[ui][i] = corrected > 0.0 ? std::max(0.0, u.y[i] - spill_[ui][i]) / corrected : 1.0;
       }
       shapes_[ui] = shapes_of(u.t, area, u.shape_model);
     }
   }
   bool affects(const Unit& u) const override {
-    return k_ != 0.0 && u.crosstalk_area_mm2.size() == kCrosstalkGrid.size();
+    return k_ != 0.0 && u.crosstalk_area_mm2.size() == kCrosstalkGrid.size() &&
+           u.crosstalk_removed_n.size() == kCrosstalkGrid.size() &&
+           u.crosstalk_spill_in_n.size() == kCrosstalkGrid.size();
   }
-  bool additive() const override { return true; }
   void apply(std::size_t ui, const Unit&, std::span<const double> F, std::span<double> out,
              std::size_t /*choice*/) const override {
-    const std::vector<double>& removed = removed_[ui];
+    const std::vector<double>& gain = gain_[ui];
+    const std::vector<double>& spill = spill_[ui];
     for (std::size_t i = 0; i < F.size(); ++i) {
-      out[i] = F[i] + (i < removed.size() ? removed[i] : 0.0);
+      out[i] = i < gain.size() ? F[i] * gain[i] + spill[i] : F[i];
     }
   }
   const Shapes* shapes(std::size_t ui) const override {
@@ -343,7 +355,7 @@ class CrosstalkEffect final : public Applied {
  private:
   double k_;
   std::vector<Shapes> shapes_;
-  std::vector<std::vector<double>> removed_;
+  std::vector<std::vector<double>> gain_, spill_;
 };
 
 std::vector<double> linspace(double lo, double hi, int n) {
@@ -406,7 +418,7 @@ std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_
          return std::make_unique<ThermalDriftEffect>(units, th[0], newtons_per_bit);
        }});
   specs.push_back({std::string(kCrosstalk),
-                   1,
+                   2,
                    {{"coupling", 0.0, kCrosstalkGrid.back(),
                      std::vector<double>(kCrosstalkGrid.begin(), kCrosstalkGrid.end())}},
                    [](const std::vector<Unit>& units, std::span<const double> th) {

@@ -54,9 +54,10 @@ struct Unit {
   // effect, since a per-step fit bends n to absorb what the model lacks.
   std::vector<std::vector<double>> En;
   ShapeModel shape_model;
-  // The unit's area and what the correction took off its force (N), per coupling of
-  // kCrosstalkGrid and frame; empty where the steps were not measured again.
-  std::vector<std::vector<double>> crosstalk_area_mm2, crosstalk_removed_n;
+  // The unit's area, what the correction took off its force and what its cells read of other
+  // regions' cells (N; CrosstalkView::spill_in_n), per coupling of kCrosstalkGrid and frame;
+  // empty where the steps were not measured again.
+  std::vector<std::vector<double>> crosstalk_area_mm2, crosstalk_removed_n, crosstalk_spill_in_n;
   double K0 = 0.0, D0 = 0.0;
   double base_sse = 0.0;
   std::vector<double> base_pred;
@@ -121,7 +122,9 @@ struct ParamSpec {
 
 struct CandidateSpec {
   std::string name;
-  int stage = 0;  // 0 tissue, 1 sensor: the order in which effects chain
+  // The order in which effects chain, as the simulator applies them: 0 tissue, 1 sensor (each
+  // cell), 2 frame (the cells together, after the sensor stage: crosstalk).
+  int stage = 0;
   std::vector<ParamSpec> params;
   std::function<std::unique_ptr<Applied>(const std::vector<Unit>&, std::span<const double>)> make;
   bool reads_in_swing = false;  // solves each chain's unknown start lag (Pooled::unknown_starts)

@@ -95,6 +95,24 @@ std::array<RegionSample, kRegionCount> measure_frame(
 
 namespace {
 
+/// RegionSample::spill_in_n of every region: `measured` the zeroed readings as read, `corrected`
+/// the same with the crosstalk undone.
+void spill_in(std::span<const double> measured, std::span<const double> corrected,
+              double threshold_bits, const InsoleLayout& layout, double newtons_per_bit,
+              double coupling, std::array<RegionSample, kRegionCount>& samples) {
+  for (Region region : kRegions) {
+    double bits = 0.0;
+    for (std::size_t i : layout.region_sensors(region)) {
+      if (measured[i] < threshold_bits) continue;
+      for (const Neighbour& nb : layout.neighbours(i)) {
+        if (layout.sensor(nb.sensor).region != region)
+          bits += nb.shared_edge * corrected[nb.sensor];
+      }
+    }
+    samples[index_of(region)].spill_in_n = coupling * bits * newtons_per_bit;
+  }
+}
+
 /// Fits every frame's footprint of each region again, from its zeroed readings before the
 /// threshold: at the aspect the stance's free fits share (the region's box where none has one),
 /// and then over the cells under the threshold too; and, where asked, the footprint of averaging
@@ -169,6 +187,8 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
   series.total_force_n.reserve(step.stance.size());
   FrameScratch scratch;
   std::vector<std::vector<double>> readings(step.stance.size());
+  std::vector<double> measured;
+  const double newtons_per_bit = calibration.newtons_per_bit(layout.geometry().area_mm2());
   for (std::size_t f = 0; f < step.stance.size(); ++f) {
     const Frame& frame = step.stance[f];
     if (frame.bits.size() != sensors) {
@@ -181,9 +201,16 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
     for (std::size_t i = 0; i < sensors; ++i) {
       r[i] = static_cast<double>(frame.bits[i]) - step.sensor_zero_bits[i];
     }
-    if (crosstalk != nullptr) crosstalk->undo(r);
-    const auto samples = measure_readings(r, step.adaptive_threshold_bits, layout, calibration,
-                                          f == 0, cache, scratch);
+    if (crosstalk != nullptr) {
+      measured = r;
+      crosstalk->undo(r);
+    }
+    auto samples = measure_readings(r, step.adaptive_threshold_bits, layout, calibration, f == 0,
+                                    cache, scratch);
+    if (crosstalk != nullptr) {
+      spill_in(measured, r, step.adaptive_threshold_bits, layout, newtons_per_bit,
+               crosstalk->coupling(), samples);
+    }
     double total = 0.0;
     for (const RegionSample& sample : samples) total += sample.force_n;
     series.t_s.push_back(frame.t_s);

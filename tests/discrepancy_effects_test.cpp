@@ -53,6 +53,9 @@ Unit stance(Region region, int step, double t0_s) {
     }
     u.crosstalk_area_mm2.push_back(area);
     u.crosstalk_removed_n.push_back(removed);
+    std::vector<double> spill;
+    for (double y : u.y) spill.push_back(0.5 * k * y);
+    u.crosstalk_spill_in_n.push_back(spill);
   }
   return u;
 }
@@ -195,7 +198,7 @@ TEST(DiscrepancyEffects, ThoseThatSayTheyOnlyAddToTheForceDo) {
       EXPECT_TRUE(depends_on_force) << m.name;
     }
   }
-  EXPECT_EQ(additive, (std::vector<std::string>{"impact_transient", "crosstalk"}));
+  EXPECT_EQ(additive, std::vector<std::string>{"impact_transient"});
   // The drift reads in the zero windows only; the zeroing takes it off the stance.
   EXPECT_EQ(force_untouched, std::vector<std::string>{"thermal_drift"});
 }
@@ -427,9 +430,10 @@ TEST(DiscrepancyEffects, ThermalDriftMovesEachZeroByItsCellsTimesTheDrift) {
             0.0);
 }
 
-// The units of two_steps were measured again with areas (1 - 2 k) and takings 3 k y, linear in
-// the coupling k, so interpolation between the couplings measured (and the unit's own area at
-// k = 0 below the first) gives them exactly at any k.
+// The units of two_steps were measured again with areas (1 - 2 k), takings 3 k y and spills from
+// other regions 0.5 k y, linear in the coupling k, so interpolation between the couplings
+// measured (and the unit's own area at k = 0 below the first) gives them exactly at any k, and
+// so the force's gain and spill.
 TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling) {
   const std::vector<Unit> units = two_steps();
   for (const double k : {0.005, 0.0425, 0.2}) {
@@ -457,7 +461,12 @@ TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling)
       const std::vector<double> F = force(300.0, 1.0);
       std::vector<double> out(F.size());
       applied->apply(ui, u, F, out, 0);
-      for (std::size_t i = 0; i < F.size(); ++i) EXPECT_NEAR(out[i], F[i] + 3.0 * k * u.y[i], 1e-9);
+      // The corrected force is (1 - 3 k) y and the spill from other regions 0.5 k y, so the
+      // region's own mixing is a gain of (1 - 0.5 k) / (1 - 3 k) on the model, the spill added.
+      for (std::size_t i = 0; i < F.size(); ++i) {
+        const double expected = F[i] * (1.0 - 0.5 * k) / (1.0 - 3.0 * k) + 0.5 * k * u.y[i];
+        EXPECT_NEAR(out[i], expected, 1e-9 * (1.0 + std::abs(expected)));
+      }
     }
   }
   // No coupling, no correction; and a unit that was not measured again is left alone.
@@ -465,6 +474,7 @@ TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling)
   std::vector<Unit> unmeasured = two_steps();
   unmeasured[0].crosstalk_area_mm2.clear();
   unmeasured[0].crosstalk_removed_n.clear();
+  unmeasured[0].crosstalk_spill_in_n.clear();
   const auto applied = candidate("crosstalk", unmeasured, {0.05}, 112.5, 0.2824);
   EXPECT_FALSE(applied->affects(unmeasured[0]));
   EXPECT_EQ(applied->shapes(0), nullptr);

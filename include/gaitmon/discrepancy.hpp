@@ -106,7 +106,8 @@ void check_discrepancy_effect(std::string_view name);
 /// (fit_areas_mm2) and the force; and per region which area that is.
 struct CrosstalkView {
   double coupling = 0.0;
-  std::array<std::vector<double>, kRegionCount> area_mm2, force_n;
+  /// Per region and stance frame: the corrected area and force, and RegionSample::spill_in_n.
+  std::array<std::vector<double>, kRegionCount> area_mm2, force_n, spill_in_n;
   std::array<AreaSource, kRegionCount> source{};
 };
 

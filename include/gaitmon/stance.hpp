@@ -34,6 +34,11 @@ struct RegionSample {
   /// The footprint of averaging cells (footprint_area_cell_mean_mm2) at the stance's shared
   /// aspect, where measure_stance was asked for it and the cells determine it.
   std::optional<double> footprint_cell_mean_area_mm2;
+  /// Measured with a crosstalk correction: of the force the uncorrected readings give the region
+  /// (its cells at or above the threshold as read), what those cells read of other regions' cells
+  /// (N). The rest grows with the region's own load: its cells' own, and their share of each
+  /// other's. 0 without a correction.
+  double spill_in_n = 0.0;
 };
 
 /// Whether measure_stance also fits the footprint of averaging cells: a nonlinear fit per region
