@@ -1230,7 +1230,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.zero_levels = zero_level_drift(input);
   out.ceiling_plateau_steps = ceiling_plateau_steps(input);
   out.neighbour_share = input.neighbour_share;
-  const bool crosstalk_seen = input.neighbour_share.cell_frames < kMinNeighbourShareCellFrames ||
+  // Too few cells beside a load to judge the share, and the readings do not show crosstalk.
+  const bool crosstalk_seen = input.neighbour_share.cell_frames >= kMinNeighbourShareCellFrames &&
                               input.neighbour_share.floor >= settings.min_neighbour_share;
   const bool ceiling_seen =
       out.ceiling_plateau_steps < 0 ||
@@ -1283,10 +1284,16 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
       reasons.push_back("the readings show no ceiling");
     }
     if (r.name == kCrosstalk && !crosstalk_seen) {
-      reasons.push_back(fmt::format(
-          "the readings show no crosstalk (1 % of the cells next to loaded ones read under "
-          "{:.2g} of their neighbours' readings, where {:g} is needed)",
-          input.neighbour_share.floor, settings.min_neighbour_share));
+      const NeighbourShare& share = input.neighbour_share;
+      reasons.push_back(
+          share.cell_frames < kMinNeighbourShareCellFrames
+              ? fmt::format("too few cells next to loaded ones ({} cell-frames, {} needed) for "
+                            "the readings to show crosstalk",
+                            share.cell_frames, kMinNeighbourShareCellFrames)
+              : fmt::format("the readings show no crosstalk (1 % of the cells next to loaded ones "
+                            "read under {:.2g} of their neighbours' readings, where {:g} is "
+                            "needed)",
+                            share.floor, settings.min_neighbour_share));
     }
     return fmt::format("{}", fmt::join(reasons, "; "));
   };

@@ -140,6 +140,8 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   // Each effect session with the effect at the simulator's own parameters: what the effect can
   // explain at all, against which the fitted candidate is judged.
   std::string at_truth;
+  // The first named effect's parameters in each effect session, against the simulator's.
+  std::string fitted;
   int beyond_any_extension = 0;
   int beyond_any_extension_in_n = 0;
   int at_issue_target = 0;
@@ -189,6 +191,16 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
           r.zero_gap_shrink_pct, r.candidates[best].name, r.candidates[best].shrink_pct,
           r.candidates[best].zero_shrink_pct, drifting.empty() ? "-" : drifting);
       if (effect == "none") continue;
+      std::string values;
+      if (!r.named_effects.empty()) {
+        for (const ParamEstimate& p : r.named_effects.front().params) {
+          values += fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se);
+        }
+      }
+      std::string truths;
+      for (const auto& [name, value] : c.params) truths += fmt::format(" {}={:.4g}", name, value);
+      fitted += fmt::format("  {:<18} {:<6} seed {:>3}: {}{} (truth{})\n", effect,
+                            insole_size_name(c.size), c.seed, first, values, truths);
       // The drift's candidate is linear: the simulator's warm-up as its mean rate over the
       // session, bits per minute.
       const EffectParams truth_params =
@@ -267,6 +279,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   print("Confusion matrix (named effect; 3 sessions per row)", named_matrix);
   print("Best candidate by held-out likelihood (force and zero), named or not", ranked_matrix);
   fmt::print("Sessions:\n{}", shrinks);
+  fmt::print("Fitted parameters of the first effect named:\n{}", fitted);
   // The naming threshold (5 %) is 2.6 times the largest false improvement seen on 15 sessions
   // without an effect (these three and twelve others, README: impact_transient 1.95 %;
   // sensor_saturation gained up to 7.6 % in size 45-46, where no cells share the top reading,
@@ -549,6 +562,31 @@ TEST(DiscrepancySessions, RelaxationLowersThePressureAndSoThePrecisionOfTheFootp
     EXPECT_GT(with[index_of(region)].rms, 1.3 * without[index_of(region)].rms)
         << region_name(region);
   }
+}
+
+// Crosstalk is named only where the readings show it, and too few cells beside a load cannot:
+// the matrix's crosstalk session of size 41-42, with its count of such cell-frames taken under
+// the 1000 the share needs, names no crosstalk and says why.
+TEST(DiscrepancySessions, CrosstalkIsNotNamedWhereTooFewCellsCanShowIt) {
+  if (kSanitized) {
+    GTEST_SKIP() << "a simulated session with per-step Ceres fits takes too long under the "
+                    "sanitizers; the candidate's code runs under them in discrepancy_effects_test";
+  }
+  const auto dir = test::scratch_dir("discrepancy-crosstalk-cells");
+  DiscrepancyInput input =
+      session_input({"crosstalk", {{"coupling", 0.06}}, InsoleSize::S41_42, 123}, dir);
+  const DiscrepancyResult shown = find_discrepancy(input);
+  ASSERT_FALSE(shown.named_effects.empty());
+  EXPECT_EQ(shown.named_effects.front().name, "crosstalk");
+  ASSERT_GE(input.neighbour_share.cell_frames, kMinNeighbourShareCellFrames);
+  input.neighbour_share.cell_frames = kMinNeighbourShareCellFrames - 1;
+  const DiscrepancyResult unjudged = find_discrepancy(input);
+  for (const EffectEstimate& e : unjudged.named_effects) EXPECT_NE(e.name, "crosstalk");
+  EXPECT_EQ(unjudged.most_likely_candidate, "crosstalk");
+  EXPECT_NE(unjudged.not_named_reason.find("too few cells next to loaded ones (999 cell-frames, "
+                                           "1000 needed)"),
+            std::string::npos)
+      << unjudged.not_named_reason;
 }
 
 // `gaitmon analyze --effects crosstalk` measures the steps again at the candidate's couplings

@@ -134,7 +134,7 @@ inline constexpr double kSaturationBandBits = 3.0;
 /// Cells count in NeighbourShare where their edge neighbours read this much together (zeroed):
 /// a crosstalk of 1 % then gives them 0.6 bits, twice the noise of one reading's rounding.
 inline constexpr double kNeighbourShareBits = 60.0;
-/// Fewer such cell-frames, and the share is not judged.
+/// Fewer such cell-frames, and the share is not judged: crosstalk is then not named.
 inline constexpr long kMinNeighbourShareCellFrames = 1000;
 
 /// What a cell reads of its edge neighbours' readings (InsoleLayout::neighbours, shares of the
