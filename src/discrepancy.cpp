@@ -674,15 +674,11 @@ void crosstalk_series(const DiscrepancyStep& ds, const RegionAnalysis& ra,
     for (std::size_t k = 0; k < n; ++k) {
       if (a[k] > 0.0 && u.area[k] > 0.0) ratio[k] = a[k] / u.area[k];
     }
+    discrepancy_detail::fill_from_nearest(ratio, std::numeric_limits<double>::quiet_NaN());
     for (std::size_t k = 0; k < n; ++k) {
       if (!(u.area[k] > 0.0) || a[k] > 0.0) continue;
-      std::optional<double> nearest;
-      for (std::size_t d = 1; d < n && !nearest; ++d) {
-        if (k >= d && std::isfinite(ratio[k - d])) nearest = ratio[k - d];
-        if (k + d < n && std::isfinite(ratio[k + d])) nearest = ratio[k + d];
-      }
-      if (!nearest) return;
-      a[k] = *nearest * u.area[k];
+      if (std::isnan(ratio[k])) return;
+      a[k] = ratio[k] * u.area[k];
     }
   }
   u.crosstalk_area_mm2 = std::move(areas);

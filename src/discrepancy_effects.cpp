@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <utility>
 
@@ -298,8 +299,12 @@ class ThermalDriftEffect final : public Applied {
 // (measured - spill) / corrected, plus the spill, another region's load: the residual is on the
 // measured force's scale. (Predicting the measured force as the model's plus all the correction
 // took off left it on the corrected force's: a correction that only shrank every force by c
-// lowered the squared error by c^2 and looked like a gain.) A frame whose corrected force is not
-// positive keeps a gain of 1.
+// lowered the squared error by c^2 and looked like a gain.) Where the cells at or above the
+// threshold differ between the readings and their correction, the gain can come out beyond what
+// mixing gives (1 + 4 k) or the corrected force at 0; the gain is then held to [0, 1 + 4 k], a
+// frame with nothing corrected left takes the nearest frame's (as crosstalk_series does for the
+// area), and the rest of the measured force is added, so that the prediction is the measured
+// force wherever the model is the corrected force.
 class CrosstalkEffect final : public Applied {
  public:
   CrosstalkEffect(const std::vector<Unit>& units, double coupling)
@@ -313,12 +318,15 @@ class CrosstalkEffect final : public Applied {
     const double k0 = from_zero ? 0.0 : kCrosstalkGrid[g1 - 1];
     const double k1 = from_zero ? kCrosstalkGrid.front() : kCrosstalkGrid[g1];
     const double w = std::clamp((k_ - k0) / (k1 - k0), 0.0, 1.0);
+    // A cell's edge shares add up to 4 at most (InsoleLayout::neighbours), so mixing raises a
+    // region's own load by 4 k at most.
+    const double max_gain = 1.0 + 4.0 * k_;
     const auto between = [&](const std::vector<std::vector<double>>& at, std::size_t i,
                              double at_zero) {
       const double lo = from_zero ? at_zero : at[g1 - 1][i];
       return (1.0 - w) * lo + w * at[from_zero ? 0 : g1][i];
     };
-    std::vector<double> area;
+    std::vector<double> area, corrected;
     for (std::size_t ui = 0; ui < units.size(); ++ui) {
       const Unit& u = units[ui];
       if (!affects(u)) continue;
@@ -326,12 +334,17 @@ class CrosstalkEffect final : public Applied {
       area.resize(n);
       gain_[ui].resize(n);
       spill_[ui].resize(n);
+      corrected.resize(n);
+      std::vector<double>& gain = gain_[ui];
       for (std::size_t i = 0; i < n; ++i) {
         area[i] = between(u.crosstalk_area_mm2, i, u.area[i]);
-        const double corrected = u.y[i] - between(u.crosstalk_removed_n, i, 0.0);
-        spill_[ui][i] = between(u.crosstalk_spill_in_n, i, 0.0);
-        gain_[ui][i] = corrected > 0.0 ? std::max(0.0, u.y[i] - spill_[ui][i]) / corrected : 1.0;
+        corrected[i] = u.y[i] - between(u.crosstalk_removed_n, i, 0.0);
+        const double spill = between(u.crosstalk_spill_in_n, i, 0.0);
+        gain[i] = corrected[i] > 0.0 ? std::clamp((u.y[i] - spill) / corrected[i], 0.0, max_gain)
+                                     : std::numeric_limits<double>::quiet_NaN();
       }
+      fill_from_nearest(gain, 1.0);
+      for (std::size_t i = 0; i < n; ++i) spill_[ui][i] = u.y[i] - gain[i] * corrected[i];
       shapes_[ui] = shapes_of(u.t, area, u.shape_model);
     }
   }
@@ -365,6 +378,22 @@ std::vector<double> linspace(double lo, double hi, int n) {
 }
 
 }  // namespace
+
+void fill_from_nearest(std::vector<double>& v, double otherwise) {
+  const std::vector<double> given = v;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (!std::isnan(given[i])) continue;
+    v[i] = otherwise;
+    for (std::size_t d = 1; d < v.size(); ++d) {
+      const bool before = i >= d && !std::isnan(given[i - d]);
+      const bool after = i + d < v.size() && !std::isnan(given[i + d]);
+      if (before || after) {
+        v[i] = after ? given[i + d] : given[i - d];
+        break;
+      }
+    }
+  }
+}
 
 std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_per_bit) {
   // Coarse grids (the local refinement takes the parameters between the points): time

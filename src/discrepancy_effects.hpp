@@ -131,6 +131,11 @@ struct CandidateSpec {
   bool needs_ceiling = false;   // named only where the readings show a ceiling (ceiling_seen)
 };
 
+/// Replaces each NaN of `v` by the nearest value that is not (the later one where two are as
+/// near), or by `otherwise` where there is none: a frame without a measurement of its own takes
+/// its neighbour's.
+void fill_from_nearest(std::vector<double>& v, double otherwise);
+
 /// The candidates in the order the workflow tries them, with their parameter ranges and grids.
 std::vector<CandidateSpec> candidate_specs(double cell_area_mm2, double newtons_per_bit);
 

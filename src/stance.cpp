@@ -103,7 +103,7 @@ void spill_in(std::span<const double> measured, std::span<const double> correcte
   for (Region region : kRegions) {
     double bits = 0.0;
     for (std::size_t i : layout.region_sensors(region)) {
-      if (measured[i] < threshold_bits) continue;
+      if (measured[i] < threshold_bits || !(measured[i] > 0.0)) continue;  // as measure_readings
       for (const Neighbour& nb : layout.neighbours(i)) {
         if (layout.sensor(nb.sensor).region != region)
           bits += nb.shared_edge * corrected[nb.sensor];

@@ -49,7 +49,7 @@ Unit stance(Region region, int step, double t0_s) {
     std::vector<double> area, removed;
     for (std::size_t i = 0; i < kFrames; ++i) {
       area.push_back(u.area[i] * (1.0 - 2.0 * k));
-      removed.push_back(3.0 * k * u.y[i]);
+      removed.push_back(2.0 * k * u.y[i]);
     }
     u.crosstalk_area_mm2.push_back(area);
     u.crosstalk_removed_n.push_back(removed);
@@ -430,7 +430,7 @@ TEST(DiscrepancyEffects, ThermalDriftMovesEachZeroByItsCellsTimesTheDrift) {
             0.0);
 }
 
-// The units of two_steps were measured again with areas (1 - 2 k), takings 3 k y and spills from
+// The units of two_steps were measured again with areas (1 - 2 k), takings 2 k y and spills from
 // other regions 0.5 k y, linear in the coupling k, so interpolation between the couplings
 // measured (and the unit's own area at k = 0 below the first) gives them exactly at any k, and
 // so the force's gain and spill.
@@ -461,10 +461,11 @@ TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling)
       const std::vector<double> F = force(300.0, 1.0);
       std::vector<double> out(F.size());
       applied->apply(ui, u, F, out, 0);
-      // The corrected force is (1 - 3 k) y and the spill from other regions 0.5 k y, so the
-      // region's own mixing is a gain of (1 - 0.5 k) / (1 - 3 k) on the model, the spill added.
+      // The corrected force is (1 - 2 k) y and the spill from other regions 0.5 k y, so the
+      // region's own mixing is a gain of (1 - 0.5 k) / (1 - 2 k) on the model (under 1 + 4 k),
+      // the spill added.
       for (std::size_t i = 0; i < F.size(); ++i) {
-        const double expected = F[i] * (1.0 - 0.5 * k) / (1.0 - 3.0 * k) + 0.5 * k * u.y[i];
+        const double expected = F[i] * (1.0 - 0.5 * k) / (1.0 - 2.0 * k) + 0.5 * k * u.y[i];
         EXPECT_NEAR(out[i], expected, 1e-9 * (1.0 + std::abs(expected)));
       }
     }
@@ -523,6 +524,41 @@ TEST(DiscrepancyEffects, HysteresisCreepAndRelaxationFollowTheirClosedForms) {
     EXPECT_NEAR(relaxed[i], 200.0 * (1.0 - 0.3 * (1.0 - std::exp(-since / 0.15))), 1e-9);
   }
   EXPECT_NEAR(relaxed.back(), 140.0, 1e-6);  // a held load relaxes to (1 - strength)
+}
+
+// Where the cells counted differ between the readings and their correction, the gain taken from
+// them can exceed what mixing gives (1 + 4 k), or nothing corrected is left (the frame then takes
+// its neighbour's gain). The prediction is still the measured force wherever the model is the
+// corrected force, and the gain on the model stays within [0, 1 + 4 k].
+TEST(DiscrepancyEffects, CrosstalkPredictsTheMeasuredForceWhereTheModelIsTheCorrectedForce) {
+  std::vector<Unit> units = two_steps();
+  Unit& u = units[0];
+  const std::size_t spiking = kFrames / 3;  // corrected 0.1 y, spill 0.05 y: a gain of 9.5
+  const std::size_t empty = kFrames / 2;    // nothing left after the correction
+  for (std::size_t g = 0; g < kCrosstalkGrid.size(); ++g) {
+    u.crosstalk_removed_n[g][spiking] = 0.9 * u.y[spiking];
+    u.crosstalk_spill_in_n[g][spiking] = 0.05 * u.y[spiking];
+    u.crosstalk_removed_n[g][empty] = u.y[empty];
+  }
+  const double k = 0.05;
+  const auto applied = candidate("crosstalk", units, {k}, 112.5, 0.2824);
+  std::vector<double> corrected(kFrames), slope_probe(kFrames), at(kFrames), above(kFrames);
+  for (std::size_t i = 0; i < kFrames; ++i) {
+    corrected[i] = u.y[i] - u.crosstalk_removed_n[3][i];  // kCrosstalkGrid[3] is 0.05
+    slope_probe[i] = corrected[i] + 10.0;
+  }
+  ASSERT_EQ(kCrosstalkGrid[3], k);
+  applied->apply(0, u, corrected, at, 0);
+  applied->apply(0, u, slope_probe, above, 0);
+  for (std::size_t i = 0; i < kFrames; ++i) {
+    EXPECT_NEAR(at[i], u.y[i], 1e-9 * u.y[i] + 1e-12) << i;
+    const double gain = (above[i] - at[i]) / 10.0;
+    EXPECT_GE(gain, 0.0) << i;
+    EXPECT_LE(gain, 1.0 + 4.0 * k + 1e-12) << i;
+  }
+  EXPECT_NEAR((above[spiking] - at[spiking]) / 10.0, 1.0 + 4.0 * k, 1e-9);
+  // Nothing corrected left: the gain of the frame after, (1 - 0.5 k) / (1 - 2 k) there.
+  EXPECT_NEAR((above[empty] - at[empty]) / 10.0, (1.0 - 0.5 * k) / (1.0 - 2.0 * k), 1e-9);
 }
 
 // The ceiling's candidate against the capped raster it stands for. A paraboloid pressure

@@ -199,6 +199,11 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       }
       std::string truths;
       for (const auto& [name, value] : c.params) truths += fmt::format(" {}={:.4g}", name, value);
+      // Measured: 0.0575 for 0.06 and 0.091 for 0.1; at size 37-38, 0.016 for 0.05 (README).
+      if (effect == "crosstalk" && c.size != InsoleSize::S37_38 && !r.named_effects.empty()) {
+        const double truth = c.params.at("coupling");
+        EXPECT_NEAR(r.named_effects.front().params.at(0).value, truth, 0.15 * truth) << c.seed;
+      }
       fitted += fmt::format("  {:<18} {:<6} seed {:>3}: {}{} (truth{})\n", effect,
                             insole_size_name(c.size), c.seed, first, values, truths);
       // The drift's candidate is linear: the simulator's warm-up as its mean rate over the
@@ -249,8 +254,10 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       // Every force effect but stress relaxation reaches the 40 %, or all but a little
       // of what any extension could take (measured: hysteresis 45-46, whose ceiling is 28 %,
       // removed 110 % of the excess; saturation 41-42 reached 40.4 % and 89 %). Crosstalk, a
-      // candidate of ours, at its weakest (0.05 at size 37-38, where no extension could take more
-      // than 19 %) removed 81 %: three quarters for it.
+      // candidate of ours, is held to less, set just under its weakest session's 82 % (0.05 at
+      // size 37-38, where no extension could take more than 19 %, fitted at a coupling of only
+      // 0.016): that session passes on naming, not on recovery, and its coupling is not asserted
+      // (those of the other two are, below).
       if (effect != "stress_relaxation") {
         const double needed = effect == "crosstalk" ? 75.0 : 85.0;
         EXPECT_TRUE(r.gap_shrink_pct >= 40.0 || excess_removed >= needed)
@@ -625,7 +632,7 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   // threshold and BIC by hundreds, but its duration goes to the top of its range and its
   // amplitude with it: an optimum on a bound, without a finite standard error, is not an effect
   // the data show, so it is not named. Crosstalk gains more still (the correction shrinks the
-  // patches' footprints: 9.7 % at a coupling of 0.19; 40-44 % at the top of its range while its
+  // patches' footprints: 17 % at a coupling of 0.19; 40-44 % at the top of its range while its
   // residual was on the corrected force's scale), but the readings show none: the cells around
   // a patch read nothing. What is named is the most likely candidate that passes: creep, from
   // the zeros, as on the project's two other real recordings.

@@ -568,8 +568,9 @@ TEST(Discrepancy, ACorrectionThatOnlyRescalesTheForceGainsNothing) {
     for (const double k : discrepancy_detail::kCrosstalkGrid) {
       CrosstalkView view;
       view.coupling = k;
-      for (const RegionAnalysis& ra : ds.analysis.regions) {
-        const std::size_t r = index_of(ra.region);
+      // By place: clean_session fills the heel's and met3_5's, and the others' region is unset.
+      for (std::size_t r = 0; r < kRegionCount; ++r) {
+        const RegionAnalysis& ra = ds.analysis.regions[r];
         view.source[r] = ra.area;
         view.area_mm2[r] = ra.series.area_mm2;
         for (double f : ra.series.force_n) view.force_n[r].push_back(f / (1.0 + 4.0 * k));
@@ -583,8 +584,7 @@ TEST(Discrepancy, ACorrectionThatOnlyRescalesTheForceGainsNothing) {
     fmt::print("crosstalk {} on forces only rescaled: {:.3f} % -> {:.3f} %\n", k,
                at.baseline_nrmse_pct, at.extended_nrmse_pct);
     EXPECT_GT(at.baseline_nrmse_pct, 0.0);
-    // Not to rounding: a frame whose noise reads a force of 0 or less keeps a gain of 1.
-    EXPECT_NEAR(at.extended_nrmse_pct, at.baseline_nrmse_pct, 1e-3 * at.baseline_nrmse_pct);
+    EXPECT_NEAR(at.extended_nrmse_pct, at.baseline_nrmse_pct, 1e-9 * at.baseline_nrmse_pct);
   }
 }
 
