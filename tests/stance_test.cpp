@@ -312,6 +312,67 @@ TEST_F(StanceTest, UndoingTheCrosstalkGivesBackTheFootprintOfTheCellsOwnReadings
               0.5 * newtons_per_bit * layout_->region_sensors(Region::Heel).size());
 }
 
+// The adaptive threshold is a share of the step's highest summed reading, which the mixing
+// raised. Corrected, the readings take that share of their own highest sum, as the segmenter
+// would have set it for the cells' own readings: the same cells count as without crosstalk,
+// where the mixed readings' threshold drops the cap's lowest ones.
+TEST_F(StanceTest, TheCorrectedReadingsTakeTheThresholdOfTheirOwnSummedReading) {
+  const double coupling = 0.08;
+  const std::vector<std::uint8_t> own = heel_cap(*layout_, 0.8, 20.0, 150.0);
+  std::vector<std::uint8_t> mixed(own.size());
+  for (std::size_t c = 0; c < own.size(); ++c) {
+    double reading = own[c] - 2.0;
+    for (const Neighbour& n : layout_->neighbours(c)) {
+      reading += coupling * n.shared_edge * (own[n.sensor] - 2.0);
+    }
+    mixed[c] = static_cast<std::uint8_t>(2.0 + std::round(reading));
+  }
+  const auto summed = [](const std::vector<std::uint8_t>& bits) {
+    double s = 0.0;
+    for (std::uint8_t b : bits) s += b - 2.0;
+    return s;
+  };
+  // The segmenter's threshold: a share of the step's highest zeroed summed bits; here the share
+  // that puts the cells' own readings' threshold a bit under the lowest of 6 bits or more, clear
+  // of what the mixed readings' rounding leaves on the corrected ones (0.52 bits on that cell).
+  double lowest = 255.0;
+  for (std::size_t c : layout_->region_sensors(Region::Heel)) {
+    if (own[c] - 2.0 >= 6.0) lowest = std::min(lowest, own[c] - 2.0);
+  }
+  const double share = (lowest - 1.0) / summed(own);
+  const auto with_threshold = [&](Step step, const std::vector<std::uint8_t>& bits) {
+    step.max_summed_bits = summed(bits);
+    step.adaptive_threshold_bits = share * step.max_summed_bits;
+    return step;
+  };
+  const Step plain = with_threshold(make_step({own, own}), own);
+  const Step step = with_threshold(make_step({mixed, mixed}), mixed);
+  ASSERT_GT(step.adaptive_threshold_bits, 1.2 * plain.adaptive_threshold_bits);
+  // Cells whose corrected reading lies between the two thresholds: what the mixed readings'
+  // threshold would drop.
+  std::vector<double> corrected(mixed.size());
+  for (std::size_t c = 0; c < mixed.size(); ++c) corrected[c] = mixed[c] - 2.0;
+  const CrosstalkCorrection correction(*layout_, coupling);
+  correction.undo(corrected);
+  int between = 0;
+  for (std::size_t c : layout_->region_sensors(Region::Heel)) {
+    between += corrected[c] >= plain.adaptive_threshold_bits &&
+               corrected[c] < step.adaptive_threshold_bits;
+  }
+  ASSERT_GT(between, 0);
+  const StanceSeries truth = measure_stance(plain, *layout_, config_.calibration);
+  const StanceSeries undone = measure_stance(step, *layout_, config_.calibration, nullptr,
+                                             CellMeanFootprint::Skip, &correction);
+  const RegionSample& t = truth.at(1, Region::Heel);
+  const RegionSample& u = undone.at(1, Region::Heel);
+  std::printf("heel: %d cells own, %d corrected (%d between the thresholds %.2f and %.2f)\n",
+              t.active_sensors, u.active_sensors, between, plain.adaptive_threshold_bits,
+              step.adaptive_threshold_bits);
+  EXPECT_EQ(u.active_sensors, t.active_sensors);
+  ASSERT_TRUE(t.footprint_area_mm2 && u.footprint_area_mm2);
+  EXPECT_NEAR(*u.footprint_area_mm2 / *t.footprint_area_mm2, 1.0, 0.01);
+}
+
 // A sensor that still reads after its load has gone (creep) reads a few bits more on every cell
 // of the earlier, wider footprint: here 4 bits on the whole heel around a small cap of 8. Taken
 // in, those readings flatten the cap and widen it by about three quarters. Two fits of the same

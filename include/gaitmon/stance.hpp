@@ -88,7 +88,9 @@ std::array<RegionSample, kRegionCount> measure_frame(
 /// averaging cells at the same shared aspect.
 /// Contact patterns repeat from frame to frame and step to step, so a caller measuring many
 /// steps passes one cache for all of them (results are identical with or without it).
-/// With `crosstalk`, each frame's zeroed readings are corrected for it before the threshold.
+/// With `crosstalk`, each frame's zeroed readings are corrected for it before the threshold, and
+/// the threshold is the same share of the corrected readings' highest summed reading over the
+/// stance as the step's is of Step::max_summed_bits (the step's own where that is 0).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             const Calibration& calibration, ContactEllipseCache* cache = nullptr,
                             CellMeanFootprint cell_mean = CellMeanFootprint::Skip,
