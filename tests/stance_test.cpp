@@ -272,20 +272,28 @@ TEST_F(StanceTest, TheRimUnderTheThresholdCountsInTheFootprint) {
   EXPECT_LT(std::abs(fp / truth - 1.0), 0.02);  // 0.75 % measured
 }
 
+/// `own` (zero 2 bits) with each cell also reading `coupling` times its edge neighbours' share,
+/// rounded to bits.
+std::vector<std::uint8_t> mixed_readings(const InsoleLayout& layout,
+                                         const std::vector<std::uint8_t>& own, double coupling) {
+  std::vector<std::uint8_t> mixed(own.size());
+  for (std::size_t c = 0; c < own.size(); ++c) {
+    double reading = own[c] - 2.0;
+    for (const Neighbour& n : layout.neighbours(c)) {
+      reading += coupling * n.shared_edge * (own[n.sensor] - 2.0);
+    }
+    mixed[c] = static_cast<std::uint8_t>(2.0 + std::round(reading));
+  }
+  return mixed;
+}
+
 // Crosstalk of 8 % per edge spreads a heel cap's readings into the ring of cells around it and
 // widens the footprint; measured with the correction at that coupling, the stance reads the
 // cap's own force and footprint again, to within the rounding of the mixed readings to bits.
 TEST_F(StanceTest, UndoingTheCrosstalkGivesBackTheFootprintOfTheCellsOwnReadings) {
   const double coupling = 0.08;
   const std::vector<std::uint8_t> own = heel_cap(*layout_, 0.8, 20.0, 150.0);
-  std::vector<std::uint8_t> mixed(own.size());
-  for (std::size_t c = 0; c < own.size(); ++c) {
-    double reading = own[c] - 2.0;
-    for (const Neighbour& n : layout_->neighbours(c)) {
-      reading += coupling * n.shared_edge * (own[n.sensor] - 2.0);
-    }
-    mixed[c] = static_cast<std::uint8_t>(2.0 + std::round(reading));
-  }
+  const std::vector<std::uint8_t> mixed = mixed_readings(*layout_, own, coupling);
   const Step plain = make_step({own, own});
   const Step step = make_step({mixed, mixed});
   const CrosstalkCorrection correction(*layout_, coupling);
@@ -319,14 +327,7 @@ TEST_F(StanceTest, UndoingTheCrosstalkGivesBackTheFootprintOfTheCellsOwnReadings
 TEST_F(StanceTest, TheCorrectedReadingsTakeTheThresholdOfTheirOwnSummedReading) {
   const double coupling = 0.08;
   const std::vector<std::uint8_t> own = heel_cap(*layout_, 0.8, 20.0, 150.0);
-  std::vector<std::uint8_t> mixed(own.size());
-  for (std::size_t c = 0; c < own.size(); ++c) {
-    double reading = own[c] - 2.0;
-    for (const Neighbour& n : layout_->neighbours(c)) {
-      reading += coupling * n.shared_edge * (own[n.sensor] - 2.0);
-    }
-    mixed[c] = static_cast<std::uint8_t>(2.0 + std::round(reading));
-  }
+  const std::vector<std::uint8_t> mixed = mixed_readings(*layout_, own, coupling);
   const auto summed = [](const std::vector<std::uint8_t>& bits) {
     double s = 0.0;
     for (std::uint8_t b : bits) s += b - 2.0;
