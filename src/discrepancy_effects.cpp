@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <utility>
 
 namespace gaitmon::discrepancy_detail {
@@ -308,7 +309,7 @@ class ThermalDriftEffect final : public Applied {
 class CrosstalkEffect final : public Applied {
  public:
   CrosstalkEffect(const std::vector<Unit>& units, double coupling)
-      : k_(coupling), shapes_(units.size()), gain_(units.size()), spill_(units.size()) {
+      : k_(coupling), seen_(units.size()), gain_(units.size()), spill_(units.size()) {
     if (k_ == 0.0) return;
     const auto hi = std::upper_bound(kCrosstalkGrid.begin(), kCrosstalkGrid.end(), k_);
     const std::size_t g1 = std::clamp<std::size_t>(
@@ -330,6 +331,7 @@ class CrosstalkEffect final : public Applied {
     for (std::size_t ui = 0; ui < units.size(); ++ui) {
       const Unit& u = units[ui];
       if (!affects(u)) continue;
+      const CrosstalkSeries& x = *u.crosstalk;
       const std::size_t n = u.y.size();
       area.resize(n);
       gain_[ui].resize(n);
@@ -337,21 +339,30 @@ class CrosstalkEffect final : public Applied {
       corrected.resize(n);
       std::vector<double>& gain = gain_[ui];
       for (std::size_t i = 0; i < n; ++i) {
-        area[i] = between(u.crosstalk_area_mm2, i, u.area[i]);
-        corrected[i] = u.y[i] - between(u.crosstalk_removed_n, i, 0.0);
-        const double spill = between(u.crosstalk_spill_in_n, i, 0.0);
+        area[i] = between(x.area_mm2, i, u.area[i]);
+        corrected[i] = u.y[i] - between(x.removed_n, i, 0.0);
+        const double spill = between(x.spill_in_n, i, 0.0);
         gain[i] = corrected[i] > 0.0 ? std::clamp((u.y[i] - spill) / corrected[i], 0.0, max_gain)
                                      : std::numeric_limits<double>::quiet_NaN();
       }
       fill_from_nearest(gain, 1.0);
       for (std::size_t i = 0; i < n; ++i) spill_[ui][i] = u.y[i] - gain[i] * corrected[i];
-      shapes_[ui] = shapes_of(u.t, area, u.shape_model);
+      // The tissue's and the cells' effects act on the contact the corrected readings give.
+      Shapes sh = shapes_of(u.t, area, u.shape_model);
+      Unit& v = seen_[ui].emplace(u);
+      v.area = area;
+      v.E = sh.En.front();
+      v.En = std::move(sh.En);
+      v.V = std::move(sh.V);
+      v.d_mm = std::move(sh.d_mm);
+      v.ddot_mm_per_s = std::move(sh.ddot_mm_per_s);
     }
   }
   bool affects(const Unit& u) const override {
-    return k_ != 0.0 && u.crosstalk_area_mm2.size() == kCrosstalkGrid.size() &&
-           u.crosstalk_removed_n.size() == kCrosstalkGrid.size() &&
-           u.crosstalk_spill_in_n.size() == kCrosstalkGrid.size();
+    return k_ != 0.0 && u.crosstalk != nullptr &&
+           u.crosstalk->area_mm2.size() == kCrosstalkGrid.size() &&
+           u.crosstalk->removed_n.size() == kCrosstalkGrid.size() &&
+           u.crosstalk->spill_in_n.size() == kCrosstalkGrid.size();
   }
   void apply(std::size_t ui, const Unit&, std::span<const double> F, std::span<double> out,
              std::size_t /*choice*/) const override {
@@ -361,13 +372,11 @@ class CrosstalkEffect final : public Applied {
       out[i] = i < gain.size() ? F[i] * gain[i] + spill[i] : F[i];
     }
   }
-  const Shapes* shapes(std::size_t ui) const override {
-    return shapes_[ui].En.empty() ? nullptr : &shapes_[ui];
-  }
+  const Unit* seen(std::size_t ui) const override { return seen_[ui] ? &*seen_[ui] : nullptr; }
 
  private:
   double k_;
-  std::vector<Shapes> shapes_;
+  std::vector<std::optional<Unit>> seen_;
   std::vector<std::vector<double>> gain_, spill_;
 };
 

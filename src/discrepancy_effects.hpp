@@ -42,6 +42,13 @@ inline constexpr std::string_view kCrosstalk = "crosstalk";
 inline constexpr std::array<double, 8> kCrosstalkGrid{0.01,  0.02, 0.035, 0.05,
                                                       0.075, 0.1,  0.15,  0.2};
 
+// A unit measured again with its readings corrected for crosstalk: per coupling of
+// kCrosstalkGrid and frame, its area, what the correction took off its force and what its cells
+// read of other regions' cells (N; CrosstalkView::spill_in_n).
+struct CrosstalkSeries {
+  std::vector<std::vector<double>> area_mm2, removed_n, spill_in_n;
+};
+
 // One region of one step: the measured series and the baseline's shapes.
 struct Unit {
   int ordinal = 0;           // the step's place in time order (both feet)
@@ -54,10 +61,9 @@ struct Unit {
   // effect, since a per-step fit bends n to absorb what the model lacks.
   std::vector<std::vector<double>> En;
   ShapeModel shape_model;
-  // The unit's area, what the correction took off its force and what its cells read of other
-  // regions' cells (N; CrosstalkView::spill_in_n), per coupling of kCrosstalkGrid and frame;
-  // empty where the steps were not measured again.
-  std::vector<std::vector<double>> crosstalk_area_mm2, crosstalk_removed_n, crosstalk_spill_in_n;
+  // Null where the steps were not measured again; shared, since the crosstalk candidate copies
+  // each unit as the other effects then see it (Applied::seen).
+  std::shared_ptr<const CrosstalkSeries> crosstalk;
   double K0 = 0.0, D0 = 0.0;
   double base_sse = 0.0;
   std::vector<double> base_pred;
@@ -109,9 +115,10 @@ class Applied {
   virtual double swing_reading(std::size_t /*ui*/) const { return 0.0; }
   /// What it adds there per unit of lag at the start of the unit's chain, where that is unknown.
   virtual double swing_reading_per_start_lag(std::size_t /*ui*/) const { return 0.0; }
-  /// An effect of the measurement on the area the model is driven by gives the unit's shapes
-  /// from the area it corrects; nullptr keeps the unit's own.
-  virtual const Shapes* shapes(std::size_t /*ui*/) const { return nullptr; }
+  /// An effect of the measurement on the area the model is driven by gives the unit as the
+  /// model and the other effects in the chain then see it: the area it corrects, and the shapes,
+  /// deformation and rate from that area; nullptr keeps the unit as measured.
+  virtual const Unit* seen(std::size_t /*ui*/) const { return nullptr; }
 };
 
 struct ParamSpec {

@@ -45,18 +45,20 @@ Unit stance(Region region, int step, double t0_s) {
   u.shape_model.id = {3000.0, 0.0, 0.3, 0.0, 1.0};
   // As if measured again for crosstalk: the correction shrinks the area and takes a share of
   // the force off, both growing with the coupling.
+  CrosstalkSeries x;
   for (double k : kCrosstalkGrid) {
     std::vector<double> area, removed;
     for (std::size_t i = 0; i < kFrames; ++i) {
       area.push_back(u.area[i] * (1.0 - 2.0 * k));
       removed.push_back(2.0 * k * u.y[i]);
     }
-    u.crosstalk_area_mm2.push_back(area);
-    u.crosstalk_removed_n.push_back(removed);
+    x.area_mm2.push_back(area);
+    x.removed_n.push_back(removed);
     std::vector<double> spill;
     for (double y : u.y) spill.push_back(0.5 * k * y);
-    u.crosstalk_spill_in_n.push_back(spill);
+    x.spill_in_n.push_back(spill);
   }
+  u.crosstalk = std::make_shared<const CrosstalkSeries>(std::move(x));
   return u;
 }
 
@@ -445,9 +447,19 @@ TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling)
       std::vector<double> area(u.area.size());
       for (std::size_t i = 0; i < area.size(); ++i) area[i] = u.area[i] * (1.0 - 2.0 * k);
       const Shapes expected = shapes_of(u.t, area, u.shape_model);
-      const Shapes* got = applied->shapes(ui);
+      const Unit* got = applied->seen(ui);
       ASSERT_NE(got, nullptr);
       ASSERT_EQ(got->En.size(), expected.En.size());
+      // The chain's other effects see the corrected contact: its area, and the deformation and
+      // rate from it.
+      for (std::size_t i = 0; i < area.size(); ++i) {
+        EXPECT_NEAR(got->area[i], area[i], 1e-9 * area[i]);
+        EXPECT_NEAR(got->d_mm[i], expected.d_mm[i], 1e-12 + 1e-9 * expected.d_mm[i]);
+        EXPECT_NEAR(got->ddot_mm_per_s[i], expected.ddot_mm_per_s[i],
+                    1e-9 * (1.0 + std::abs(expected.ddot_mm_per_s[i])));
+      }
+      EXPECT_EQ(got->E, got->En.front());
+      EXPECT_EQ(got->y, u.y);
       for (std::size_t n = 0; n < expected.En.size(); ++n) {
         for (std::size_t i = 0; i < area.size(); ++i) {
           EXPECT_NEAR(got->En[n][i], expected.En[n][i], 1e-9 * (1.0 + expected.En[n][i]));
@@ -473,12 +485,10 @@ TEST(DiscrepancyEffects, CrosstalkDrivesTheModelByTheCorrectedAreaAtItsCoupling)
   // No coupling, no correction; and a unit that was not measured again is left alone.
   EXPECT_FALSE(candidate("crosstalk", units, {0.0}, 112.5, 0.2824)->affects(units[0]));
   std::vector<Unit> unmeasured = two_steps();
-  unmeasured[0].crosstalk_area_mm2.clear();
-  unmeasured[0].crosstalk_removed_n.clear();
-  unmeasured[0].crosstalk_spill_in_n.clear();
+  unmeasured[0].crosstalk.reset();
   const auto applied = candidate("crosstalk", unmeasured, {0.05}, 112.5, 0.2824);
   EXPECT_FALSE(applied->affects(unmeasured[0]));
-  EXPECT_EQ(applied->shapes(0), nullptr);
+  EXPECT_EQ(applied->seen(0), nullptr);
   EXPECT_TRUE(applied->affects(unmeasured[1]));
 }
 
@@ -535,16 +545,18 @@ TEST(DiscrepancyEffects, CrosstalkPredictsTheMeasuredForceWhereTheModelIsTheCorr
   Unit& u = units[0];
   const std::size_t spiking = kFrames / 3;  // corrected 0.1 y, spill 0.05 y: a gain of 9.5
   const std::size_t empty = kFrames / 2;    // nothing left after the correction
+  CrosstalkSeries x = *u.crosstalk;
   for (std::size_t g = 0; g < kCrosstalkGrid.size(); ++g) {
-    u.crosstalk_removed_n[g][spiking] = 0.9 * u.y[spiking];
-    u.crosstalk_spill_in_n[g][spiking] = 0.05 * u.y[spiking];
-    u.crosstalk_removed_n[g][empty] = u.y[empty];
+    x.removed_n[g][spiking] = 0.9 * u.y[spiking];
+    x.spill_in_n[g][spiking] = 0.05 * u.y[spiking];
+    x.removed_n[g][empty] = u.y[empty];
   }
+  u.crosstalk = std::make_shared<const CrosstalkSeries>(std::move(x));
   const double k = 0.05;
   const auto applied = candidate("crosstalk", units, {k}, 112.5, 0.2824);
   std::vector<double> corrected(kFrames), slope_probe(kFrames), at(kFrames), above(kFrames);
   for (std::size_t i = 0; i < kFrames; ++i) {
-    corrected[i] = u.y[i] - u.crosstalk_removed_n[3][i];  // kCrosstalkGrid[3] is 0.05
+    corrected[i] = u.y[i] - u.crosstalk->removed_n[3][i];  // kCrosstalkGrid[3] is 0.05
     slope_probe[i] = corrected[i] + 10.0;
   }
   ASSERT_EQ(kCrosstalkGrid[3], k);

@@ -350,6 +350,8 @@ struct DiscrepancyResult {
   /// (DiscrepancySettings::min_ceiling_steps); -1 where the input has no cell counts.
   int ceiling_plateau_steps = -1;
   NeighbourShare neighbour_share;  ///< the input's (DiscrepancySettings::min_neighbour_share)
+  /// With a second, the first as refitted with it in place where that predicts the held-out
+  /// steps better (as fit_extended_model); second_candidates have the first as named alone.
   std::vector<EffectEstimate> named_effects;
   /// The candidate whose held-out deviance falls most below the baseline's, and why it was not
   /// named, in words (empty where it was): a clear gain can still leave a parameter
@@ -376,7 +378,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                                    const std::function<void(double)>& on_progress = {});
 
 /// The extended model with the named effects (in the given order, each fitted on top of the
-/// previous), fitted on all steps: what `gaitmon analyze --effects` reports.
+/// previous, and refitted with the later ones: fit_extended_model), fitted on all steps: what
+/// `gaitmon analyze --effects` reports.
 struct ExtendedModelFit {
   std::vector<EffectEstimate> effects;
   double baseline_nrmse_pct = 0.0;  ///< pooled, in sample
@@ -398,8 +401,10 @@ class FitStopped : public std::runtime_error {
 /// Throws std::invalid_argument for an unknown or repeated name, fewer steps than folds, or
 /// crosstalk named for steps not measured again for it (extended_model_input does), and
 /// FitStopped soon after `stop` is requested (the live monitor's shutdown on a signal).
-/// `on_progress`, if set, receives the fraction of the effects fitted after each, on the
-/// calling thread.
+/// The effects are fitted one after another in the order given, each on top of those before it,
+/// and then each but the last once more with all the others in place, which is kept where it
+/// predicts the held-out steps better. `on_progress`, if set, receives the fraction of those
+/// fits done after each of the first round and at the end, on the calling thread.
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
                                     const DiscrepancySettings& settings = {},
