@@ -370,8 +370,8 @@ struct Model {
 };
 
 // An effect at fixed parameters, made ready for the units once where it is evaluated under
-// many others (the first effect under each second candidate): crosstalk's shapes take longer to
-// make than the chain takes to run.
+// many others (the first effect under each second candidate): crosstalk's corrected units take
+// longer to make than the chain takes to run.
 struct FixedEffect {
   const CandidateSpec* spec;
   std::vector<double> theta;
@@ -539,10 +539,12 @@ double half_local_spacing(const ParamSpec& p, double value) {
 }
 
 // Fits one candidate on top of `base` (fixed effects): grid, k-fold, refinement, SEs.
-// Every evaluation of the model first checks `stop`.
+// Every evaluation of the model first checks `stop`. The candidate takes place `at` among the
+// base's effects (the end by default), which orders it among those of its own stage.
 CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& pooled,
                                std::span<const FixedEffect> base, const CandidateSpec& spec,
-                               const std::stop_token& stop = {}) {
+                               const std::stop_token& stop = {},
+                               std::size_t at = std::numeric_limits<std::size_t>::max()) {
   const auto check_stop = [&] {
     if (stop.stop_requested()) throw FitStopped();
   };
@@ -551,13 +553,16 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     if (e.made == nullptr) e.made = e.spec->make(units, e.theta);
   }
   base = made_base;
+  const auto with_candidate = [&](const std::vector<double>& th) {
+    std::vector<FixedEffect> fx(base.begin(), base.end());
+    fx.insert(fx.begin() + static_cast<std::ptrdiff_t>(std::min(at, fx.size())), {&spec, th});
+    return fx;
+  };
   const auto grid = grid_of(spec);
   std::vector<Costs> costs(grid.size());
   parallel_for(grid.size(), [&](std::size_t gi) {
     check_stop();
-    std::vector<FixedEffect> fx(base.begin(), base.end());
-    fx.push_back({&spec, grid[gi]});
-    costs[gi] = unit_costs(units, fx);
+    costs[gi] = unit_costs(units, with_candidate(grid[gi]));
   });
   // The two channels' deviance over the units of every fold but `held_out` (-1: all units).
   const auto deviance_without = [&](const Costs& c, int held_out) {
@@ -571,9 +576,7 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   };
   const auto costs_at = [&](const std::vector<double>& th) {
     check_stop();
-    std::vector<FixedEffect> fx(base.begin(), base.end());
-    fx.push_back({&spec, th});
-    return unit_costs(units, fx);
+    return unit_costs(units, with_candidate(th));
   };
   SearchBox box;
   for (const ParamSpec& p : spec.params) {
@@ -641,33 +644,36 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
 // Effects are fitted one after another, each on top of those before it, so an earlier one was
 // fitted without the later ones: a saturation ceiling fitted before crosstalk takes up the
 // neighbours' share of a capped cell (104 bits for 85 at a coupling of 0.08), a hysteresis
-// before it the widened footprint (0.38-0.43 for 0.2). Each effect but the last is fitted again,
-// in order, with all the others in place (the last one was fitted so already): one round of
-// coordinate descent, which took those to 85 bits and 0.21-0.22. It is kept where it predicts
-// the held-out steps better than `last`, the outcome of the fit one after another (a second
-// effect that only takes up what the first's form leaves could otherwise draw the first off:
-// crosstalk's coupling at size 37-38 went from 0.044 to 0.030 for 0.05 under an impact).
-// Returns the refits, in the order of `chosen`, whose parameters they then replace; none where
-// they are not kept.
-std::vector<CandidateOutcome> refit_earlier_effects(const std::vector<Unit>& units,
-                                                    const Pooled& pooled,
-                                                    std::vector<FixedEffect>& chosen,
-                                                    const CandidateOutcome& last,
-                                                    const std::stop_token& stop = {}) {
+// before it the widened footprint (0.43 for 0.2). One round of coordinate descent fits each
+// again, in order and in its place in the chain, with all the others in place; it took those to
+// 85 bits and 0.21. The round ends on the last effect, held out as in `last`, the outcome of the
+// fit one after another, so the two held-out errors hold out the same parameters; the round is
+// kept where it predicts the held-out steps better and every parameter keeps a standard error
+// (a second effect that only takes up what the first's form leaves can otherwise draw the first
+// off). Returns the refits in the order of `chosen`, whose parameters they then replace; none
+// where the round is not kept or there is one effect.
+std::vector<CandidateOutcome> refit_together(const std::vector<Unit>& units, const Pooled& pooled,
+                                             std::vector<FixedEffect>& chosen,
+                                             const CandidateOutcome& last,
+                                             const std::stop_token& stop = {}) {
+  if (chosen.size() < 2) return {};
   std::vector<FixedEffect> refitted = chosen;
   std::vector<CandidateOutcome> refits;
-  for (std::size_t i = 0; i + 1 < refitted.size(); ++i) {
+  for (std::size_t i = 0; i < refitted.size(); ++i) {
     std::vector<FixedEffect> others;
     for (std::size_t j = 0; j < refitted.size(); ++j) {
       if (j != i) others.push_back({refitted[j].spec, refitted[j].theta});
     }
-    refits.push_back(fit_candidate(units, pooled, others, *refitted[i].spec, stop));
+    refits.push_back(fit_candidate(units, pooled, others, *refitted[i].spec, stop, i));
     refitted[i] = {refits.back().spec, refits.back().theta};
   }
   const auto heldout_deviance = [&](const CandidateOutcome& c) {
     return deviance(c.heldout.force_sse(), c.heldout.zero_sse(), pooled);
   };
-  if (refits.empty() || !(heldout_deviance(refits.back()) < heldout_deviance(last))) return {};
+  const bool determined = std::all_of(refits.begin(), refits.end(), [](const CandidateOutcome& c) {
+    return std::all_of(c.se.begin(), c.se.end(), [](double se) { return std::isfinite(se); });
+  });
+  if (!determined || !(heldout_deviance(refits.back()) < heldout_deviance(last))) return {};
   chosen = std::move(refitted);
   return refits;
 }
@@ -1360,18 +1366,18 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
         seconds.push_back(fit_candidate(units, pooled, chosen, spec));
         out.second_candidates.push_back(result_of(seconds.back(), pooled, first_fixed,
                                                   base_params + param_count(*first.spec, pooled)));
-        report((1.0 + static_cast<double>(seconds.size()) /
-                          static_cast<double>(std::max<std::size_t>(1, specs.size() - 1))) /
+        // The second round: the other candidates, then the two named fitted once more.
+        report((1.0 + static_cast<double>(seconds.size()) / static_cast<double>(specs.size() + 1)) /
                rounds);
       }
       if (const auto b2 = most_likely(out.second_candidates, true)) {
         out.named_effects.push_back(estimate_of(seconds[*b2]));
         chosen.push_back({seconds[*b2].spec, seconds[*b2].theta});
         last = &seconds[*b2];
-        refits = refit_earlier_effects(units, pooled, chosen, *last);
-        if (!refits.empty()) {
-          out.named_effects.front() = estimate_of(refits.front());
-          last = &refits.back();
+        refits = refit_together(units, pooled, chosen, *last);
+        for (std::size_t i = 0; i < refits.size(); ++i) {
+          out.named_effects[i] = estimate_of(refits[i]);
+          last = &refits[i];
         }
       }
     }
@@ -1454,13 +1460,14 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
     in_sample = c.in_sample;
     last_fit = c;
     if (on_progress) {
-      // Every effect but the last is fitted once more (refit_earlier_effects).
-      on_progress(static_cast<double>(chosen.size()) / static_cast<double>(2 * effects.size() - 1));
+      // With two or more, each is fitted once more (refit_together).
+      on_progress(static_cast<double>(chosen.size()) /
+                  static_cast<double>(effects.size() < 2 ? 1 : 2 * effects.size()));
     }
   }
-  if (last_fit) {
+  if (chosen.size() >= 2) {
     const std::vector<CandidateOutcome> refits =
-        refit_earlier_effects(prep.units, prep.pooled, chosen, *last_fit, stop);
+        refit_together(prep.units, prep.pooled, chosen, *last_fit, stop);
     for (std::size_t i = 0; i < refits.size(); ++i) out.effects[i] = estimate_of(refits[i]);
     if (!refits.empty()) {
       heldout = refits.back().heldout;

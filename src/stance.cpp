@@ -1,6 +1,7 @@
 // Turns a segmented step into per-region force, area and ellipse series (seed 3.4, 3.5, ch. 4).
 #include "gaitmon/stance.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 #include <stdexcept>

@@ -350,8 +350,9 @@ struct DiscrepancyResult {
   /// (DiscrepancySettings::min_ceiling_steps); -1 where the input has no cell counts.
   int ceiling_plateau_steps = -1;
   NeighbourShare neighbour_share;  ///< the input's (DiscrepancySettings::min_neighbour_share)
-  /// With a second, the first as refitted with it in place where that predicts the held-out
-  /// steps better (as fit_extended_model); second_candidates have the first as named alone.
+  /// With a second, both as fitted once more with the other in place where that predicts the
+  /// held-out steps better (as fit_extended_model); second_candidates have the first as named
+  /// alone.
   std::vector<EffectEstimate> named_effects;
   /// The candidate whose held-out deviance falls most below the baseline's, and why it was not
   /// named, in words (empty where it was): a clear gain can still leave a parameter
@@ -372,14 +373,16 @@ struct DiscrepancyResult {
 
 /// Runs the workflow. Deterministic. Throws std::invalid_argument for bad settings or fewer
 /// steps than folds. `on_progress`, if set, receives the fraction of the candidate fits done
-/// (their k-fold fits are nearly all of the time) after each candidate, on the calling thread.
+/// (their k-fold fits are nearly all of the time) after each candidate, on the calling thread;
+/// the second round counts the two named effects' fits once more (where a second is named)
+/// before its end.
 DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                                    const DiscrepancySettings& settings = {},
                                    const std::function<void(double)>& on_progress = {});
 
 /// The extended model with the named effects (in the given order, each fitted on top of the
-/// previous, and refitted with the later ones: fit_extended_model), fitted on all steps: what
-/// `gaitmon analyze --effects` reports.
+/// previous, then each once more with all the others in place: fit_extended_model), fitted on
+/// all steps: what `gaitmon analyze --effects` reports.
 struct ExtendedModelFit {
   std::vector<EffectEstimate> effects;
   double baseline_nrmse_pct = 0.0;  ///< pooled, in sample
@@ -401,10 +404,11 @@ class FitStopped : public std::runtime_error {
 /// Throws std::invalid_argument for an unknown or repeated name, fewer steps than folds, or
 /// crosstalk named for steps not measured again for it (extended_model_input does), and
 /// FitStopped soon after `stop` is requested (the live monitor's shutdown on a signal).
-/// The effects are fitted one after another in the order given, each on top of those before it,
-/// and then each but the last once more with all the others in place, which is kept where it
-/// predicts the held-out steps better. `on_progress`, if set, receives the fraction of those
-/// fits done after each of the first round and at the end, on the calling thread.
+/// The effects are fitted one after another in the order given, each on top of those before it;
+/// with two or more, each is then fitted once more with all the others in place, and that round
+/// is kept where it predicts the held-out steps better and leaves every parameter a standard
+/// error. `on_progress`, if set, receives the fraction of those fits done after each of the
+/// first round and at the end, on the calling thread.
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
                                     const DiscrepancySettings& settings = {},

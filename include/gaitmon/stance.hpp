@@ -90,7 +90,8 @@ std::array<RegionSample, kRegionCount> measure_frame(
 /// steps passes one cache for all of them (results are identical with or without it).
 /// With `crosstalk`, each frame's zeroed readings are corrected for it before the threshold, and
 /// the threshold is the same share of the corrected readings' highest summed reading over the
-/// stance as the step's is of Step::max_summed_bits (the step's own where that is 0).
+/// stance as the step's is of Step::max_summed_bits (the step's own where that is not positive;
+/// 0 where the corrected readings sum to nothing positive).
 StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             const Calibration& calibration, ContactEllipseCache* cache = nullptr,
                             CellMeanFootprint cell_mean = CellMeanFootprint::Skip,
