@@ -353,7 +353,8 @@ double solve_unit(const Chain& chain, std::size_t ui, const Unit& u, Workspace& 
   return best.sse;
 }
 
-// Per-unit SSE of the chain `fixed` followed by one candidate at theta, in physical order.
+// A model's effects in the order given; the chain runs them in physical order, by stage and in
+// the order given within one.
 struct Model {
   std::vector<std::shared_ptr<const Applied>> owned;
   std::vector<int> stages;
@@ -539,12 +540,12 @@ double half_local_spacing(const ParamSpec& p, double value) {
 }
 
 // Fits one candidate on top of `base` (fixed effects): grid, k-fold, refinement, SEs.
-// Every evaluation of the model first checks `stop`. The candidate takes place `at` among the
-// base's effects (the end by default), which orders it among those of its own stage.
+// Every evaluation of the model first checks `stop`. The candidate goes in at index `place` among
+// the base's effects (the end by default), which orders it among those of its own stage.
 CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& pooled,
                                std::span<const FixedEffect> base, const CandidateSpec& spec,
                                const std::stop_token& stop = {},
-                               std::size_t at = std::numeric_limits<std::size_t>::max()) {
+                               std::size_t place = std::numeric_limits<std::size_t>::max()) {
   const auto check_stop = [&] {
     if (stop.stop_requested()) throw FitStopped();
   };
@@ -555,7 +556,7 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   base = made_base;
   const auto with_candidate = [&](const std::vector<double>& th) {
     std::vector<FixedEffect> fx(base.begin(), base.end());
-    fx.insert(fx.begin() + static_cast<std::ptrdiff_t>(std::min(at, fx.size())), {&spec, th});
+    fx.insert(fx.begin() + static_cast<std::ptrdiff_t>(std::min(place, fx.size())), {&spec, th});
     return fx;
   };
   const auto grid = grid_of(spec);
@@ -648,15 +649,22 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
 // again, in order and in its place in the chain, with all the others in place; it took those to
 // 85 bits and 0.21. The round ends on the last effect, held out as in `last`, the outcome of the
 // fit one after another, so the two held-out errors hold out the same parameters; the round is
-// kept where it predicts the held-out steps better and every parameter keeps a standard error
-// (a second effect that only takes up what the first's form leaves can otherwise draw the first
-// off). Returns the refits in the order of `chosen`, whose parameters they then replace; none
-// where the round is not kept or there is one effect.
+// kept where it predicts the held-out steps better and no parameter loses the standard error
+// it had one after another, `had_se`, one per effect of `chosen` (a second effect that only
+// takes up what the first's form leaves can otherwise draw the first off). One that had none,
+// an effect the data do not show listed with others (`analyze --effects`), does not hold the
+// others back: a listed creep at its bounds kept a ceiling at 104 bits for 85. Returns the
+// refits in the order of `chosen`, whose parameters they then replace; none where the round is
+// not kept or there is one effect.
 std::vector<CandidateOutcome> refit_together(const std::vector<Unit>& units, const Pooled& pooled,
                                              std::vector<FixedEffect>& chosen,
+                                             std::span<const std::vector<double>> had_se,
                                              const CandidateOutcome& last,
                                              const std::stop_token& stop = {}) {
   if (chosen.size() < 2) return {};
+  if (had_se.size() != chosen.size()) {
+    throw std::logic_error("refit_together: one set of standard errors per effect expected");
+  }
   std::vector<FixedEffect> refitted = chosen;
   std::vector<CandidateOutcome> refits;
   for (std::size_t i = 0; i < refitted.size(); ++i) {
@@ -670,9 +678,13 @@ std::vector<CandidateOutcome> refit_together(const std::vector<Unit>& units, con
   const auto heldout_deviance = [&](const CandidateOutcome& c) {
     return deviance(c.heldout.force_sse(), c.heldout.zero_sse(), pooled);
   };
-  const bool determined = std::all_of(refits.begin(), refits.end(), [](const CandidateOutcome& c) {
-    return std::all_of(c.se.begin(), c.se.end(), [](double se) { return std::isfinite(se); });
-  });
+  bool determined = true;
+  for (std::size_t i = 0; i < refits.size(); ++i) {
+    for (std::size_t p = 0; p < refits[i].se.size(); ++p) {
+      const bool had = p < had_se[i].size() && std::isfinite(had_se[i][p]);
+      determined = determined && (!had || std::isfinite(refits[i].se[p]));
+    }
+  }
   if (!determined || !(heldout_deviance(refits.back()) < heldout_deviance(last))) return {};
   chosen = std::move(refitted);
   return refits;
@@ -1374,7 +1386,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
         out.named_effects.push_back(estimate_of(seconds[*b2]));
         chosen.push_back({seconds[*b2].spec, seconds[*b2].theta});
         last = &seconds[*b2];
-        refits = refit_together(units, pooled, chosen, *last);
+        refits = refit_together(units, pooled, chosen,
+                                std::vector<std::vector<double>>{first.se, seconds[*b2].se}, *last);
         for (std::size_t i = 0; i < refits.size(); ++i) {
           out.named_effects[i] = estimate_of(refits[i]);
           last = &refits[i];
@@ -1440,6 +1453,14 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   }
   check_crosstalk_views(input, effects);
   const Prepared prep = prepare(input, settings.folds);
+  // Fitted on no unit, the coupling would be a minimum of nothing.
+  if (names_crosstalk(effects) &&
+      std::none_of(prep.units.begin(), prep.units.end(),
+                   [](const Unit& u) { return u.crosstalk != nullptr; })) {
+    throw std::invalid_argument(
+        "crosstalk: no region-step has readings corrected for it (the steps were measured again "
+        "from another contact area source than the analyses')");
+  }
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   ExtendedModelFit out;
   const Costs base = unit_costs(prep.units, {});
@@ -1451,11 +1472,13 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   Costs heldout = base;
   Costs in_sample = base;
   std::optional<CandidateOutcome> last_fit;
+  std::vector<std::vector<double>> had_se;
   for (const std::string& name : effects) {
     const CandidateOutcome c =
         fit_candidate(prep.units, prep.pooled, chosen, spec_named(specs, name), stop);
     out.effects.push_back(estimate_of(c));
     chosen.push_back({c.spec, c.theta});
+    had_se.push_back(c.se);
     heldout = c.heldout;
     in_sample = c.in_sample;
     last_fit = c;
@@ -1467,7 +1490,7 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   }
   if (chosen.size() >= 2) {
     const std::vector<CandidateOutcome> refits =
-        refit_together(prep.units, prep.pooled, chosen, *last_fit, stop);
+        refit_together(prep.units, prep.pooled, chosen, had_se, *last_fit, stop);
     for (std::size_t i = 0; i < refits.size(); ++i) out.effects[i] = estimate_of(refits[i]);
     if (!refits.empty()) {
       heldout = refits.back().heldout;

@@ -300,11 +300,13 @@ class ThermalDriftEffect final : public Applied {
 // (measured - spill) / corrected, plus the spill, another region's load: the residual is on the
 // measured force's scale. (Predicting the measured force as the model's plus all the correction
 // took off left it on the corrected force's: a correction that only shrank every force by c
-// lowered the squared error by c^2 and looked like a gain.) Where the cells at or above the
-// threshold differ between the readings and their correction, the gain can come out beyond what
-// mixing gives (1 + 4 k) or the corrected force at 0; the gain is then held to [0, 1 + 4 k], a
-// frame with nothing corrected left takes the nearest frame's (as crosstalk_series does for the
-// area), and the rest of the measured force is added, so that the prediction is the measured
+// lowered the squared error by c^2 and looked like a gain.) The price is a bias the other way:
+// the model's own misfit reaches the residual times the gain, which grows with k, and where the
+// misfit is flat near the truth the fitted coupling comes out low (README). Where the cells at or
+// above the threshold differ between the readings and their correction, the gain can come out
+// beyond what mixing gives (1 + 4 k) or the corrected force at 0; the gain is then held to [0, 1 +
+// 4 k], a frame with nothing corrected left takes the nearest frame's (as crosstalk_series does for
+// the area), and the rest of the measured force is added, so that the prediction is the measured
 // force wherever the model is the corrected force.
 class CrosstalkEffect final : public Applied {
  public:

@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <stop_token>
 #include <string>
@@ -562,21 +563,18 @@ TEST(Discrepancy, ZeroLevelDriftStandsOutOfTheStepToStepScatter) {
   EXPECT_EQ(z[0].foot, Foot::Left);
 }
 
-// A correction that only shrinks every force by the same factor, leaving the footprints as they
-// were, explains nothing: the model's stiffness takes the factor up. The crosstalk candidate must
-// then gain nothing on the measured force. (It once predicted the measured force as the model's
-// plus what the correction took off, which left the residual on the corrected force's scale:
-// here the error fell from 0.480 % to 0.462 % at k = 0.05 and to 0.439 % at 0.2, for nothing.)
-TEST(Discrepancy, ACorrectionThatOnlyRescalesTheForceGainsNothing) {
-  DiscrepancyInput input = clean_session({"none", {}}, 10, 5);
+// Views of each step at the couplings of the crosstalk grid whose forces are the measured ones
+// shrunk by 1 + 4 k and whose footprints are as measured, each region's taken from `source`
+// (that of its analysis where not given). By place: clean_session fills the heel's and
+// met3_5's, and the others' region is unset.
+void add_rescaled_views(DiscrepancyInput& input, std::optional<AreaSource> source = {}) {
   for (DiscrepancyStep& ds : input.steps) {
     for (const double k : discrepancy_detail::kCrosstalkGrid) {
       CrosstalkView view;
       view.coupling = k;
-      // By place: clean_session fills the heel's and met3_5's, and the others' region is unset.
       for (std::size_t r = 0; r < kRegionCount; ++r) {
         const RegionAnalysis& ra = ds.analysis.regions[r];
-        view.source[r] = ra.area;
+        view.source[r] = source.value_or(ra.area);
         view.area_mm2[r] = ra.series.area_mm2;
         for (double f : ra.series.force_n) view.force_n[r].push_back(f / (1.0 + 4.0 * k));
         view.spill_in_n[r].assign(ra.series.force_n.size(), 0.0);
@@ -584,12 +582,40 @@ TEST(Discrepancy, ACorrectionThatOnlyRescalesTheForceGainsNothing) {
       ds.crosstalk.push_back(std::move(view));
     }
   }
+}
+
+// A correction that only shrinks every force by the same factor, leaving the footprints as they
+// were, explains nothing: the model's stiffness takes the factor up. The crosstalk candidate must
+// then gain nothing on the measured force. (It once predicted the measured force as the model's
+// plus what the correction took off, which left the residual on the corrected force's scale:
+// here the error fell from 0.480 % to 0.462 % at k = 0.05 and to 0.439 % at 0.2, for nothing.)
+TEST(Discrepancy, ACorrectionThatOnlyRescalesTheForceGainsNothing) {
+  DiscrepancyInput input = clean_session({"none", {}}, 10, 5);
+  add_rescaled_views(input);
   for (const double k : {0.05, 0.2}) {
     const FixedEffectEvaluation at = evaluate_effect_at(input, "crosstalk", {{"coupling", k}});
     fmt::print("crosstalk {} on forces only rescaled: {:.3f} % -> {:.3f} %\n", k,
                at.baseline_nrmse_pct, at.extended_nrmse_pct);
     EXPECT_GT(at.baseline_nrmse_pct, 0.0);
     EXPECT_NEAR(at.extended_nrmse_pct, at.baseline_nrmse_pct, 1e-9 * at.baseline_nrmse_pct);
+  }
+}
+
+// Views of another contact area than the analyses' are left out unit by unit (their areas do
+// not compare); where that leaves crosstalk no unit, its fit is refused, not a flat minimum.
+TEST(Discrepancy, CrosstalkWithNoRegionStepCorrectedForItIsRefused) {
+  DiscrepancyInput input = clean_session({"none", {}}, 10, 5);
+  const AreaSource own = input.steps.front().analysis.regions.front().area;
+  add_rescaled_views(input,
+                     own == AreaSource::Footprint ? AreaSource::Ellipse : AreaSource::Footprint);
+  const std::vector<std::string> crosstalk{"crosstalk"};
+  try {
+    fit_extended_model(input, crosstalk);
+    ADD_FAILURE() << "crosstalk fitted to no corrected region-step";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("no region-step has readings corrected for it"),
+              std::string::npos)
+        << e.what();
   }
 }
 

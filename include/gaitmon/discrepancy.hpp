@@ -27,9 +27,11 @@
 //   thermal_drift      the zeros only: a region's zero moves by its cells x r x the time between
 //                      the steps' zero windows (rate_bits_per_min r)
 //   crosstalk          the model driven by the area of readings corrected for a coupling k to
-//                      the cells' edge neighbours, F_meas = F(A_k) + what the correction took
-//                      off the force (coupling k; the steps measured again at 8 couplings from 0.01
-//                      to 0.2, measure_crosstalk_views, and interpolated between them)
+//                      the cells' edge neighbours, F_meas = g F(A_k) + s: g = (measured - s) /
+//                      corrected, the region's own load as mixing raised it (held to
+//                      [0, 1 + 4 k]), s what its cells read of other regions' cells (coupling
+//                      k; the steps measured again at 8 couplings from 0.01 to 0.2,
+//                      measure_crosstalk_views, and interpolated between them)
 // LP_tau is a first-order lag running through the foot's steps in time order (the lag carried
 // into a step is that of the measured force of the foot's earlier steps, decayed over the
 // swing).
@@ -351,8 +353,8 @@ struct DiscrepancyResult {
   int ceiling_plateau_steps = -1;
   NeighbourShare neighbour_share;  ///< the input's (DiscrepancySettings::min_neighbour_share)
   /// With a second, both as fitted once more with the other in place where that predicts the
-  /// held-out steps better (as fit_extended_model); second_candidates have the first as named
-  /// alone.
+  /// held-out steps better and leaves every parameter its standard error (as fit_extended_model);
+  /// second_candidates have the first as named alone.
   std::vector<EffectEstimate> named_effects;
   /// The candidate whose held-out deviance falls most below the baseline's, and why it was not
   /// named, in words (empty where it was): a clear gain can still leave a parameter
@@ -374,15 +376,15 @@ struct DiscrepancyResult {
 /// Runs the workflow. Deterministic. Throws std::invalid_argument for bad settings or fewer
 /// steps than folds. `on_progress`, if set, receives the fraction of the candidate fits done
 /// (their k-fold fits are nearly all of the time) after each candidate, on the calling thread;
-/// the second round counts the two named effects' fits once more (where a second is named)
-/// before its end.
+/// the second round keeps two of its shares for fitting the two named effects once more, and
+/// reports them at its end (1), whether or not a second was named.
 DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                                    const DiscrepancySettings& settings = {},
                                    const std::function<void(double)>& on_progress = {});
 
 /// The extended model with the named effects (in the given order, each fitted on top of the
-/// previous, then each once more with all the others in place: fit_extended_model), fitted on
-/// all steps: what `gaitmon analyze --effects` reports.
+/// previous, then each once more with all the others in place where that is kept:
+/// fit_extended_model), fitted on all steps: what `gaitmon analyze --effects` reports.
 struct ExtendedModelFit {
   std::vector<EffectEstimate> effects;
   double baseline_nrmse_pct = 0.0;  ///< pooled, in sample
@@ -402,13 +404,14 @@ class FitStopped : public std::runtime_error {
 };
 
 /// Throws std::invalid_argument for an unknown or repeated name, fewer steps than folds, or
-/// crosstalk named for steps not measured again for it (extended_model_input does), and
-/// FitStopped soon after `stop` is requested (the live monitor's shutdown on a signal).
-/// The effects are fitted one after another in the order given, each on top of those before it;
-/// with two or more, each is then fitted once more with all the others in place, and that round
-/// is kept where it predicts the held-out steps better and leaves every parameter a standard
-/// error. `on_progress`, if set, receives the fraction of those fits done after each of the
-/// first round and at the end, on the calling thread.
+/// crosstalk named for steps not measured again for it (extended_model_input does) or where no
+/// region-step has a series corrected for it (the views measured from another area source than
+/// the analyses), and FitStopped soon after `stop` is requested (the live monitor's shutdown on
+/// a signal). The effects are fitted one after another in the order given, each on top of those
+/// before it; with two or more, each is then fitted once more with all the others in place, and
+/// that round is kept where it predicts the held-out steps better and no parameter loses the
+/// standard error it had. `on_progress`, if set, receives the fraction of those fits done after
+/// each of the first round and at the end, on the calling thread.
 ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     std::span<const std::string> effects,
                                     const DiscrepancySettings& settings = {},
