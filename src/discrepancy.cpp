@@ -648,14 +648,15 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
 // before it the widened footprint (0.43 for 0.2). One round of coordinate descent fits each
 // again, in order and in its place in the chain, with all the others in place; it took those to
 // 85 bits and 0.21. The round ends on the last effect, held out as in `last`, the outcome of the
-// fit one after another, so the two held-out errors hold out the same parameters; the round is
-// kept where it predicts the held-out steps better and no parameter loses the standard error
-// it had one after another, `had_se`, one per effect of `chosen` (a second effect that only
-// takes up what the first's form leaves can otherwise draw the first off). One that had none,
-// an effect the data do not show listed with others (`analyze --effects`), does not hold the
-// others back: a listed creep at its bounds kept a ceiling at 104 bits for 85. Returns the
-// refits in the order of `chosen`, whose parameters they then replace; none where the round is
-// not kept or there is one effect.
+// fit one after another, so the two held-out errors hold out the same parameters (in both the
+// earlier effects' are fitted on all steps, so the refit, whose earlier effects saw the later
+// ones, holds out a little less than it seems); the round is kept where it predicts the held-out
+// steps better and no parameter loses the standard error it had one after another, `had_se`, one
+// per effect of `chosen` (a second effect that only takes up what the first's form leaves can
+// otherwise draw the first off). One that had none, an effect the data do not show listed with
+// others (`analyze --effects`), does not hold the others back: a listed creep at its bounds kept a
+// ceiling at 104 bits for 85. Returns the refits in the order of `chosen`, whose parameters they
+// then replace; none where the round is not kept or there is one effect.
 std::vector<CandidateOutcome> refit_together(const std::vector<Unit>& units, const Pooled& pooled,
                                              std::vector<FixedEffect>& chosen,
                                              std::span<const std::vector<double>> had_se,
