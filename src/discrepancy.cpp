@@ -786,8 +786,10 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
       // The frames the tissue fit was given: without a measured area the model has nothing to
       // say. And at the heel, the stance frames before the first of them in which it already
       // reads a load: a heel strike with a few cells, whose area the cells do not give, where
-      // the model expects next to nothing. Only an impact acts there; without one the stance
-      // starts (40 N) when the heel's footprint is already determined.
+      // the model expects next to nothing. They are kept only where some of them carry more
+      // than the first frame with an area, a pulse ahead of the loading: a light walker's heel
+      // takes its load too gently for its cells to give a footprint (at 25 kg up to 171 N before
+      // the first), and a load that only rises into that frame is no impact.
       std::vector<std::size_t> frames;
       for (std::size_t i = 0; i < ra.series.t_s.size(); ++i) {
         if (ra.series.area_mm2[i] > 0.0) {
@@ -795,6 +797,16 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
         } else if (region == Region::Heel && frames.empty() && ra.series.force_n[i] > 0.0) {
           frames.push_back(i);
         }
+      }
+      const auto first_area = std::find_if(
+          frames.begin(), frames.end(), [&](std::size_t i) { return ra.series.area_mm2[i] > 0.0; });
+      if (first_area != frames.begin()) {
+        double before = 0.0;
+        for (auto it = frames.begin(); it != first_area; ++it) {
+          before = std::max(before, ra.series.force_n[*it]);
+        }
+        const bool pulse = first_area != frames.end() && before > ra.series.force_n[*first_area];
+        if (!pulse) frames.erase(frames.begin(), first_area);
       }
       RegionSeries contact;
       for (std::size_t i : frames) {
@@ -1409,14 +1421,15 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.map_after = residual_map(units, ext_preds, settings.phase_bins);
   out.regions = compare_regions(units, base, heldout);
 
-  // Where: the cells whose residual exceeds the noise floor most.
-  std::vector<ResidualCell> cells;
-  for (const ResidualCell& c : out.map_before.cells) {
-    if (c.samples > 0) cells.push_back(c);
-  }
+  // Where: the cells whose residual exceeds the noise floor most; none under it, which would be
+  // listed as what the model misses where it is only the noise.
   const auto excess = [](const ResidualCell& c) {
     return c.rms_n * c.rms_n - c.noise_floor_n * c.noise_floor_n;
   };
+  std::vector<ResidualCell> cells;
+  for (const ResidualCell& c : out.map_before.cells) {
+    if (c.samples > 0 && excess(c) > 0.0) cells.push_back(c);
+  }
   std::stable_sort(cells.begin(), cells.end(), [&](const ResidualCell& a, const ResidualCell& b) {
     return excess(a) > excess(b);
   });

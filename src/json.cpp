@@ -14,6 +14,13 @@ void to_json(nlohmann::json& j, const EllipsoidParams& p) {
        {"m", p.m}};
 }
 
+void to_json(nlohmann::json& j, const RegionComparison& c) {
+  const auto nrmse = [&](double pct) { return c.step_regions > 0 ? nlohmann::json(pct) : nullptr; };
+  j = {{"step_regions", c.step_regions},
+       {"baseline_heldout_nrmse_pct", nrmse(c.baseline_heldout_nrmse_pct)},
+       {"extended_heldout_nrmse_pct", nrmse(c.extended_heldout_nrmse_pct)}};
+}
+
 std::string json_file_text(const nlohmann::json& j) {
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }

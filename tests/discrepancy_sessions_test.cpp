@@ -49,6 +49,7 @@ struct SessionCase {
   double duration_s = 12.0;
   double noise_sd_bits = SimulationOptions{}.noise_sd_bits;
   int max_bias_bits = SimulationOptions{}.max_bias_bits;
+  double body_mass_kg = SimulationOptions{}.body_mass_kg;
 };
 
 // Simulates the case into `dir`; returns the session CSV (and the truth, where asked).
@@ -60,6 +61,7 @@ std::filesystem::path simulated(const SessionCase& c, const std::filesystem::pat
   o.size = c.size;
   o.noise_sd_bits = c.noise_sd_bits;
   o.max_bias_bits = c.max_bias_bits;
+  o.body_mass_kg = c.body_mass_kg;
   if (c.effect != "none") {
     o.effects = {c.effect};
     o.effect_params[c.effect] = c.params;
@@ -460,6 +462,27 @@ TEST(DiscrepancySessions, NothingIsNamedInTheSmallestSizeWithoutAnEffect) {
     fmt::print("size 35-36 seed {}: held-out {:.2f} %, best candidate {} {:+.1f} %\n", seed,
                r.baseline_heldout_nrmse_pct, best_name, best);
     EXPECT_TRUE(r.named_effects.empty()) << "seed " << seed << ": " << r.named_effects.front().name;
+  }
+}
+
+// A light walker's heel takes its load too gently for its cells to give a footprint in the
+// first frames (at 25 kg up to 171 N before the first). Those frames, where the model has no
+// area and says nothing, were compared as an impact's, and these sessions without an effect
+// named impact_transient (78-98 N over 13-20 ms, gap 36-51 %).
+TEST(DiscrepancySessions, ALightWalkersHeelStrikeIsNoImpact) {
+  if (kSanitized) {
+    GTEST_SKIP() << "three simulated sessions with per-step Ceres fits take too long under the "
+                    "sanitizers; the workflow's code runs under them in discrepancy_test";
+  }
+  const auto dir = test::scratch_dir("discrepancy-light-walker");
+  for (const auto& [mass, seed] : {std::pair{25.0, 4u}, std::pair{30.0, 3u}, std::pair{30.0, 4u}}) {
+    SessionCase c{"none", {}, InsoleSize::S41_42, seed};
+    c.body_mass_kg = mass;
+    const DiscrepancyResult r = run(c, dir);
+    fmt::print("{} kg, seed {}: named {}\n", mass, seed,
+               r.named_effects.empty() ? "none" : r.named_effects.front().name);
+    EXPECT_TRUE(r.named_effects.empty())
+        << mass << " kg, seed " << seed << ": " << r.named_effects.front().name;
   }
 }
 

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -187,6 +188,15 @@ TEST_P(CleanSeries, NamesTheEffectAndClosesTheHeldOutGap) {
   EXPECT_TRUE(std::is_sorted(progress.begin(), progress.end()));
   EXPECT_GT(progress.front(), 0.0);
   EXPECT_EQ(progress.back(), 1.0);
+  // `where` lists only cells above their noise floor, furthest first (it had listed ten
+  // whatever their excess, most of them under it where there is no effect).
+  double last_excess = std::numeric_limits<double>::infinity();
+  for (const ResidualCell& cell : r.where) {
+    const double excess = cell.rms_n * cell.rms_n - cell.noise_floor_n * cell.noise_floor_n;
+    EXPECT_GT(excess, 0.0) << region_name(cell.region) << " bin " << cell.bin;
+    EXPECT_LE(excess, last_excess);
+    last_excess = excess;
+  }
   if (expected == "none") {
     EXPECT_TRUE(r.named_effects.empty()) << named(r);
     EXPECT_FALSE(r.not_named_reason.empty());
@@ -196,6 +206,7 @@ TEST_P(CleanSeries, NamesTheEffectAndClosesTheHeldOutGap) {
   EXPECT_TRUE(r.not_named_reason.empty()) << r.not_named_reason;
   EXPECT_EQ(r.named_effects.front().name, expected);
   EXPECT_GE(r.gap_shrink_pct, 40.0) << expected;
+  EXPECT_FALSE(r.where.empty()) << expected;
 }
 
 // "none" with a ceiling stands for sensor saturation at region level (no cells here).

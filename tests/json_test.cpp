@@ -19,5 +19,18 @@ TEST(Json, EllipsoidParamsCarryEveryParameterWithItsUnit) {
   EXPECT_EQ(j.at("m"), 1.18);
 }
 
+// A region no step-region of which was fitted (a toe on the contact ellipse) had errors of 0,
+// which read as a perfect fit.
+TEST(Json, ARegionComparisonWithoutStepRegionsHasNoErrors) {
+  const nlohmann::json fitted = RegionComparison{Region::Heel, 12, 1.5, 0.9};
+  EXPECT_EQ(fitted.at("step_regions"), 12);
+  EXPECT_EQ(fitted.at("baseline_heldout_nrmse_pct"), 1.5);
+  EXPECT_EQ(fitted.at("extended_heldout_nrmse_pct"), 0.9);
+  const nlohmann::json none = RegionComparison{Region::Toe2, 0, 0.0, 0.0};
+  EXPECT_EQ(none.at("step_regions"), 0);
+  EXPECT_TRUE(none.at("baseline_heldout_nrmse_pct").is_null());
+  EXPECT_TRUE(none.at("extended_heldout_nrmse_pct").is_null());
+}
+
 }  // namespace
 }  // namespace gaitmon

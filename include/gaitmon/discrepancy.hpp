@@ -364,7 +364,7 @@ struct DiscrepancyResult {
   std::string not_named_reason;
   std::vector<CandidateResult> candidates;         ///< each on top of the baseline
   std::vector<CandidateResult> second_candidates;  ///< each on top of the first named effect
-  std::vector<ResidualCell> where;                 ///< top cells by excess over the noise floor
+  std::vector<ResidualCell> where;  ///< top cells by excess over the noise floor, none under it
   ResidualMap map_before;
   ResidualMap map_after;
   std::vector<RegionComparison> regions;

@@ -112,15 +112,17 @@ struct EffectParamReport {
   std::string effect;  ///< discrepancy_effect_names()
   std::string name;    ///< the parameter, its unit in the name (tau_s, amplitude_n, ...)
   double value = 0.0;
-  double se = 0.0;  ///< standard error; NaN when the optimum is on a bound
+  double se = 0.0;  ///< standard error; NaN where the data do not determine the parameter (an
+                    ///< optimum on a bound or along a flat direction)
 };
 
-/// The extended tissue model ([model] effects) fitted to the latest complete steps of both feet,
-/// as `gaitmon analyze --effects` fits it to a whole session (GAITMON_EFFECTS).
+/// The extended tissue model ([model] effects) fitted to the latest complete steps of both feet
+/// (of the first analysed step's insole size; another's are left out with a warning), as
+/// `gaitmon analyze --effects` fits it to a whole session (GAITMON_EFFECTS).
 struct EffectsReport {
   std::int64_t utime = 0;
   bool final_estimate = false;  ///< the last one of the run, published at shutdown
-  int steps = 0;                ///< complete steps the fit used
+  int steps = 0;                ///< complete steps in the window the fit was given
   double t_first_heel_strike_s = 0.0;
   double t_last_toe_off_s = 0.0;
   double baseline_nrmse_pct = 0.0;  ///< pooled, in sample, without the effects

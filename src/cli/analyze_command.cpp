@@ -252,9 +252,7 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
   }
   nlohmann::json regions = nlohmann::json::object();
   for (const RegionComparison& c : fit->regions) {
-    regions[std::string(region_name(c.region))] = {
-        {"baseline_heldout_nrmse_pct", c.baseline_heldout_nrmse_pct},
-        {"extended_heldout_nrmse_pct", c.extended_heldout_nrmse_pct}};
+    regions[std::string(region_name(c.region))] = c;
   }
   return {{"effects", effects},
           {"note",
@@ -401,7 +399,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   const Config config = load_global_config(global);
   const AnalysisSettings settings = settings_from(args);
   check_output_dir(args.out_dir, "--out");
-  OutputSet outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"});
+  OutputSet outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"},
+                    args.session);
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
 

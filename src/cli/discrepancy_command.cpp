@@ -142,10 +142,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
   j["second_candidates"] = candidates_json(r.second_candidates);
   nlohmann::json regions = nlohmann::json::object();
   for (const RegionComparison& c : r.regions) {
-    regions[std::string(region_name(c.region))] = {
-        {"step_regions", c.step_regions},
-        {"baseline_heldout_nrmse_pct", c.baseline_heldout_nrmse_pct},
-        {"extended_heldout_nrmse_pct", c.extended_heldout_nrmse_pct}};
+    regions[std::string(region_name(c.region))] = c;
   }
   j["regions"] = regions;
   j["residual_map_before"] = map_json(r.map_before);
@@ -192,7 +189,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const Config config = load_global_config(global);
   check_output_dir(args.out_dir, "--out");
-  OutputSet outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"});
+  OutputSet outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"}, args.session);
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
   std::vector<Step> steps;

@@ -246,6 +246,9 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
         c.noise_floor_n);
   }
   where += "</table>";
+  if (r.where.empty()) {
+    where = "<p>No region and phase has a residual above its noise floor.</p>";
+  }
 
   std::string diag = "<table><tr><th>state</th><th>correlation with residual</th></tr>";
   for (const StateCorrelation& c : r.diagnostics.correlations) {

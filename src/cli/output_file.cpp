@@ -3,12 +3,14 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <stdexcept>
+#include <system_error>
 #include <utility>
 
 namespace gaitmon::cli {
@@ -38,13 +40,37 @@ void check_output_dir(const std::filesystem::path& dir, const std::string& optio
   if (dir.empty()) throw CLI::ValidationError(option, "the path is empty");
   std::error_code ec;
   const auto status = std::filesystem::status(dir, ec);
-  if (!ec && std::filesystem::exists(status) && !std::filesystem::is_directory(status)) {
-    throw CLI::ValidationError(option, dir.string() + " exists and is not a folder");
+  if (ec && ec != std::errc::no_such_file_or_directory) {
+    throw CLI::ValidationError(option, dir.string() + ": " + ec.message());
+  }
+  if (std::filesystem::exists(status)) {
+    if (!std::filesystem::is_directory(status)) {
+      throw CLI::ValidationError(option, dir.string() + " exists and is not a folder");
+    }
+    return;
+  }
+  std::filesystem::path parent = std::filesystem::absolute(dir).parent_path();
+  while (!std::filesystem::exists(parent, ec) && parent.has_relative_path()) {
+    parent = parent.parent_path();
+  }
+  if (::access(parent.c_str(), W_OK | X_OK) != 0) {
+    throw CLI::ValidationError(
+        option, dir.string() + " cannot be made: " + parent.string() + ": " + std::strerror(errno));
   }
 }
 
 void remove_earlier_outputs(const std::filesystem::path& dir,
-                            std::initializer_list<std::string_view> names) {
+                            std::initializer_list<std::string_view> names,
+                            const std::filesystem::path& input) {
+  for (const std::string_view name : names) {
+    std::error_code ec;
+    if (std::filesystem::equivalent(dir / name, input, ec)) {
+      throw CLI::ValidationError("--out", (dir / name).string() +
+                                              " is the file this command reads, and a run "
+                                              "replaces it with its own output: give another "
+                                              "folder");
+    }
+  }
   std::vector<std::string> removed;
   for (const std::string_view name : names) {
     const std::filesystem::path path = dir / name;
@@ -115,9 +141,10 @@ void OutputFile::commit_all(std::span<OutputFile* const> files) {
   }
 }
 
-OutputSet::OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names)
+OutputSet::OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names,
+                     const std::filesystem::path& input)
     : dir_(std::move(dir)), names_(names.begin(), names.end()) {
-  remove_earlier_outputs(dir_, names);
+  remove_earlier_outputs(dir_, names, input);
 }
 
 void OutputSet::add(std::string_view name, std::string_view text) {

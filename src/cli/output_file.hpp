@@ -19,16 +19,21 @@ namespace gaitmon::cli {
 /// CLI::ValidationError naming `option` (a usage error, exit 2).
 void check_output_path(const std::filesystem::path& path, const std::string& option);
 
-/// Refuses, before any work, an output folder that cannot be one: an empty path, or an existing
-/// node that is not a folder. Throws CLI::ValidationError naming `option` (a usage error, exit 2).
+/// Refuses, before any work, an output folder that cannot be one: an empty path, an existing
+/// node that is not a folder, a path that cannot be looked up (a file on the way), or a new
+/// folder whose nearest existing parent this user cannot write in (found only after the work
+/// otherwise). Throws CLI::ValidationError naming `option` (a usage error, exit 2).
 void check_output_dir(const std::filesystem::path& dir, const std::string& option);
 
 /// Removes the files `names` (a command's whole set of outputs) that an earlier run left in `dir`,
 /// before this run starts: a run that fails then leaves none of them, where the earlier run's
-/// complete set would look like its own. Logs what it removed. Throws std::runtime_error naming
-/// a file that cannot be removed.
+/// complete set would look like its own. Logs what it removed. Throws CLI::ValidationError
+/// naming --out, before removing anything, where one of them is `input`, the file the command
+/// reads (a session copied in as steps.csv would be deleted), and std::runtime_error naming a
+/// file that cannot be removed.
 void remove_earlier_outputs(const std::filesystem::path& dir,
-                            std::initializer_list<std::string_view> names);
+                            std::initializer_list<std::string_view> names,
+                            const std::filesystem::path& input);
 
 class OutputFile {
  public:
@@ -66,8 +71,9 @@ class OutputFile {
 /// removes and what it writes is one list.
 class OutputSet {
  public:
-  /// remove_earlier_outputs(dir, names).
-  OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names);
+  /// remove_earlier_outputs(dir, names, input).
+  OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names,
+            const std::filesystem::path& input);
   /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file, and
   /// std::logic_error for a name the set was not made with.
   void add(std::string_view name, std::string_view text);

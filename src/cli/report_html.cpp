@@ -476,15 +476,16 @@ std::string render_report_html(const ReportInput& in) {
     fmt::format_to(std::back_inserter(out),
                    "<p class=\"note\">C and d0 are <b>declared</b>, not fitted: force and contact "
                    "area cannot determine them. They are the seed's Appendix I means for insole "
-                   "{}; A/B is the median measured contact-ellipse aspect with P = &pi;AB from "
-                   "Appendix I. kbar and cbar are derived under those declared values, so compare "
+                   "{}; A/B is the median measured contact-ellipse aspect with P = &pi;AB {}. "
+                   "kbar and cbar are derived under those declared values, so compare "
                    "them with Appendix I only with that in mind. Per region: the typical step is "
                    "the one with the median NRMSE; boxes span the interquartile range with the "
                    "median; orange marks Appendix I's mean &plusmn; SD. The pooled mean comes "
                    "from pooling the steps' fits, each with its own uncertainty; the "
                    "between-step SD is how much the tissue itself seems to vary beyond those "
                    "uncertainties (in % for kbar and cbar).</p>",
-                   insole_size_name(in.size));
+                   insole_size_name(in.size),
+                   fit.free_scale ? "fitted per region-step (--free-scale)" : "from Appendix I");
   }
   out += "<p>Regions:";
   for (Region region : kRegions) {

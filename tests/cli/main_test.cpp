@@ -222,6 +222,24 @@ TEST(Cli, AnOutFolderThatCannotBeOneIsAUsageErrorBeforeAnyWork) {
   }
 }
 
+// A session kept in the output folder under the name of one of the command's outputs was
+// deleted, as an earlier run's output, before it was read.
+TEST(Cli, TheSessionIsNeverRemovedAsAnEarlierRunsOutput) {
+  const auto dir = test::scratch_dir("cli-out-input");
+  const std::string demo = read_all(test::demo_session());
+  for (const std::string command : {"segment", "analyze", "discrepancy"}) {
+    const std::string name = command == "discrepancy" ? "discrepancy.json" : "steps.csv";
+    const std::string session = test::write_text(dir / name, demo).string();
+    int status = -1;
+    const std::string out = run(command + " " + session + " --out " + dir.string(), &status);
+    EXPECT_EQ(status, 2) << command << "\n" << out;
+    EXPECT_NE(out.find("--out: " + session + " is the file this command reads"), std::string::npos)
+        << command << "\n"
+        << out;
+    EXPECT_EQ(read_all(session), demo) << command;
+  }
+}
+
 // A failed rerun into the folder of a successful run left that run's files, which looked like
 // this run's: now none of the command's outputs is left, and other files are kept.
 TEST(Cli, AFailedRerunLeavesNoneOfTheCommandsEarlierOutputs) {

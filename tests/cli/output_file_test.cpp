@@ -35,7 +35,7 @@ std::string read(const fs::path& path) {
 
 TEST(OutputFile, NothingHasItsFinalNameUntilTheSetIsCommitted) {
   const fs::path dir = test::scratch_dir("output_commit");
-  OutputSet set(dir, {"steps.csv", "session.json"});
+  OutputSet set(dir, {"steps.csv", "session.json"}, {});
   set.add("steps.csv", "a,b\n1,2\n");
   set.add("session.json", "{}\n");
   EXPECT_EQ(names_in(dir), (std::vector<std::string>{"session.json.partial", "steps.csv.partial"}));
@@ -50,7 +50,7 @@ TEST(OutputFile, NothingHasItsFinalNameUntilTheSetIsCommitted) {
 TEST(OutputFile, ASetThatIsNeverCommittedLeavesNothingBehind) {
   const fs::path dir = test::scratch_dir("output_abandoned");
   {
-    OutputSet set(dir, {"regions.csv"});
+    OutputSet set(dir, {"regions.csv"}, {});
     set.add("regions.csv", "foot,step\n");
   }
   EXPECT_TRUE(names_in(dir).empty());
@@ -59,7 +59,7 @@ TEST(OutputFile, ASetThatIsNeverCommittedLeavesNothingBehind) {
 TEST(OutputFile, AFailedRenameTakesBackTheFilesAlreadyPublished) {
   const fs::path dir = test::scratch_dir("output_rename_fails");
   {
-    OutputSet set(dir, {"steps.csv", "session.json"});
+    OutputSet set(dir, {"steps.csv", "session.json"}, {});
     // A folder that is not empty cannot be replaced by a file, so the second rename fails.
     test::write_text(dir / "session.json" / "keep", "x");
     set.add("steps.csv", "new\n");
@@ -104,16 +104,16 @@ TEST(OutputFile, AnEarlierRunsOutputsAreRemovedAndOtherFilesKept) {
   test::write_text(dir / "report.html", "old\n");
   test::write_text(dir / "steps.csv", "old\n");
   test::write_text(dir / "notes.txt", "mine\n");
-  remove_earlier_outputs(dir, {"steps.csv", "report.html", "never_written.html"});
+  remove_earlier_outputs(dir, {"steps.csv", "report.html", "never_written.html"}, {});
   EXPECT_EQ(names_in(dir), std::vector<std::string>{"notes.txt"});
-  remove_earlier_outputs(dir / "not_there", {"steps.csv"});
+  remove_earlier_outputs(dir / "not_there", {"steps.csv"}, {});
 }
 
 TEST(OutputFile, AnEarlierOutputThatCannotBeRemovedIsNamedInTheError) {
   const fs::path dir = test::scratch_dir("output_earlier_stays");
   test::write_text(dir / "report.html" / "keep", "x");
   try {
-    remove_earlier_outputs(dir, {"report.html"});
+    remove_earlier_outputs(dir, {"report.html"}, {});
     FAIL() << "removed a folder that is not empty";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find((dir / "report.html").string() +
@@ -128,7 +128,7 @@ TEST(OutputFile, ASetRemovesTheEarlierRunsFilesOfItsNamesAndWritesNoOther) {
   const fs::path dir = test::scratch_dir("output_set_names");
   test::write_text(dir / "steps.csv", "earlier\n");
   test::write_text(dir / "notes.txt", "mine\n");
-  OutputSet set(dir, {"steps.csv", "report.html"});
+  OutputSet set(dir, {"steps.csv", "report.html"}, {});
   EXPECT_EQ(names_in(dir), std::vector<std::string>{"notes.txt"});
   set.add("steps.csv", "new\n");
   EXPECT_THROW(set.add("notes.txt", "overwritten\n"), std::logic_error);
@@ -141,14 +141,50 @@ TEST(OutputFile, AnOutputFolderMustBeAFolderOrNotExistYet) {
   const fs::path dir = test::scratch_dir("output_dir_check");
   EXPECT_NO_THROW(check_output_dir(dir, "--out"));
   EXPECT_NO_THROW(check_output_dir(dir / "new", "--out"));
+  EXPECT_NO_THROW(check_output_dir(dir / "new" / "newer", "--out"));
   EXPECT_THROW(check_output_dir("", "--out"), CLI::ValidationError);
-  EXPECT_THROW(check_output_dir(test::write_text(dir / "file", "x"), "--out"),
-               CLI::ValidationError);
+  const fs::path file = test::write_text(dir / "file", "x");
+  EXPECT_THROW(check_output_dir(file, "--out"), CLI::ValidationError);
+  // A file on the way: this was found only when the outputs were written, as exit 1.
+  try {
+    check_output_dir(file / "sub", "--out");
+    FAIL() << "a folder under a file passed";
+  } catch (const CLI::ValidationError& e) {
+    EXPECT_NE(std::string(e.what()).find((file / "sub").string() + ": Not a directory"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// A session copied into the output folder under an output's name was deleted as an earlier
+// run's output before it was read (`analyze out/steps.csv --out out`).
+TEST(OutputFile, TheFileACommandReadsIsNeverRemovedAsAnEarlierOutput) {
+  const fs::path dir = test::scratch_dir("output_input");
+  const fs::path session = test::write_text(dir / "steps.csv", "a session\n");
+  fs::create_directories(dir / "other");
+  const fs::path link = dir / "other" / "session.json";
+  fs::create_symlink(session, link);
+  for (const fs::path& input : {session, link}) {
+    try {
+      remove_earlier_outputs(dir, {"session.json", "steps.csv"}, input);
+      FAIL() << "removed the input " << input;
+    } catch (const CLI::ValidationError& e) {
+      EXPECT_NE(std::string(e.what()).find((dir / "steps.csv").string() +
+                                           " is the file this command reads"),
+                std::string::npos)
+          << e.what();
+    }
+    EXPECT_EQ(read(session), "a session\n");
+  }
+  // Through the link the input is also an output's name there: that one goes neither.
+  EXPECT_THROW(OutputSet(dir / "other", {"session.json"}, session), CLI::ValidationError);
+  EXPECT_EQ(read(session), "a session\n");
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(link)));
 }
 
 TEST(OutputFile, AFolderThatCannotBeWrittenIsNamedInTheError) {
   const fs::path dir = test::scratch_dir("output_missing") / "not_there";
-  OutputSet set(dir, {"steps.csv"});
+  OutputSet set(dir, {"steps.csv"}, {});
   try {
     set.add("steps.csv", "x\n");
     FAIL() << "created a file in a folder that does not exist";

@@ -119,7 +119,15 @@ TEST(ReportHtml, SummarisesTheSessionAndItsSettings) {
                   "smoothing none, contact area footprint. Median total-force NRMSE 2.5 % "
                   "(IQR 1.0 %).</p>"));
   EXPECT_TRUE(has(html, "C and d0 are <b>declared</b>, not fitted"));
+  EXPECT_TRUE(has(html, "with P = &pi;AB from Appendix I."));
   EXPECT_FALSE(has(html, "<b>--fit seed8</b>"));
+
+  // With --free-scale the note had still said that P comes from Appendix I.
+  Fixture free_scale;
+  free_scale.settings.fit.free_scale = true;
+  const std::string scaled = render_report_html(free_scale.input());
+  EXPECT_TRUE(has(scaled, "with P = &pi;AB fitted per region-step (--free-scale)."));
+  EXPECT_FALSE(has(scaled, "from Appendix I."));
 
   Fixture seed8;
   seed8.settings.fit.mode = FitMode::Seed8;
