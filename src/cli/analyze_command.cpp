@@ -565,6 +565,12 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                               "default: [model] effects of the config",
                               fmt::join(discrepancy_effect_names(), ", ")))
       ->delimiter(',')
+      ->check(CLI::Validator(
+          [](const std::string& name) {
+            return name.empty() ? std::string("an empty effect name (none for no effect)")
+                                : std::string();
+          },
+          ""))
       ->check(CLI::IsMember(effect_names_or_none()));
   sub->callback([&global, args, sub] {
     args->effects_given = sub->count("--effects") > 0;

@@ -45,6 +45,7 @@ CLI::Validator session_file_read_twice() {
         std::error_code ec;
         const auto status = std::filesystem::status(text, ec);
         if (ec || !std::filesystem::exists(status)) return "File does not exist: " + text;
+        if (std::filesystem::is_directory(status)) return text + " is a folder, not a session";
         if (!std::filesystem::is_regular_file(status)) {
           return text + " is not a regular file; this command reads a session twice, which a " +
                  "pipe cannot give (save it to a file first)";

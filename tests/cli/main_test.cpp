@@ -320,6 +320,17 @@ TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
   EXPECT_NE(out.find("--effects: none cannot be combined with an effect"), std::string::npos)
       << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "a"));
+  // An empty name was "--effects:  not in {...}", the name itself invisible.
+  out = run("analyze " + demo + " --out " + (dir / "a").string() + " --effects ''", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--effects: an empty effect name (none for no effect)"), std::string::npos)
+      << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "a"));
+  // A folder as the session was "not a regular file; ... which a pipe cannot give".
+  out = run("analyze " + dir.string() + " --out " + (dir / "a").string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("session: " + dir.string() + " is a folder, not a session"), std::string::npos)
+      << out;
 
   out = run("segment", &status);
   EXPECT_EQ(status, 2) << out;
