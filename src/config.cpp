@@ -282,6 +282,11 @@ void read_segmentation(TableReader table, double sample_rate_hz,
   segmentation.event_threshold_bits = integer_in(table, "event_threshold_bits", 1, kMaxSummedBits);
   segmentation.debounce_frames = integer_in(table, "debounce_frames", 1, 100);
   segmentation.swing_window_frames = integer_in(table, "swing_window_frames", 1, 100);
+  segmentation.threshold_noise_sds = number_at_least(table, "threshold_noise_sds", 0.0);
+  if (segmentation.threshold_noise_sds > 20.0) {
+    table.fail("threshold_noise_sds",
+               fmt::format("must be <= 20, got {}", segmentation.threshold_noise_sds));
+  }
   // Frame intervals jitter around one sample period (0.0099-0.0100 s in the real recordings at
   // 100 Hz): a limit within half a period of it would cut a steady stream.
   segmentation.max_gap_s = number_above(table, "max_gap_s", 1.5 / sample_rate_hz);

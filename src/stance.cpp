@@ -215,10 +215,13 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
   // would have set it for the insole without crosstalk. (Held at the mixed readings' threshold,
   // the corrected footprints lost their rim and came out smaller and more scattered than the
   // same session's without crosstalk: heel area RMS 98 mm^2 off it at size 37-38, 83 uncorrected.)
-  const double threshold_bits = crosstalk != nullptr && step.max_summed_bits > 0.0
-                                    ? step.adaptive_threshold_bits *
-                                          std::max(0.0, corrected_max_summed) / step.max_summed_bits
-                                    : step.adaptive_threshold_bits;
+  // The noise floor under it stays: undoing the mixing lowers the highest sum, not the noise.
+  const double threshold_bits =
+      crosstalk != nullptr && step.max_summed_bits > 0.0
+          ? std::max(step.threshold_floor_bits, step.adaptive_threshold_bits *
+                                                    std::max(0.0, corrected_max_summed) /
+                                                    step.max_summed_bits)
+          : step.adaptive_threshold_bits;
   for (std::size_t f = 0; f < step.stance.size(); ++f) {
     auto samples =
         measure_readings(readings[f], threshold_bits, layout, calibration, f == 0, cache, scratch);

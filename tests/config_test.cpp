@@ -111,6 +111,7 @@ TEST(Config, ShippedConfigHasTheDocumentedDefaults) {
   EXPECT_EQ(config.segmentation.event_threshold_bits, 142);
   EXPECT_EQ(config.segmentation.debounce_frames, 5);
   EXPECT_EQ(config.segmentation.swing_window_frames, 5);
+  EXPECT_DOUBLE_EQ(config.segmentation.threshold_noise_sds, 4.0);
   EXPECT_DOUBLE_EQ(config.segmentation.max_gap_s, 0.055);
   // Seed Table 2.
   const std::vector<double> threshold_pct{0.2, 0.2, 0.1, 0.1, 0.2, 0.2};
@@ -259,6 +260,7 @@ TEST(Config, AcceptsBoundaryValuesAndAnAbsoluteInsolesPath) {
   edit_file(main, replace("event_threshold_bits = 142", "event_threshold_bits = 41055"));
   edit_file(main, replace("debounce_frames = 5", "debounce_frames = 100"));
   edit_file(main, replace("swing_window_frames = 5", "swing_window_frames = 1"));
+  edit_file(main, replace("threshold_noise_sds = 4", "threshold_noise_sds = 0"));
   // 1.5 periods at 10 kHz are 0.00015 s.
   edit_file(main, replace("max_gap_s = 0.055", "max_gap_s = 0.0002"));
   edit_file(elsewhere / "layouts.toml", replace("[sizes.\"37-38\"]", "adaptive_threshold_pct = 0.2",
@@ -271,6 +273,7 @@ TEST(Config, AcceptsBoundaryValuesAndAnAbsoluteInsolesPath) {
   EXPECT_EQ(config.segmentation.event_threshold_bits, 41055);
   EXPECT_EQ(config.segmentation.debounce_frames, 100);
   EXPECT_EQ(config.segmentation.swing_window_frames, 1);
+  EXPECT_EQ(config.segmentation.threshold_noise_sds, 0.0);
   EXPECT_DOUBLE_EQ(config.segmentation.max_gap_s, 0.0002);
   EXPECT_DOUBLE_EQ(config.insole(InsoleSize::S37_38).adaptive_threshold_pct, 100.0);
 }
@@ -421,6 +424,10 @@ const Refusal kRefusals[] = {
      "segmentation.swing_window_frames", "must be in [1, 100]"},
     {"SwingWindowTooHigh", kMain, replace("swing_window_frames = 5", "swing_window_frames = 101"),
      "segmentation.swing_window_frames", "must be in [1, 100]"},
+    {"NoiseSdsNegative", kMain, replace("threshold_noise_sds = 4", "threshold_noise_sds = -0.5"),
+     "segmentation.threshold_noise_sds", "must be >= 0, got -0.5"},
+    {"NoiseSdsTooHigh", kMain, replace("threshold_noise_sds = 4", "threshold_noise_sds = 20.5"),
+     "segmentation.threshold_noise_sds", "must be <= 20, got 20.5"},
     {"MaxGapOneSamplePeriod", kMain, replace("max_gap_s = 0.055", "max_gap_s = 0.01"),
      "segmentation.max_gap_s", "must be > 0.015, got 0.01"},
     {"MaxGapNegative", kMain, replace("max_gap_s = 0.055", "max_gap_s = -1"),

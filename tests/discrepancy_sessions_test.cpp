@@ -469,13 +469,17 @@ TEST(DiscrepancySessions, NothingIsNamedInTheSmallestSizeWithoutAnEffect) {
 // first frames (at 25 kg up to 171 N before the first). Those frames, where the model has no
 // area and says nothing, were compared as an impact's, and these sessions without an effect
 // named impact_transient (78-98 N over 13-20 ms, gap 36-51 %).
-TEST(DiscrepancySessions, ALightWalkersHeelStrikeIsNoImpact) {
+// At 20 and 25 kg the threshold by the seed's rule alone was under one bit and took noise for
+// contact: hysteresis was named in three of these four sessions (strength 0.10-0.62). At 25-30 kg
+// the heel's frames before its first footprint were taken for an impact.
+TEST(DiscrepancySessions, NothingIsNamedForALightWalkerWithoutAnEffect) {
   if (kSanitized) {
-    GTEST_SKIP() << "three simulated sessions with per-step Ceres fits take too long under the "
+    GTEST_SKIP() << "six simulated sessions with per-step Ceres fits take too long under the "
                     "sanitizers; the workflow's code runs under them in discrepancy_test";
   }
   const auto dir = test::scratch_dir("discrepancy-light-walker");
-  for (const auto& [mass, seed] : {std::pair{25.0, 4u}, std::pair{30.0, 3u}, std::pair{30.0, 4u}}) {
+  for (const auto& [mass, seed] : {std::pair{20.0, 3u}, std::pair{20.0, 4u}, std::pair{25.0, 3u},
+                                   std::pair{25.0, 4u}, std::pair{30.0, 3u}, std::pair{30.0, 4u}}) {
     SessionCase c{"none", {}, InsoleSize::S41_42, seed};
     c.body_mass_kg = mass;
     const DiscrepancyResult r = run(c, dir);

@@ -125,6 +125,8 @@ void expect_same(const Step& a, const Step& b) {
   EXPECT_TRUE(same(a.pre_zero_t_s, b.pre_zero_t_s)) << a.pre_zero_t_s << " " << b.pre_zero_t_s;
   EXPECT_TRUE(same(a.post_zero_t_s, b.post_zero_t_s)) << a.post_zero_t_s << " " << b.post_zero_t_s;
   EXPECT_EQ(a.max_summed_bits, b.max_summed_bits);
+  EXPECT_EQ(a.zero_noise_sd_bits, b.zero_noise_sd_bits);
+  EXPECT_EQ(a.threshold_floor_bits, b.threshold_floor_bits);
   EXPECT_EQ(a.adaptive_threshold_bits, b.adaptive_threshold_bits);
   EXPECT_EQ(a.peak_force_n, b.peak_force_n);
   ASSERT_EQ(a.stance.size(), b.stance.size());
@@ -284,6 +286,84 @@ TEST(StepSegmenter, ZeroingRemovesANoisyBiasBelowTheThreshold) {
       zero_and_threshold(frame.bits, step.sensor_zero_bits, step.adaptive_threshold_bits, out);
       for (std::size_t s = kLoaded; s < kSensors; ++s) EXPECT_EQ(out[s], 0.0);
     }
+  }
+}
+
+TEST(AdaptiveThreshold, IsNeverBelowItsFloor) {
+  EXPECT_DOUBLE_EQ(adaptive_threshold_bits(2500.0, 0.2, 7.0), 7.0);
+  EXPECT_DOUBLE_EQ(adaptive_threshold_bits(2500.0, 0.2, 3.0), 5.0);
+  EXPECT_DOUBLE_EQ(adaptive_threshold_bits(-40.0, 0.2, -1.0), 0.0);
+}
+
+std::vector<Step> segment_with(const SegmentationSettings& settings,
+                               const std::vector<Frame>& frames) {
+  StepSegmenter segmenter(Foot::Left, kSensors, settings, 0.2, kNewtonsPerBit, {});
+  std::vector<Step> steps;
+  for (const Frame& f : frames) segmenter.push(f, steps);
+  segmenter.finish(steps);
+  return steps;
+}
+
+TEST(StepSegmenter, TheThresholdStaysAboveTheNoiseOfTheSwingWindows) {
+  // A light load (300 summed bits: 0.2 % of it is 0.6 bits) and every sensor reading one bit
+  // more in every other frame. In a window of 5 frames a sensor reads 1 in two or three of them:
+  // squared deviations from its window mean 1.2 either way, so a variance of 1.2 / 4 bits^2.
+  std::vector<Bump> bumps;
+  for (int i = 0; i < 3; ++i) bumps.push_back({50 + 100 * i, 60, 300.0});
+  const auto alternate = [](std::int64_t k, std::size_t) { return static_cast<int>(k % 2); };
+  const std::vector<Frame> frames = make_frames(360, bumps, alternate);
+  const double sd = std::sqrt(1.2 / 4.0);
+  SegmentationSettings settings = seed_settings();
+  ASSERT_EQ(settings.threshold_noise_sds, 4.0);
+  const std::vector<Step> floored = segment_with(settings, frames);
+  settings.threshold_noise_sds = 0.0;
+  const std::vector<Step> seed_rule = segment_with(settings, frames);
+  ASSERT_EQ(floored.size(), 3U);
+  ASSERT_EQ(seed_rule.size(), 3U);
+  for (std::size_t i = 0; i < floored.size(); ++i) {
+    SCOPED_TRACE("step " + std::to_string(i));
+    ASSERT_EQ(floored[i].status, StepStatus::Ok);
+    EXPECT_DOUBLE_EQ(floored[i].zero_noise_sd_bits, sd);
+    EXPECT_DOUBLE_EQ(floored[i].threshold_floor_bits, 4.0 * sd);
+    EXPECT_DOUBLE_EQ(floored[i].adaptive_threshold_bits, 4.0 * sd);
+    EXPECT_DOUBLE_EQ(seed_rule[i].zero_noise_sd_bits, sd);
+    EXPECT_EQ(seed_rule[i].threshold_floor_bits, 0.0);
+    EXPECT_DOUBLE_EQ(seed_rule[i].adaptive_threshold_bits,
+                     0.2 * seed_rule[i].max_summed_bits / 100.0);
+    EXPECT_LT(seed_rule[i].adaptive_threshold_bits, 1.0);
+    std::vector<double> out(kSensors);
+    for (const Frame& frame : floored[i].stance) {
+      zero_and_threshold(frame.bits, floored[i].sensor_zero_bits,
+                         floored[i].adaptive_threshold_bits, out);
+      for (std::size_t s = kLoaded; s < kSensors; ++s) EXPECT_EQ(out[s], 0.0);
+    }
+  }
+}
+
+TEST(StepSegmenter, TheNoiseIsTheQuieterWindows) {
+  // From frame 215 on, in the swing after the second step, every sensor reads one bit more in
+  // every other frame: the second step's window after it is noisy, the one before is not.
+  const std::vector<Bump> bumps = walking(50, 3);
+  const auto later_noise = [](std::int64_t k, std::size_t) {
+    return k >= 215 ? static_cast<int>(k % 2) : 0;
+  };
+  const std::vector<Step> steps = segment(make_frames(360, bumps, later_noise));
+  ASSERT_EQ(steps.size(), 3U);
+  EXPECT_EQ(steps[0].zero_noise_sd_bits, 0.0);
+  EXPECT_EQ(steps[1].zero_noise_sd_bits, 0.0);
+  EXPECT_DOUBLE_EQ(steps[2].zero_noise_sd_bits, std::sqrt(1.2 / 4.0));
+}
+
+TEST(StepSegmenter, AZeroThatMovesBetweenTheWindowsIsNoNoise) {
+  // Every sensor reads 1 bit more from frame 215 on, between the second step's two windows: each
+  // window is steady, so no step sees noise and each keeps the seed's threshold.
+  const std::vector<Bump> bumps = walking(50, 3);
+  const auto shift = [](std::int64_t k, std::size_t) { return k >= 215 ? 1 : 0; };
+  const std::vector<Step> steps = segment(make_frames(360, bumps, shift));
+  ASSERT_EQ(steps.size(), 3U);
+  for (const Step& step : steps) {
+    EXPECT_EQ(step.zero_noise_sd_bits, 0.0);
+    EXPECT_DOUBLE_EQ(step.adaptive_threshold_bits, 0.2 * step.max_summed_bits / 100.0);
   }
 }
 
@@ -682,6 +762,11 @@ TEST(StepSegmenter, RejectsMisuse) {
                std::invalid_argument);
   EXPECT_THROW(StepSegmenter(Foot::Left, kSensors, {142, 5, 5, 0.0}, 0.2, kNewtonsPerBit),
                std::invalid_argument);
+  for (double sds : {-0.5, 20.5, std::nan("")}) {
+    EXPECT_THROW(StepSegmenter(Foot::Left, kSensors, {142, 5, 5, 0.055, sds}, 0.2, kNewtonsPerBit),
+                 std::invalid_argument)
+        << sds;
+  }
   // Under 1.5 sample periods a steady stream would be cut at every frame: at 10 Hz, 0.15 s.
   SegmenterLimits slow;
   slow.sample_period_s = 0.1;

@@ -372,6 +372,12 @@ TEST_F(StanceTest, TheCorrectedReadingsTakeTheThresholdOfTheirOwnSummedReading) 
   EXPECT_EQ(u.active_sensors, t.active_sensors);
   ASSERT_TRUE(t.footprint_area_mm2 && u.footprint_area_mm2);
   EXPECT_NEAR(*u.footprint_area_mm2 / *t.footprint_area_mm2, 1.0, 0.01);
+  // Where the threshold is the sensors' noise floor, it stays: the cells between go.
+  Step floored = step;
+  floored.threshold_floor_bits = step.adaptive_threshold_bits;
+  const StanceSeries kept = measure_stance(floored, *layout_, config_.calibration, nullptr,
+                                           CellMeanFootprint::Skip, &correction);
+  EXPECT_EQ(kept.at(1, Region::Heel).active_sensors, u.active_sensors - between);
 }
 
 // A sensor that still reads after its load has gone (creep) reads a few bits more on every cell

@@ -54,6 +54,9 @@ struct SegmentationSettings {
   /// fewer than a debounce, so no contact or swing the segmenter could find fits in them; the
   /// half period to spare keeps jitter and the rounding of t_s from deciding.
   double max_gap_s = 0.055;
+  /// The adaptive threshold is at least this many SDs of the noise an unloaded sensor reads in
+  /// the swing windows (Step::zero_noise_sd_bits); 0 keeps the seed's threshold alone.
+  double threshold_noise_sds = 4.0;
 };
 
 /// Bounds on row and sensor numbers, far above any real insole (18 rows, 11 per row): they keep

@@ -108,10 +108,17 @@ struct Step {
   /// (NaN where the step has no such window): when the insole read its zero.
   double pre_zero_t_s = std::numeric_limits<double>::quiet_NaN();
   double post_zero_t_s = std::numeric_limits<double>::quiet_NaN();
-  double max_summed_bits = 0.0;          ///< max over the stance of the zeroed summed bits
-  double adaptive_threshold_bits = 0.0;  ///< adaptive_threshold_bits(max_summed_bits, pct)
-  double peak_force_n = 0.0;             ///< max over the stance of (S - bias) * newtons_per_bit
-  std::vector<Frame> stance;             ///< raw frames heel strike..toe off inclusive
+  double max_summed_bits = 0.0;  ///< max over the stance of the zeroed summed bits
+  /// The SD of one sensor's reading about its mean within a swing window, pooled over the
+  /// sensors, in the quieter of the step's windows: how much an unloaded sensor reads by noise.
+  /// 0 where no window had two frames.
+  double zero_noise_sd_bits = 0.0;
+  /// [segmentation] threshold_noise_sds x zero_noise_sd_bits: the least the threshold may be.
+  double threshold_floor_bits = 0.0;
+  /// adaptive_threshold_bits(max_summed_bits, pct, threshold_floor_bits).
+  double adaptive_threshold_bits = 0.0;
+  double peak_force_n = 0.0;  ///< max over the stance of (S - bias) * newtons_per_bit
+  std::vector<Frame> stance;  ///< raw frames heel strike..toe off inclusive
 };
 
 /// Bounds that keep a live segmenter's memory finite; the defaults are 60 s and 1.5 s at 100 Hz.
@@ -189,6 +196,8 @@ class StepSegmenter {
     double bias_bits = 0.0;
     double floor_bits = 0.0;
     std::vector<double> zero_bits;
+    double squared_deviation_bits2 = 0.0;  ///< of every sensor's frames from its window mean
+    std::int64_t degrees_of_freedom = 0;   ///< sensors x (frames - 1)
   };
   enum class Side : std::uint8_t { BeforeStep, AfterStep };
 
@@ -285,9 +294,13 @@ class StepSegmenter {
   int next_index_ = 0;
 };
 
-/// The seed's adaptive threshold: pct % of the step's maximum zeroed summed bits, never below 0.
-/// adaptive_threshold_bits(2500, 0.2) == 5.
-double adaptive_threshold_bits(double max_summed_bits, double pct);
+/// The seed's adaptive threshold, pct % of the step's maximum zeroed summed bits, but never below
+/// `floor_bits` (nor 0). adaptive_threshold_bits(2500, 0.2) == 5. Why the floor: the seed's
+/// share gives an adult a few bits, but a 20 kg walker under one bit (0.77 at size 41-42), so
+/// a sensor that reads one bit of noise counts as loaded: the heel's
+/// contact went on through 30 frames of noise after heel-off, its footprint was undetermined in
+/// every step, and its fitted n was 0.01 for 0.27 (README, "Light walkers").
+double adaptive_threshold_bits(double max_summed_bits, double pct, double floor_bits = 0.0);
 
 /// Zeroes one frame with the step's per-sensor zero and applies the adaptive threshold: values
 /// below the threshold (after zeroing) become 0 (inactive). Output in bits. Throws
