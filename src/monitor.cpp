@@ -666,10 +666,10 @@ struct Monitor::Impl {
     }
   }
 
-  /// Fits the extended model to a copy of the window and publishes it. When the run is
-  /// interrupted a fit still queued is skipped and a running one stops.
+  /// Fits the extended model to a copy of the window and publishes it; false where it published
+  /// nothing. When the run is interrupted a fit still queued is skipped and a running one stops.
   /// Never throws: it runs on a pool thread, where an exception would end the program.
-  void fit_effects(bool final_estimate) noexcept {
+  bool fit_effects(bool final_estimate) noexcept {
     std::size_t count = 0;
     std::optional<EffectsReport> report;
     try {
@@ -680,7 +680,7 @@ struct Monitor::Impl {
         const std::lock_guard lock(effects_mutex);
         if (interrupted.load()) {
           effect_window.fitting = false;
-          return;
+          return false;
         }
         count = effect_window.steps.size();
         for (const auto& [key, entry] : effect_window.steps) {
@@ -689,6 +689,10 @@ struct Monitor::Impl {
         }
         layout = effect_window.layout;
         effect_window.fresh = 0;
+      }
+      if (final_estimate) {
+        spdlog::info("monitor: fitting the extended model to the {} steps of the window as it ends",
+                     count);
       }
       const ExtendedModelFit fit =
           fit_extended_model(extended_model_input(steps, std::move(analyses), *layout, config,
@@ -709,24 +713,36 @@ struct Monitor::Impl {
       }
     }
     const std::lock_guard lock(effects_mutex);
-    effect_window.last_is_current = report && effect_window.fresh == 0;
+    const bool sent = report.has_value();
+    effect_window.last_is_current = sent && effect_window.fresh == 0;
     if (report) effect_window.last = std::move(report);
     effect_window.fitting = false;
+    return sent;
   }
 
   /// At shutdown, after the workers: the final estimate, over the window as it ends. An
   /// interrupted run (close()) publishes its latest estimate instead, as a fit of the window
-  /// could take longer than a signal's shutdown may.
+  /// could take longer than a signal's shutdown may; so does a run whose final fit close()
+  /// stopped or that failed.
   /// Never throws: stop() runs it, and ~Monitor() calls stop().
   void finish_effects() noexcept {
     if (config.model.effects.empty()) return;
     try {
       std::size_t held = 0;
-      std::optional<EffectsReport> last;
+      bool current = false;
       {
         const std::lock_guard lock(effects_mutex);
         held = effect_window.steps.size();
-        if (effect_window.last_is_current || interrupted.load()) last = effect_window.last;
+        current = effect_window.last_is_current;
+      }
+      if (!current && !interrupted.load() &&
+          held >= static_cast<std::size_t>(DiscrepancySettings{}.folds) && fit_effects(true)) {
+        return;
+      }
+      std::optional<EffectsReport> last;
+      {
+        const std::lock_guard lock(effects_mutex);
+        last = effect_window.last;
       }
       if (last) {
         last->final_estimate = true;
@@ -738,7 +754,7 @@ struct Monitor::Impl {
       } else if (interrupted.load()) {
         spdlog::warn("monitor: stopped before the extended model's first estimate");
       } else {
-        fit_effects(true);
+        spdlog::warn("monitor: the extended model has no estimate to publish as the final one");
       }
     } catch (const std::exception& e) {
       spdlog::error("monitor: the extended model's final estimate was lost: {}", e.what());

@@ -8,8 +8,16 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace gaitmon {
+namespace {
+
+// A swing window's sensors that vary more than this times the median sensor's squared
+// deviations (5 times its SD) are left out of the noise estimate.
+constexpr double kMaxNoiseVarianceOfMedian = 25.0;
+
+}  // namespace
 
 SegmenterLimits segmenter_limits(double sample_rate_hz) {
   SegmenterLimits limits;
@@ -352,14 +360,28 @@ StepSegmenter::Window StepSegmenter::window(std::int64_t midpoint, std::int64_t 
   w.bias_bits = static_cast<double>(sum) / static_cast<double>(count);
   w.t_s /= static_cast<double>(count);
   for (double& z : w.zero_bits) z /= static_cast<double>(count);
+  // Pooled over the sensors but those that vary over 5 times as much as the median sensor: a
+  // sensor that flickers, or a little load in the swing, would otherwise raise every sensor's
+  // threshold. Over 5 frames a sensor of Gaussian noise is left out with a chance under 1e-15.
+  std::vector<double> squared(sensors_, 0.0);
   for (std::int64_t i = lo; i <= hi; ++i) {
     const Entry& e = at(i);
     for (std::size_t s = 0; s < sensors_; ++s) {
       const double deviation = e.frame.bits[s] - w.zero_bits[s];
-      w.squared_deviation_bits2 += deviation * deviation;
+      squared[s] += deviation * deviation;
     }
   }
-  w.degrees_of_freedom = static_cast<std::int64_t>(sensors_) * (count - 1);
+  std::vector<double> sorted = squared;
+  const auto middle = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+  std::nth_element(sorted.begin(), middle, sorted.end());
+  const double limit = kMaxNoiseVarianceOfMedian * *middle;
+  std::int64_t kept = 0;
+  for (double q : squared) {
+    if (q > limit) continue;
+    w.squared_deviation_bits2 += q;
+    ++kept;
+  }
+  w.degrees_of_freedom = kept * (count - 1);
 
   // The quietest run of `count` frames between this window and the step.
   w.floor_bits =

@@ -731,10 +731,12 @@ std::vector<std::int64_t> fitted_steps(const std::vector<FitReport>& fits, Foot 
 }
 
 // At the first message matching `arm_on` it makes the logging thread's next allocation fail
-// (spdlog calls a sink on the thread that logs, and allocates nothing after the last sink).
+// (spdlog calls a sink on the thread that logs, and allocates nothing after the last sink), or
+// with `fail_an_allocation` false only notes the message.
 class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
  public:
-  explicit ArmingSink(std::regex arm_on) : arm_on_(std::move(arm_on)) {}
+  explicit ArmingSink(std::regex arm_on, bool fail_an_allocation = true)
+      : arm_on_(std::move(arm_on)), fail_an_allocation_(fail_an_allocation) {}
   /// The submatches of the message that armed it; empty if none did.
   std::vector<std::string> armed_at() {
     const std::lock_guard lock(mutex_);
@@ -747,13 +749,14 @@ class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
     std::smatch match;
     if (armed_at_.empty() && std::regex_search(line, match, arm_on_)) {
       armed_at_.assign(match.begin(), match.end());
-      test::allocations_until_failure = 0;
+      if (fail_an_allocation_) test::allocations_until_failure = 0;
     }
   }
   void flush_() override {}
 
  private:
   std::regex arm_on_;
+  bool fail_an_allocation_;
   std::vector<std::string> armed_at_;
 };
 
@@ -965,9 +968,58 @@ TEST(Monitor, AStatusThatMemoryRanOutForIsLostAndLoggedAndTheRunGoesOn) {
   EXPECT_EQ(monitor.counters().publish_failures, 0u);
 }
 
+// close() while stop() fits the window as it ends (reachable through the API: the commands
+// close before they stop) stops that fit; the latest estimate is published as the final one
+// instead, as when close() comes first. The frames are offered until 5 steps are published (the
+// first estimate's), then 1.5 s more (fewer new steps than the 5 old, so no estimate starts), so
+// that stop() has a window to fit. Crosstalk's fit measures every step again at 8 couplings
+// (14 ms a step), so the close lands inside it.
+TEST(Monitor, AFinalEffectsFitThatCloseStopsLeavesTheLatestEstimateAsTheFinalOne) {
+  Config config = shipped_config();
+  config.model.effects = {"crosstalk"};
+  RecordingPublisher publisher;
+  const auto watch =
+      std::make_shared<ArmingSink>(std::regex("fitting the extended model to the"), false);
+  const test::ScopedSink sink(watch);
+  const test::LogCapture log;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
+  Monitor monitor(config, quick_replay(), publisher);
+  std::size_t next = 0;
+  while (publisher.fits().size() < 5) {
+    ASSERT_LT(next, frames.size());
+    ASSERT_TRUE(monitor.offer_wait(frames[next++]));
+    ASSERT_TRUE(wait_until([&] { return monitor.counters().frames_processed == next; }));
+  }
+  ASSERT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
+  for (const std::size_t end = next + 300; next < end; ++next) {
+    ASSERT_TRUE(monitor.offer_wait(frames[next]));
+  }
+  std::thread stopping([&] { monitor.stop(); });
+  const bool fitting = wait_until([&] { return !watch->armed_at().empty(); });
+  monitor.close();
+  stopping.join();
+  ASSERT_TRUE(fitting) << "stop() fitted no window";
+  EXPECT_THAT(log.text.str(), testing::Not(testing::HasSubstr("could not be fitted")));
+  const std::vector<EffectsReport> reports = publisher.effects();
+  ASSERT_EQ(reports.size(), 2u);
+  EXPECT_FALSE(reports[0].final_estimate);
+  EXPECT_TRUE(reports[1].final_estimate);
+  EXPECT_EQ(reports[1].steps, reports[0].steps);
+  ASSERT_EQ(reports[1].params.size(), reports[0].params.size());
+  for (std::size_t i = 0; i < reports[1].params.size(); ++i) {
+    EXPECT_EQ(reports[1].params[i].value, reports[0].params[i].value) << reports[1].params[i].name;
+  }
+  EXPECT_EQ(publisher.order().back(), RecordingPublisher::Kind::Status);
+}
+
 // Runs the demo with an effect, and stop() with its first allocation failing: the final effects
 // estimate's (a copy of the latest, or of the window to fit), on the thread that stops.
-std::string stop_without_memory_for_the_final_effects(bool interrupt) {
+struct StoppedWithoutMemory {
+  std::string log;
+  std::vector<EffectsReport> effects;
+};
+
+StoppedWithoutMemory stop_without_memory_for_the_final_effects(bool interrupt) {
   Config config = shipped_config();
   config.model.effects = {"impact_transient"};
   RecordingPublisher publisher;
@@ -979,23 +1031,36 @@ std::string stop_without_memory_for_the_final_effects(bool interrupt) {
   test::allocations_until_failure = 0;
   monitor.stop();
   test::allocations_until_failure = -1;
-  for (const EffectsReport& report : publisher.effects()) EXPECT_FALSE(report.final_estimate);
   const std::vector<StatusReport> statuses = publisher.statuses();
   EXPECT_TRUE(!statuses.empty() && statuses.back().connection == "finished") << "no final status";
-  return log.text.str();
+  return {log.text.str(), publisher.effects()};
 }
 
 TEST(Monitor, AnInterruptedRunThatMemoryRanOutForInItsFinalEffectsEstimateStillEnds) {
+  const StoppedWithoutMemory run = stop_without_memory_for_the_final_effects(true);
   EXPECT_THAT(
-      stop_without_memory_for_the_final_effects(true),
+      run.log,
       testing::HasSubstr("monitor: the extended model's final estimate was lost: std::bad_alloc"));
+  for (const EffectsReport& report : run.effects) EXPECT_FALSE(report.final_estimate);
 }
 
 TEST(Monitor, ARunThatMemoryRanOutForInItsFinalEffectsEstimateStillEnds) {
   // Whether the latest estimate is of the window as it ends depends on when the workers finished.
-  EXPECT_THAT(stop_without_memory_for_the_final_effects(false),
-              testing::ContainsRegex("monitor: the extended model('s final estimate was lost| "
-                                     "could not be fitted to [0-9]+ steps): std::bad_alloc"));
+  // If it is, its copy is what fails, and nothing is final; if not, the fit of the window fails
+  // and the latest estimate is the final one.
+  const StoppedWithoutMemory run = stop_without_memory_for_the_final_effects(false);
+  ASSERT_FALSE(run.effects.empty());
+  if (run.log.find("could not be fitted") == std::string::npos) {
+    EXPECT_THAT(run.log, testing::HasSubstr("monitor: the extended model's final estimate was "
+                                            "lost: std::bad_alloc"));
+    for (const EffectsReport& report : run.effects) EXPECT_FALSE(report.final_estimate);
+  } else {
+    EXPECT_THAT(run.log, testing::ContainsRegex("monitor: the extended model could not be fitted "
+                                                "to [0-9]+ steps: std::bad_alloc"));
+    ASSERT_GE(run.effects.size(), 2u);
+    EXPECT_TRUE(run.effects.back().final_estimate);
+    EXPECT_EQ(run.effects.back().steps, run.effects[run.effects.size() - 2].steps);
+  }
 }
 
 TEST(Monitor, RefusesARateTooLowForTheConfigsWindowsBeforeAnyFrame) {

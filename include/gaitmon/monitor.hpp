@@ -71,7 +71,8 @@
 // in offer_wait(). close() also marks the run as interrupted (the commands call it on SIGINT and
 // SIGTERM): stop() then publishes the latest estimate of the effects as the final one rather
 // than fitting the window again, skips a fit still waiting for a worker and stops a running
-// one, so that the shutdown stays within the 2 s.
+// one (that of step (3) too), so that the shutdown stays within the 2 s. Where that
+// last fit fails or is stopped, the latest estimate is the final one as well.
 #pragma once
 
 #include <cstdint>
