@@ -735,16 +735,21 @@ struct Monitor::Impl {
         held = effect_window.steps.size();
         current = effect_window.last_is_current;
       }
-      if (!current && !interrupted.load() &&
-          held >= static_cast<std::size_t>(DiscrepancySettings{}.folds) && fit_effects(true)) {
-        return;
-      }
+      const bool refit = !current && !interrupted.load() &&
+                         held >= static_cast<std::size_t>(DiscrepancySettings{}.folds);
+      if (refit && fit_effects(true)) return;
       std::optional<EffectsReport> last;
       {
         const std::lock_guard lock(effects_mutex);
         last = effect_window.last;
       }
       if (last) {
+        if (refit) {
+          spdlog::info(
+              "monitor: the latest estimate of the extended model, over {} steps, is the "
+              "final one",
+              last->steps);
+        }
         last->final_estimate = true;
         last->utime = now_utime();
         send(*last);

@@ -14,8 +14,10 @@ namespace gaitmon {
 namespace {
 
 // A swing window's sensors that vary more than this times the median sensor's squared
-// deviations (5 times its SD) are left out of the noise estimate.
+// deviations (5 times its SD) are left out of the noise estimate; the median taken as at least
+// the rounding's 1/12 bit^2 a frame, as where most sensors read a steady 0 it is 0.
 constexpr double kMaxNoiseVarianceOfMedian = 25.0;
+constexpr double kRoundingVarianceBits2 = 1.0 / 12.0;
 
 }  // namespace
 
@@ -374,7 +376,8 @@ StepSegmenter::Window StepSegmenter::window(std::int64_t midpoint, std::int64_t 
   std::vector<double> sorted = squared;
   const auto middle = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
   std::nth_element(sorted.begin(), middle, sorted.end());
-  const double limit = kMaxNoiseVarianceOfMedian * *middle;
+  const double limit = kMaxNoiseVarianceOfMedian *
+                       std::max(*middle, kRoundingVarianceBits2 * static_cast<double>(count - 1));
   std::int64_t kept = 0;
   for (double q : squared) {
     if (q > limit) continue;

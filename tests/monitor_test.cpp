@@ -732,11 +732,12 @@ std::vector<std::int64_t> fitted_steps(const std::vector<FitReport>& fits, Foot 
 
 // At the first message matching `arm_on` it makes the logging thread's next allocation fail
 // (spdlog calls a sink on the thread that logs, and allocates nothing after the last sink), or
-// with `fail_an_allocation` false only notes the message.
+// does `action` instead, on that thread.
 class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
  public:
-  explicit ArmingSink(std::regex arm_on, bool fail_an_allocation = true)
-      : arm_on_(std::move(arm_on)), fail_an_allocation_(fail_an_allocation) {}
+  explicit ArmingSink(
+      std::regex arm_on, std::function<void()> action = [] { test::allocations_until_failure = 0; })
+      : arm_on_(std::move(arm_on)), action_(std::move(action)) {}
   /// The submatches of the message that armed it; empty if none did.
   std::vector<std::string> armed_at() {
     const std::lock_guard lock(mutex_);
@@ -749,14 +750,14 @@ class ArmingSink final : public spdlog::sinks::base_sink<std::mutex> {
     std::smatch match;
     if (armed_at_.empty() && std::regex_search(line, match, arm_on_)) {
       armed_at_.assign(match.begin(), match.end());
-      if (fail_an_allocation_) test::allocations_until_failure = 0;
+      action_();
     }
   }
   void flush_() override {}
 
  private:
   std::regex arm_on_;
-  bool fail_an_allocation_;
+  std::function<void()> action_;
   std::vector<std::string> armed_at_;
 };
 
@@ -970,38 +971,45 @@ TEST(Monitor, AStatusThatMemoryRanOutForIsLostAndLoggedAndTheRunGoesOn) {
 
 // close() while stop() fits the window as it ends (reachable through the API: the commands
 // close before they stop) stops that fit; the latest estimate is published as the final one
-// instead, as when close() comes first. The first estimate starts at the 5th step; the frames
-// are offered until a 6th is published, so that the estimate does not cover the window as it
-// ends and stop() fits it, and no more, so that no other estimate starts (that needs 5 new
-// steps). Crosstalk's fit measures every step again at 8 couplings (14 ms a step), so the close
-// lands inside it.
+// instead, as when close() comes first. The close comes from the log line that starts the fit,
+// on the stopping thread, before the fit's first step. The first estimate starts at the 5th
+// step; frames are offered until one more step is published after it, so that it does not cover
+// the window as it ends and stop() fits that, and no further, as another estimate would start
+// only at 5 new steps.
 TEST(Monitor, AFinalEffectsFitThatCloseStopsLeavesTheLatestEstimateAsTheFinalOne) {
   Config config = shipped_config();
   config.model.effects = {"crosstalk"};
   RecordingPublisher publisher;
-  const auto watch =
-      std::make_shared<ArmingSink>(std::regex("fitting the extended model to the"), false);
-  const test::ScopedSink sink(watch);
   const test::LogCapture log;
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s());
   Monitor monitor(config, quick_replay(), publisher);
+  const auto closing = std::make_shared<ArmingSink>(
+      std::regex("fitting the extended model to the ([0-9]+) steps"), [&] { monitor.close(); });
+  const test::ScopedSink sink(closing);
   std::size_t next = 0;
-  while (publisher.fits().size() < 6) {
-    ASSERT_LT(next, frames.size());
-    ASSERT_TRUE(monitor.offer_wait(frames[next++]));
-    ASSERT_TRUE(wait_until([&] { return monitor.counters().frames_processed == next; }));
-  }
+  const auto offer_until = [&](const std::function<bool()>& done) {
+    while (!done()) {
+      ASSERT_LT(next, frames.size());
+      ASSERT_TRUE(monitor.offer_wait(frames[next++]));
+      ASSERT_TRUE(wait_until([&] { return monitor.counters().frames_processed == next; }));
+    }
+  };
+  offer_until([&] { return monitor.counters().steps_queued >= 5; });
   ASSERT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
-  std::thread stopping([&] { monitor.stop(); });
-  const bool fitting = wait_until([&] { return !watch->armed_at().empty(); });
-  monitor.close();
-  stopping.join();
-  ASSERT_TRUE(fitting) << "stop() fitted no window";
+  const std::size_t published = publisher.fits().size();
+  offer_until([&] { return monitor.counters().steps_queued > published; });
+  ASSERT_TRUE(wait_until([&] { return publisher.fits().size() > published; }));
+  monitor.stop();
+  const std::vector<std::string> armed = closing->armed_at();
+  ASSERT_EQ(armed.size(), 2u) << "stop() fitted no window";
+  EXPECT_LT(std::stoi(armed[1]), 10);
+  EXPECT_THAT(log.text.str(), testing::HasSubstr("over 5 steps, is the final one"));
   EXPECT_THAT(log.text.str(), testing::Not(testing::HasSubstr("could not be fitted")));
   const std::vector<EffectsReport> reports = publisher.effects();
   ASSERT_EQ(reports.size(), 2u);
   EXPECT_FALSE(reports[0].final_estimate);
   EXPECT_TRUE(reports[1].final_estimate);
+  EXPECT_EQ(reports[0].steps, 5);
   EXPECT_EQ(reports[1].steps, reports[0].steps);
   ASSERT_EQ(reports[1].params.size(), reports[0].params.size());
   for (std::size_t i = 0; i < reports[1].params.size(); ++i) {

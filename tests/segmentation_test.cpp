@@ -367,6 +367,22 @@ TEST(StepSegmenter, TheNoiseIsTheQuieterWindows) {
   }
 }
 
+TEST(StepSegmenter, NoiseOnAMinorityOfSensorsCounts) {
+  // 10 of the 24 sensors read one bit more in every other frame, the others a steady reading: the
+  // median sensor does not vary, and the noisy ones are kept all the same (their squared
+  // deviations, 1.2 in a window, are within 25 times the rounding's 4 / 12). Pooled over all 24:
+  // 10 x 1.2 / (24 x 4) bits^2.
+  const std::vector<Bump> bumps = walking(50, 3);
+  const auto noise = [](std::int64_t k, std::size_t s) {
+    return s % 12 < 5 ? static_cast<int>(k % 2) : 0;
+  };
+  const std::vector<Step> steps = segment(make_frames(360, bumps, noise));
+  ASSERT_EQ(steps.size(), 3U);
+  for (const Step& step : steps) {
+    EXPECT_DOUBLE_EQ(step.zero_noise_sd_bits, std::sqrt(10.0 * 1.2 / (24.0 * 4.0)));
+  }
+}
+
 TEST(StepSegmenter, AFlickeringSensorIsNotTakenForNoise) {
   // As above, every sensor one bit more in every other frame; one unloaded sensor 50 bits more.
   const std::vector<Bump> bumps = walking(50, 3);

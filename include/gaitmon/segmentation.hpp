@@ -197,7 +197,7 @@ class StepSegmenter {
     double floor_bits = 0.0;
     std::vector<double> zero_bits;
     double squared_deviation_bits2 = 0.0;  ///< of every sensor's frames from its window mean
-    std::int64_t degrees_of_freedom = 0;   ///< sensors x (frames - 1)
+    std::int64_t degrees_of_freedom = 0;   ///< sensors kept x (frames - 1)
   };
   enum class Side : std::uint8_t { BeforeStep, AfterStep };
 
