@@ -158,16 +158,20 @@ struct Monitor::Impl {
     Step step;
     std::shared_ptr<const InsoleLayout> layout;
     Clock::time_point finalised;
+    std::uint64_t arrival = 0;  ///< among both feet's steps, in the detector's finalising order
   };
   struct Reorder {
     std::uint64_t next = 0;
     bool draining = false;  ///< a thread is publishing from this buffer
     Outcomes pending;
   };
-  /// The latest complete steps for the extended model, keyed by time (both feet), so that the
-  /// window and the fit do not depend on the order in which the workers finish.
+  /// The latest complete steps for the extended model, keyed by the order in which the detector
+  /// finalised them (both feet), so that the window and the fit do not depend on the order in
+  /// which the workers finish. Not by time: after a device restart its foot's clock runs behind
+  /// the other's by the time the device was down, and the window would shut out that foot's
+  /// new steps as old.
   struct EffectWindow {
-    std::map<std::pair<double, Foot>, std::pair<Step, StepAnalysis>> steps;
+    std::map<std::uint64_t, std::pair<Step, StepAnalysis>> steps;
     std::shared_ptr<const InsoleLayout> layout;  ///< of the first step; one insole per session
     std::size_t fresh = 0;  ///< steps in the window added since the last fit took its copy
     bool fitting = false;   ///< a fit is queued or running
@@ -431,7 +435,8 @@ struct Monitor::Impl {
       return;
     }
     ++foot.next_seq;
-    enqueue(Job{step.foot, std::move(slot), std::move(step), foot.layout, Clock::now()});
+    enqueue(Job{step.foot, std::move(slot), std::move(step), foot.layout, Clock::now(),
+                next_arrival++});
   }
 
   /// A step no worker will take. Allocates nothing, so that a dropped step is always filed.
@@ -556,7 +561,7 @@ struct Monitor::Impl {
       }
       complete(job->foot, std::move(job->slot), std::move(ready));
       if (analysis && !config.model.effects.empty()) {
-        remember_for_effects(std::move(job->step), std::move(*analysis), job->layout);
+        remember_for_effects(job->arrival, std::move(job->step), std::move(*analysis), job->layout);
       }
     }
   }
@@ -609,10 +614,10 @@ struct Monitor::Impl {
   /// Adds an analysed step to the window. A fit starts once there is a step per fold, then
   /// whenever the new steps are as many as the old ones (5, 10, 20, ...; every half window once
   /// full), so its cost stays proportional to the steps. Never throws: the step's fit is out.
-  void remember_for_effects(Step step, StepAnalysis analysis,
+  void remember_for_effects(std::uint64_t arrival, Step step, StepAnalysis analysis,
                             std::shared_ptr<const InsoleLayout> layout) noexcept {
     try {
-      add_to_effect_window(std::move(step), std::move(analysis), std::move(layout));
+      add_to_effect_window(arrival, std::move(step), std::move(analysis), std::move(layout));
     } catch (const std::exception& e) {
       if (auto held = effects_log.allow()) {
         spdlog::warn(
@@ -623,7 +628,7 @@ struct Monitor::Impl {
     }
   }
 
-  void add_to_effect_window(Step step, StepAnalysis analysis,
+  void add_to_effect_window(std::uint64_t arrival, Step step, StepAnalysis analysis,
                             std::shared_ptr<const InsoleLayout> layout) {
     const std::lock_guard lock(effects_mutex);
     EffectWindow& w = effect_window;
@@ -637,8 +642,7 @@ struct Monitor::Impl {
       }
       return;
     }
-    w.steps.insert_or_assign(std::pair(step.t_heel_strike_s, step.foot),
-                             std::pair(std::move(step), std::move(analysis)));
+    w.steps.insert_or_assign(arrival, std::pair(std::move(step), std::move(analysis)));
     while (w.steps.size() > static_cast<std::size_t>(config.model.effects_window_steps)) {
       w.steps.erase(w.steps.begin());
     }
@@ -871,6 +875,7 @@ struct Monitor::Impl {
   RawFrameReport raw_report;
   Clock::time_point next_status;
   std::uint64_t ring_drops_logged = 0;
+  std::uint64_t next_arrival = 0;  ///< both feet's steps, in the order they were finalised
 
   std::atomic<std::uint64_t> processed{0}, rejected{0}, steps_detected{0}, steps_queued{0},
       backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0}, segmentation_gaps{0},

@@ -434,16 +434,14 @@ TEST_P(MonitorEffects, OfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
   config.model.effects = {GetParam()};
   SessionHeader header;
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  // In the order the segmenters finalise them, which is the monitor's for frames in file order.
   std::vector<Step> ok;
   for (Step& step : batch_steps(demo_30s(), config)) {
     if (step.status == StepStatus::Ok) ok.push_back(std::move(step));
   }
-  std::sort(ok.begin(), ok.end(), [](const Step& a, const Step& b) {
-    return std::pair(a.t_heel_strike_s, a.foot) < std::pair(b.t_heel_strike_s, b.foot);
-  });
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
 
-  // The whole session fits in a window of 100; a window of 20 keeps the latest 20 by time.
+  // The whole session fits in a window of 100; a window of 20 keeps the latest 20 finalised.
   for (const int window : {100, 20}) {
     SCOPED_TRACE(window);
     config.model.effects_window_steps = window;
@@ -599,6 +597,43 @@ TEST(Monitor, AWindowThatTurnedOverWhileAnEffectsFitRanIsFittedAgain) {
   const auto estimates = std::count_if(reports.begin(), reports.end(),
                                        [](const EffectsReport& r) { return !r.final_estimate; });
   EXPECT_GE(estimates, 2) << "a fit of the new window follows the held one";
+}
+
+// The right foot's device is down from 10 to 20 s and its clock starts over, so that foot's time
+// then runs 10 s behind the left's. The window keeps the latest steps finalised: by time, the
+// left foot's steps of the last 5 s would have shut out every right step after the restart.
+TEST(Monitor, TheEffectsWindowKeepsTheLatestStepsOfAFootWhoseDeviceRestarted) {
+  Config config = shipped_config();
+  config.model.effects = {"impact_transient"};
+  config.model.effects_window_steps = 5;
+  std::vector<SensorFrame> feed;
+  for (SensorFrame f : test::session_frames(demo_30s())) {
+    if (f.foot == Foot::Right && f.device_time_us >= 10'000'000) {
+      if (f.device_time_us < 20'000'000) continue;
+      f.device_time_us -= 20'000'000;
+    }
+    feed.push_back(f);
+  }
+  RecordingPublisher publisher;
+  {
+    Monitor monitor(config, quick_replay(), publisher);
+    offer_all(monitor, feed);
+  }
+  double right_last_heel_strike_s = 0.0;
+  double left_last_heel_strike_s = 0.0;
+  for (const FitReport& fit : publisher.fits()) {
+    double& last = fit.foot == Foot::Right ? right_last_heel_strike_s : left_last_heel_strike_s;
+    last = std::max(last, fit.t_heel_strike_s);
+  }
+  ASSERT_LT(right_last_heel_strike_s, 20.0) << "the right foot's clock runs behind after the restart";
+  ASSERT_GT(left_last_heel_strike_s, 27.0);
+  const std::vector<EffectsReport> reports = publisher.effects();
+  ASSERT_FALSE(reports.empty());
+  const EffectsReport& final_estimate = reports.back();
+  ASSERT_TRUE(final_estimate.final_estimate);
+  EXPECT_EQ(final_estimate.steps, 5);
+  EXPECT_LE(final_estimate.t_first_heel_strike_s, right_last_heel_strike_s)
+      << "the right foot's last step is among the 5 latest finalised";
 }
 
 TEST(Monitor, WithoutEffectsNothingIsPublishedOnTheirChannel) {

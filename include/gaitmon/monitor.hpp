@@ -20,7 +20,8 @@
 //    published in step order per foot (a reorder buffer holds those that finish early), each
 //    with latency_ms = publication time - the time the detector finalised the step.
 //  - With [model] effects in the config, the workers also keep the latest
-//    config.model.effects_window_steps analysed Ok steps (both feet, by heel strike time), and
+//    config.model.effects_window_steps analysed Ok steps (both feet, in the order the detector
+//    finalised them: a restarted device's clock runs behind the other foot's), and
 //    a thread of its own fits the extended model (discrepancy.hpp: make_discrepancy_input,
 //    fit_extended_model) to them, once there are as many steps as folds (5) and again whenever
 //    the new steps are as many as the old (5, 10, 20, ...; every half window once full), so
