@@ -625,7 +625,8 @@ TEST(Monitor, TheEffectsWindowKeepsTheLatestStepsOfAFootWhoseDeviceRestarted) {
     double& last = fit.foot == Foot::Right ? right_last_heel_strike_s : left_last_heel_strike_s;
     last = std::max(last, fit.t_heel_strike_s);
   }
-  ASSERT_LT(right_last_heel_strike_s, 20.0) << "the right foot's clock runs behind after the restart";
+  ASSERT_LT(right_last_heel_strike_s, 20.0)
+      << "the right foot's clock runs behind after the restart";
   ASSERT_GT(left_last_heel_strike_s, 27.0);
   const std::vector<EffectsReport> reports = publisher.effects();
   ASSERT_FALSE(reports.empty());
