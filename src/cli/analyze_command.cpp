@@ -499,6 +499,10 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
         "extended model: pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)\n",
         extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
         extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
+    // Without this the table above reads as the extended model's tissue.
+    fmt::print(
+        "note: the tissue parameters above and in regions.csv are the baseline fit's; the "
+        "effects are fitted on top of it, not inside each step's fit\n");
     if (extended->zero_changes > 0) {
       fmt::print(
           "zero channel ({} changes of the step-regions' zeros): held-out NRMSE {:.3f} % -> "

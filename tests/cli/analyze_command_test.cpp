@@ -551,6 +551,26 @@ std::string run_on_terminal(const std::vector<std::string>& args, int* status) {
   return shown;
 }
 
+// With effects the summary still shows the baseline's per-step fits, and says so.
+TEST(AnalyzeCommand, WithEffectsItSaysTheTissueParametersAreTheBaselines) {
+  const auto dir = test::scratch_dir("analyze-effects-note");
+  const std::string session = (analysed().dir / "s.csv").string();
+  int status = -1;
+  const std::string with =
+      run("analyze " + session + " --out " + (dir / "o").string() + " --effects impact_transient",
+          &status);
+  ASSERT_EQ(status, 0) << with;
+  EXPECT_NE(with.find("effect impact_transient:"), std::string::npos) << with;
+  EXPECT_NE(with.find("note: the tissue parameters above and in regions.csv are the baseline "
+                      "fit's"),
+            std::string::npos)
+      << with;
+  const std::string without =
+      run("analyze " + session + " --out " + (dir / "p").string() + " --effects none", &status);
+  ASSERT_EQ(status, 0) << without;
+  EXPECT_EQ(without.find("baseline fit's"), std::string::npos) << without;
+}
+
 // The bar covers the whole job, the extended model's fit and the session-level fits too: it
 // ended at 95 % before.
 TEST(AnalyzeCommand, ProgressBarOnATerminalRisesToAHundredPercent) {
