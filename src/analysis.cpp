@@ -102,7 +102,6 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
   out.model = settings.fit.model;
   out.t_s = stance.t_s;
   out.measured_total_force_n.assign(frames, 0.0);
-  out.model_total_force_n.assign(frames, 0.0);
 
   std::vector<double> aspects;
   for (Region region : kRegions) {
@@ -127,13 +126,22 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
     r.aspect = aspects.empty() ? seed.mean.A_mm / seed.mean.B_mm : median_of(aspects);
     r.declared = declared_params(seed, r.aspect);
     r.fit = fit_region(r.series, r.declared, config.fit_bounds, settings.fit);
+  }
+  set_model_totals(out);
+  return out;
+}
+
+void set_model_totals(StepAnalysis& step) {
+  const std::size_t frames = step.t_s.size();
+  step.model_total_force_n.assign(frames, 0.0);
+  for (const RegionAnalysis& r : step.regions) {
     if (r.fit.status == FitStatus::Ok && r.fit.model_force_n.size() == frames) {
-      for (std::size_t f = 0; f < frames; ++f) out.model_total_force_n[f] += r.fit.model_force_n[f];
+      for (std::size_t f = 0; f < frames; ++f)
+        step.model_total_force_n[f] += r.fit.model_force_n[f];
     }
   }
-  out.nrmse_total_pct =
-      frames == 0 ? 0.0 : nrmse_pct(out.measured_total_force_n, out.model_total_force_n);
-  return out;
+  step.nrmse_total_pct =
+      frames == 0 ? 0.0 : nrmse_pct(step.measured_total_force_n, step.model_total_force_n);
 }
 
 namespace {
@@ -144,6 +152,7 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   RegionSessionAnalysis r;
   r.region = region;
   std::vector<RegionSeries> stances;
+  std::vector<const ForceTransform*> transforms;
   std::vector<double> aspects;
   std::array<std::vector<double>, 9> values;
   std::vector<MaterialEstimate> estimates;
@@ -156,6 +165,7 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
       ++r.steps_on_ellipse;
     }
     stances.push_back(ra.series);
+    transforms.push_back(ra.effects.get());
     aspects.push_back(ra.aspect);
     if (ra.fit.status != FitStatus::Ok) continue;
     ++r.steps_fitted;
@@ -189,7 +199,11 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   r.aspect = aspects.empty() ? seed.mean.A_mm / seed.mean.B_mm : median_of(aspects);
   r.declared = declared_params(seed, r.aspect);
   if (!stances.empty()) {
-    r.session_fit = fit_region_session(stances, r.declared, config.fit_bounds, settings.fit);
+    const bool effects = std::any_of(transforms.begin(), transforms.end(),
+                                     [](const ForceTransform* t) { return t != nullptr; });
+    r.session_fit = fit_region_session(stances, r.declared, config.fit_bounds, settings.fit,
+                                       effects ? std::span<const ForceTransform* const>(transforms)
+                                               : std::span<const ForceTransform* const>());
   }
   Spread* targets[] = {
       &r.A_mm, &r.B_mm,     &r.C_mm, &r.d0_mm, &r.kbar_n_per_mm3, &r.n, &r.cbar_ns_per_mm3,

@@ -818,6 +818,7 @@ Prepared prepare(const DiscrepancyInput& input, int folds) {
         u.t_contact_s = std::min(u.t_contact_s, contact.t_s.front());
       }
       if (contact.t_s.size() < static_cast<std::size_t>(kMinContactFrames)) continue;
+      u.series_frames = frames;
       u.t = contact.t_s;
       u.y = contact.force_n;
       u.area = contact.area_mm2;
@@ -1516,6 +1517,107 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
   out.extended_heldout_nrmse_pct = nrmse(heldout.force_sse(), prep.pooled.norm);
   out.zero_extended_heldout_nrmse_pct = nrmse(heldout.zero_sse(), prep.pooled.zero_norm);
   out.regions = compare_regions(prep.units, base.force, heldout.force);
+  return out;
+}
+
+bool effect_inside_tissue_fit(std::string_view name) {
+  check_discrepancy_effect(name);
+  const auto specs = candidate_specs(1.0, 1.0);
+  const CandidateSpec& spec = spec_named(specs, name);
+  return spec.stage == 0;
+}
+
+std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
+                                                 std::span<const EffectEstimate> effects,
+                                                 const Config& config,
+                                                 const AnalysisSettings& settings) {
+  std::vector<StepAnalysis> out;
+  for (const DiscrepancyStep& ds : input.steps) out.push_back(ds.analysis);
+  const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
+  std::vector<FixedEffect> inside;
+  for (const EffectEstimate& e : effects) {
+    check_discrepancy_effect(e.name);
+    const CandidateSpec& spec = spec_named(specs, e.name);
+    if (spec.stage != 0) continue;
+    std::vector<double> theta;
+    for (const ParamSpec& p : spec.params) {
+      const auto it = std::find_if(e.params.begin(), e.params.end(),
+                                   [&](const ParamEstimate& q) { return q.name == p.name; });
+      if (it == e.params.end()) {
+        throw std::invalid_argument(e.name + ": no estimate of its parameter '" + p.name + "'");
+      }
+      theta.push_back(it->value);
+    }
+    inside.push_back({&spec, std::move(theta)});
+  }
+  if (inside.empty()) return out;
+  if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
+    throw std::invalid_argument(
+        "effects inside the tissue fit need the default fit (identifiable parameters, P "
+        "declared), not --fit seed8 or --free-scale");
+  }
+  // Shared by every region-step's transform, which the session-level fit runs again later.
+  struct Effects {
+    Prepared prep;
+    Model model;
+    Chain chain;
+  };
+  auto fx = std::make_shared<Effects>();
+  fx->prep = prepare(input, 2);
+  fx->model = build(fx->prep.units, inside);
+  fx->chain = fx->model.chain();
+  const std::shared_ptr<const Effects> shared = fx;
+  std::map<std::pair<Foot, int>, std::size_t> step_of;
+  for (std::size_t i = 0; i < out.size(); ++i) step_of[{out[i].foot, out[i].step}] = i;
+  parallel_for(shared->prep.units.size(), [&](std::size_t ui) {
+    const Unit& u = shared->prep.units[ui];
+    const Chain& chain = shared->chain;
+    const bool affected =
+        std::any_of(chain.begin(), chain.end(), [&](const Applied* e) { return e->affects(u); });
+    if (!affected) return;
+    std::size_t choices = 1;
+    for (const Applied* e : chain) {
+      if (e->affects(u)) choices = std::max(choices, e->choices(u));
+    }
+    RegionAnalysis& ra = out[step_of.at({u.foot, u.step})].regions[index_of(u.region)];
+    const std::size_t n = u.y.size();
+    const std::vector<double> zeros(n, 0.0);
+    Workspace w;
+    std::optional<RegionFit> best;
+    std::shared_ptr<const ForceTransform> best_transform;
+    for (std::size_t c = 0; c < choices; ++c) {
+      auto transform = std::make_shared<ForceTransform>();
+      std::vector<double> y(n), at_zero(n);
+      transform->offset_n.assign(ra.series.t_s.size(), 0.0);
+      run_chain(chain, ui, u, u, zeros, y, w, c);
+      for (std::size_t k = 0; k < n; ++k) transform->offset_n[u.series_frames[k]] = y[k];
+      // The linear part is the chain without what it adds, less that chain's response to no
+      // force (relaxation's carried-in lag). Each transform has its own scratch.
+      run_chain(chain, ui, u, u, zeros, at_zero, w, c, true);
+      transform->linear = [shared, ui, c, at_zero, x = std::vector<double>(n),
+                           y = std::vector<double>(n), w = Workspace{}](
+                              std::span<const double> tissue, std::span<double> reported) mutable {
+        const Unit& unit = shared->prep.units[ui];
+        for (std::size_t k = 0; k < x.size(); ++k) x[k] = tissue[unit.series_frames[k]];
+        run_chain(shared->chain, ui, unit, unit, x, y, w, c, true);
+        std::fill(reported.begin(), reported.end(), 0.0);
+        for (std::size_t k = 0; k < x.size(); ++k) {
+          reported[unit.series_frames[k]] = y[k] - at_zero[k];
+        }
+      };
+      RegionFit fit =
+          fit_region(ra.series, ra.declared, config.fit_bounds, settings.fit, transform.get());
+      const bool better = !best || (fit.status == FitStatus::Ok && best->status != FitStatus::Ok) ||
+                          (fit.status == best->status && fit.final_cost < best->final_cost);
+      if (better) {
+        best = std::move(fit);
+        best_transform = std::move(transform);
+      }
+    }
+    ra.fit = std::move(*best);
+    ra.effects = std::move(best_transform);
+  });
+  for (StepAnalysis& step : out) set_model_totals(step);
   return out;
 }
 

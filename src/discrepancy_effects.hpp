@@ -57,6 +57,7 @@ struct Unit {
   int step = 0;
   Region region = Region::Heel;
   std::vector<double> t, y, area, E, V, d_mm, ddot_mm_per_s, phase, floor2, sat;
+  std::vector<std::size_t> series_frames;  // per frame, its index in the step's region series
   // Elastic shapes for the fit's n (first) and a grid of n: the exponent is re-chosen with every
   // effect, since a per-step fit bends n to absorb what the model lacks.
   std::vector<std::vector<double>> En;

@@ -124,6 +124,66 @@ struct FitFrame {
   std::size_t input_index = 0;  ///< where the model force goes in RegionFit::model_force_n
 };
 
+// The effects between the tissue and the cells (ForceTransform, one per stance or none) on
+// per-fit-frame vectors: each stance's linear part runs on its input frames, with 0 in the frames
+// not fitted. Holds scratch, so one per fit.
+class ReportedForce {
+ public:
+  ReportedForce(const std::vector<FitFrame>& frames, std::span<const std::size_t> stance_begin,
+                std::span<const ForceTransform* const> transforms, std::size_t input_size)
+      : frames_(&frames),
+        begin_(stance_begin.begin(), stance_begin.end()),
+        transforms_(transforms.begin(), transforms.end()),
+        offset_(frames.size(), 0.0) {
+    begin_.push_back(input_size);
+    identity_ = std::all_of(transforms_.begin(), transforms_.end(),
+                            [](const ForceTransform* t) { return t == nullptr; });
+    if (identity_) return;
+    input_.assign(input_size, 0.0);
+    output_.assign(input_size, 0.0);
+    std::vector<double> per_input(input_size, 0.0);
+    for (std::size_t s = 0; s < transforms_.size(); ++s) {
+      const ForceTransform* t = transforms_[s];
+      if (t == nullptr) continue;
+      if (!t->linear || t->offset_n.size() != begin_[s + 1] - begin_[s]) {
+        throw std::invalid_argument(
+            "ForceTransform: a linear map and one offset per frame of its series are needed");
+      }
+      std::copy(t->offset_n.begin(), t->offset_n.end(),
+                per_input.begin() + static_cast<std::ptrdiff_t>(begin_[s]));
+    }
+    for (std::size_t i = 0; i < frames.size(); ++i) offset_[i] = per_input[frames[i].input_index];
+  }
+  bool identity() const { return identity_; }
+  const std::vector<double>& offset() const { return offset_; }
+  // The linear part, in place on a vector over the fit's frames.
+  void linear(double* per_frame) const {
+    if (identity_) return;
+    std::fill(input_.begin(), input_.end(), 0.0);
+    for (std::size_t i = 0; i < frames_->size(); ++i) {
+      input_[(*frames_)[i].input_index] = per_frame[i];
+    }
+    output_ = input_;
+    for (std::size_t s = 0; s < transforms_.size(); ++s) {
+      if (transforms_[s] == nullptr) continue;
+      const std::size_t b = begin_[s], n = begin_[s + 1] - b;
+      transforms_[s]->linear(std::span<const double>(input_.data() + b, n),
+                             std::span<double>(output_.data() + b, n));
+    }
+    for (std::size_t i = 0; i < frames_->size(); ++i) {
+      per_frame[i] = output_[(*frames_)[i].input_index];
+    }
+  }
+
+ private:
+  const std::vector<FitFrame>* frames_;
+  std::vector<std::size_t> begin_;
+  std::vector<const ForceTransform*> transforms_;
+  bool identity_ = true;
+  std::vector<double> offset_;
+  mutable std::vector<double> input_, output_;
+};
+
 // How the free vector theta maps to the physical parameters.
 struct Layout {
   // Index into theta per physical parameter, or -1 if declared. Log-scaled unless n or m.
@@ -488,8 +548,10 @@ struct SeparableData {
   double log_ratio = 0.0;  ///< log C - log d0: K = kbar exp(log_c + n log_ratio)
 };
 
+// `offset` (per frame) is what the effects report without a tissue force: the target is the
+// force less it.
 SeparableData separable_data(const std::vector<FitFrame>& frames, const Layout& layout,
-                             ModelVariant variant) {
+                             ModelVariant variant, std::span<const double> offset) {
   const auto& d = layout.declared;
   const double P = std::numbers::pi * d[kA] * d[kB];
   SeparableData s;
@@ -510,7 +572,7 @@ SeparableData separable_data(const std::vector<FitFrame>& frames, const Layout& 
     s.log_g.push_back(g > 0.0 ? std::log(g) : -745.0);
     s.e_base.push_back(elastic);
     s.v_base.push_back(total - elastic);
-    s.force.push_back(f.force_n);
+    s.force.push_back(f.force_n - offset[s.force.size()]);
   }
   return s;
 }
@@ -599,7 +661,9 @@ struct Residuals {
   Eigen::MatrixXd J;
 };
 
-void evaluate(const SeparableData& s, const Eigen::Vector4d& theta, Residuals& out) {
+// The penalty is on the tissue's force; the data rows compare what the cells report of it.
+void evaluate(const SeparableData& s, const ReportedForce& reported, const Eigen::Vector4d& theta,
+              Residuals& out) {
   const std::size_t n = s.force.size();
   const Eigen::Index N = static_cast<Eigen::Index>(n);
   out.r.resize(2 * N);
@@ -613,7 +677,7 @@ void evaluate(const SeparableData& s, const Eigen::Vector4d& theta, Residuals& o
     const double f = elastic + damping;
     const Eigen::RowVector4d grad(elastic, elastic * (s.log_ratio + s.log_g[i]), damping,
                                   damping * (s.log_ratio + s.log_g[i]));
-    out.r(row) = f - s.force[i];
+    out.r(row) = f;
     out.J.row(row) = grad;
     if (f < 0.0) {
       out.r(N + row) = -kPenaltyWeight * f;
@@ -623,11 +687,15 @@ void evaluate(const SeparableData& s, const Eigen::Vector4d& theta, Residuals& o
       out.J.row(N + row).setZero();
     }
   }
+  // Column-major: each column's data rows are contiguous.
+  reported.linear(out.r.data());
+  for (Eigen::Index c = 0; c < 4; ++c) reported.linear(out.J.col(c).data());
+  for (std::size_t i = 0; i < n; ++i) out.r(static_cast<Eigen::Index>(i)) -= s.force[i];
 }
 
 Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layout,
-                         const FitSettings& settings) {
-  const SeparableData s = separable_data(frames, layout, settings.model);
+                         const FitSettings& settings, const ReportedForce& reported) {
+  const SeparableData s = separable_data(frames, layout, settings.model, reported.offset());
   const int iK = layout.index[kKbar], iN = layout.index[kN], iC = layout.index[kCbar],
             iM = layout.index[kM];
   const Eigen::Vector4d lower(layout.lower[iK], layout.lower[iN], layout.lower[iC],
@@ -651,6 +719,16 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
     for (std::size_t i = 0; i < count; ++i)
       v_grid[b * count + i] = s.v_base[i] * std::exp(m * s.log_g[i]);
   }
+  // What the cells report of each basis: the data's moments use these, the penalty the bases.
+  std::vector<double> te_grid, tv_grid;
+  if (!reported.identity()) {
+    te_grid = e_grid;
+    tv_grid = v_grid;
+    for (int a = 0; a < kGridN; ++a) reported.linear(&te_grid[a * count]);
+    for (int b = 0; b < kGridM; ++b) reported.linear(&tv_grid[b * count]);
+  }
+  const std::vector<double>& te_all = reported.identity() ? e_grid : te_grid;
+  const std::vector<double>& tv_all = reported.identity() ? v_grid : tv_grid;
   std::vector<double> ee(kGridN), eF(kGridN), vv(kGridM), vF(kGridM);
   double FF = 0.0;
   std::vector<std::size_t> unloading;
@@ -660,14 +738,14 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
   }
   for (int a = 0; a < kGridN; ++a) {
     for (std::size_t i = 0; i < count; ++i) {
-      const double e = e_grid[a * count + i];
+      const double e = te_all[a * count + i];
       ee[a] += e * e;
       eF[a] += e * s.force[i];
     }
   }
   for (int b = 0; b < kGridM; ++b) {
     for (std::size_t i = 0; i < count; ++i) {
-      const double v = v_grid[b * count + i];
+      const double v = tv_all[b * count + i];
       vv[b] += v * v;
       vF[b] += v * s.force[i];
     }
@@ -684,7 +762,9 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
       const double d_scale = std::exp(s.log_c + m * s.log_ratio);
       const std::span<const double> v(&v_grid[b * count], count);
       Moments mo{ee[a], eF[a], vv[b], vF[b], 0.0, FF};
-      for (std::size_t i = 0; i < count; ++i) mo.ev += e[i] * v[i];
+      const double* te = &te_all[a * count];
+      const double* tv = &tv_all[b * count];
+      for (std::size_t i = 0; i < count; ++i) mo.ev += te[i] * tv[i];
       const Coefficients c = best_coefficients(
           mo, e, v, unloading, negative, std::exp(lower(0)) * k_scale, std::exp(upper(0)) * k_scale,
           std::exp(lower(2)) * d_scale, std::exp(upper(2)) * d_scale);
@@ -700,7 +780,7 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
   // projected back onto it.
   Solution out;
   Residuals res, trial;
-  evaluate(s, theta, res);
+  evaluate(s, reported, theta, res);
   double cost = 0.5 * res.r.squaredNorm();
   double lambda = 1e-3;
   int iterations = 0;
@@ -732,7 +812,7 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
       }
       const Eigen::Vector4d step = H.ldlt().solve(-pg);
       const Eigen::Vector4d next = (theta + step).cwiseMax(lower).cwiseMin(upper);
-      evaluate(s, next, trial);
+      evaluate(s, reported, next, trial);
       const double trial_cost = 0.5 * trial.r.squaredNorm();
       if (std::isfinite(trial_cost) && trial_cost <= cost) {
         const double decrease = cost - trial_cost;
@@ -860,7 +940,8 @@ Solution solve_ceres(const std::vector<FitFrame>& frames, const Layout& layout,
 
 RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size,
                      std::span<const double> measured, const EllipsoidParams& declared,
-                     const FitBounds& bounds, const FitSettings& settings) {
+                     const FitBounds& bounds, const FitSettings& settings,
+                     const ReportedForce& reported) {
   for (const auto& [b, name] : {std::pair{bounds.kbar_n_per_mm3, "kbar_n_per_mm3"},
                                 {bounds.n, "n"},
                                 {bounds.cbar_ns_per_mm3, "cbar_ns_per_mm3"},
@@ -910,8 +991,12 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
   }
 
   const bool separable = settings.mode == FitMode::Identifiable && !settings.free_scale;
-  const Solution solution =
-      separable ? solve_separable(frames, layout, settings) : solve_ceres(frames, layout, settings);
+  if (!separable && !reported.identity()) {
+    throw std::invalid_argument(
+        "a ForceTransform needs the default fit (identifiable parameters, P declared)");
+  }
+  const Solution solution = separable ? solve_separable(frames, layout, settings, reported)
+                                      : solve_ceres(frames, layout, settings);
   if (solution.theta.empty()) {
     fit.status = FitStatus::Failed;
     fit.reason = solution.failure;
@@ -926,6 +1011,10 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
   const ForceModel model{&frames, &layout, settings.model};
   std::vector<double> model_force(frames.size());
   model.forces(theta.data(), model_force.data());
+  if (!reported.identity()) {
+    reported.linear(model_force.data());
+    for (std::size_t i = 0; i < frames.size(); ++i) model_force[i] += reported.offset()[i];
+  }
   std::vector<double> fitted_measured(frames.size());
   double ssr = 0.0;
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -1049,8 +1138,9 @@ SeparableResiduals separable_residuals(const RegionSeries& series, const Ellipso
   append_frames(series, settings.smoothing, settings.end_rate, 0, frames);
   Layout layout;
   layout.declared = phys_values(declared);
+  const ReportedForce none(frames, {}, {}, series.t_s.size());
   Residuals res;
-  evaluate(separable_data(frames, layout, settings.model),
+  evaluate(separable_data(frames, layout, settings.model, none.offset()), none,
            Eigen::Vector4d(theta[0], theta[1], theta[2], theta[3]), res);
   SeparableResiduals out;
   out.residual.assign(res.r.begin(), res.r.end());
@@ -1063,20 +1153,32 @@ SeparableResiduals separable_residuals(const RegionSeries& series, const Ellipso
 }  // namespace detail
 
 RegionFit fit_region(const RegionSeries& series, const EllipsoidParams& declared,
-                     const FitBounds& bounds, const FitSettings& settings) {
-  return fit_region_session(std::span<const RegionSeries>(&series, 1), declared, bounds, settings);
+                     const FitBounds& bounds, const FitSettings& settings,
+                     const ForceTransform* transform) {
+  const std::array<const ForceTransform*, 1> transforms{transform};
+  return fit_region_session(std::span<const RegionSeries>(&series, 1), declared, bounds, settings,
+                            transform != nullptr
+                                ? std::span<const ForceTransform* const>(transforms)
+                                : std::span<const ForceTransform* const>());
 }
 
 RegionFit fit_region_session(std::span<const RegionSeries> stances, const EllipsoidParams& declared,
-                             const FitBounds& bounds, const FitSettings& settings) {
+                             const FitBounds& bounds, const FitSettings& settings,
+                             std::span<const ForceTransform* const> transforms) {
+  if (!transforms.empty() && transforms.size() != stances.size()) {
+    throw std::invalid_argument("fit_region_session: one ForceTransform (or none) per stance");
+  }
   std::vector<FitFrame> frames;
   std::vector<double> measured;
+  std::vector<std::size_t> stance_begin;
   for (const RegionSeries& s : stances) {
     check_series(s);
+    stance_begin.push_back(measured.size());
     append_frames(s, settings.smoothing, settings.end_rate, measured.size(), frames);
     measured.insert(measured.end(), s.force_n.begin(), s.force_n.end());
   }
-  return fit_frames(frames, measured.size(), measured, declared, bounds, settings);
+  const ReportedForce reported(frames, stance_begin, transforms, measured.size());
+  return fit_frames(frames, measured.size(), measured, declared, bounds, settings, reported);
 }
 
 }  // namespace gaitmon

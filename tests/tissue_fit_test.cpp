@@ -12,6 +12,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -1020,6 +1021,98 @@ TEST(TissueFit, LengthMismatchThrows) {
   RegionSeries s = model_series(kHeel, ModelVariant::Correct, 30);
   s.force_n.pop_back();
   EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, FitSettings{}), std::invalid_argument);
+}
+
+// A transform between the tissue and the cells, written out here on its own: a relaxing
+// Maxwell branch (the force less 0.35 of it low-passed with tau 0.2 s, advanced frame by frame)
+// and a constant 4 N that the cells add. The fit given it finds the tissue under it; the fit
+// without it does not.
+ForceTransform relaxing(const RegionSeries& s) {
+  ForceTransform t;
+  t.offset_n.assign(s.t_s.size(), 4.0);
+  const std::vector<double> times = s.t_s;
+  t.linear = [times](std::span<const double> tissue, std::span<double> reported) {
+    double r = 0.0;
+    for (std::size_t i = 0; i < tissue.size(); ++i) {
+      const double keep = std::exp(-(i > 0 ? times[i] - times[i - 1] : 0.01) / 0.2);
+      r = r * keep + tissue[i] * (1.0 - keep);
+      reported[i] = tissue[i] - 0.35 * r;
+    }
+  };
+  return t;
+}
+
+RegionSeries through(const RegionSeries& s, const ForceTransform& t) {
+  RegionSeries out = s;
+  t.linear(s.force_n, out.force_n);
+  for (std::size_t i = 0; i < out.force_n.size(); ++i) out.force_n[i] += t.offset_n[i];
+  return out;
+}
+
+TEST(TissueFit, AForceTransformFindsTheTissueUnderIt) {
+  const RegionSeries tissue = model_series(kHeel, ModelVariant::Correct, 60);
+  const ForceTransform t = relaxing(tissue);
+  const RegionSeries reported = through(tissue, t);
+  const RegionFit with = fit_region(reported, kHeel, config().fit_bounds, raw(), &t);
+  ASSERT_EQ(with.status, FitStatus::Ok) << with.reason << " " << with.solver_message;
+  EXPECT_NEAR(with.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
+  EXPECT_NEAR(with.n.value, 0.294, 0.294 * 0.03);
+  EXPECT_NEAR(with.cbar_ns_per_mm3.value, 0.011, 0.011 * 0.05);
+  EXPECT_NEAR(with.m.value, 1.18, 1.18 * 0.05);
+  EXPECT_TRUE(std::isfinite(with.kbar_n_per_mm3.se));
+  // The model force is what the cells report, so it follows the reported series.
+  EXPECT_LT(with.nrmse_pct, 0.5);
+  for (std::size_t i = 0; i < reported.force_n.size(); ++i) {
+    EXPECT_NEAR(with.model_force_n[i], reported.force_n[i], 0.01 * 300.0) << i;
+  }
+  const RegionFit without = fit_region(reported, kHeel, config().fit_bounds, raw());
+  ASSERT_EQ(without.status, FitStatus::Ok);
+  EXPECT_GT(without.nrmse_pct, 2.0 * with.nrmse_pct);
+
+  // Shared by two stances, each with its own transform; nullptr leaves a stance as it is.
+  const std::vector<RegionSeries> stances{reported, tissue};
+  const std::vector<const ForceTransform*> transforms{&t, nullptr};
+  const RegionFit session =
+      fit_region_session(stances, kHeel, config().fit_bounds, raw(), transforms);
+  ASSERT_EQ(session.status, FitStatus::Ok);
+  EXPECT_NEAR(session.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
+  EXPECT_NEAR(session.n.value, 0.294, 0.294 * 0.03);
+}
+
+TEST(TissueFit, AnIdentityTransformChangesNothing) {
+  const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 40);
+  ForceTransform identity;
+  identity.offset_n.assign(s.t_s.size(), 0.0);
+  identity.linear = [](std::span<const double> in, std::span<double> out) {
+    std::copy(in.begin(), in.end(), out.begin());
+  };
+  const RegionFit with = fit_region(s, kHeel, config().fit_bounds, raw(), &identity);
+  const RegionFit without = fit_region(s, kHeel, config().fit_bounds, raw());
+  EXPECT_DOUBLE_EQ(with.kbar_n_per_mm3.value, without.kbar_n_per_mm3.value);
+  EXPECT_DOUBLE_EQ(with.n.value, without.n.value);
+  EXPECT_DOUBLE_EQ(with.cbar_ns_per_mm3.value, without.cbar_ns_per_mm3.value);
+  EXPECT_DOUBLE_EQ(with.m.value, without.m.value);
+  EXPECT_DOUBLE_EQ(with.kbar_n_per_mm3.se, without.kbar_n_per_mm3.se);
+}
+
+TEST(TissueFit, AForceTransformIsRefusedWhereItCannotBeUsed) {
+  const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 40);
+  ForceTransform t = relaxing(s);
+  FitSettings seed8 = raw();
+  seed8.mode = FitMode::Seed8;
+  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, seed8, &t), std::invalid_argument);
+  FitSettings free_scale = raw();
+  free_scale.free_scale = true;
+  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, free_scale, &t), std::invalid_argument);
+  const std::vector<RegionSeries> two{s, s};
+  const std::vector<const ForceTransform*> one{&t};
+  EXPECT_THROW(fit_region_session(two, kHeel, config().fit_bounds, raw(), one),
+               std::invalid_argument);
+  t.offset_n.pop_back();
+  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, raw(), &t), std::invalid_argument);
+  ForceTransform no_map;
+  no_map.offset_n.assign(s.t_s.size(), 0.0);
+  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, raw(), &no_map), std::invalid_argument);
 }
 
 TEST(TissueFit, SessionFitSharesOneParameterSet) {

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string_view>
@@ -57,6 +58,9 @@ struct RegionAnalysis {
   EllipsoidParams declared;  ///< A, B from P and the step's aspect; C, d0 from Appendix I
   double aspect = 0.0;       ///< A/B used: median ra/rb over contact frames, else Appendix I's
   RegionFit fit;
+  /// What sits between the tissue and the cells in `fit` (fit_steps_with_effects), which the
+  /// session-level fit then takes in too; null for the baseline.
+  std::shared_ptr<const ForceTransform> effects;
   double peak_force_n = 0.0;
   double peak_area_mm2 = 0.0;
   int frames = 0;            ///< stance frames in which the region has a contact ellipse
@@ -94,6 +98,10 @@ std::pair<std::vector<double>, AreaSource> fit_areas_mm2(const StanceSeries& sta
 /// model force to the total. Deterministic; no I/O. Pass one cache for many steps.
 StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Config& config,
                           const AnalysisSettings& settings, ContactEllipseCache* cache = nullptr);
+
+/// The step's model total per frame and its NRMSE from its regions' fits, as analyse_step sets
+/// them: for a caller that fits regions again.
+void set_model_totals(StepAnalysis& step);
 
 /// Median and interquartile range of one parameter across steps (linear interpolation between
 /// order statistics, as numpy's default). All zero when there are no values.

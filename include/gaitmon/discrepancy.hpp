@@ -418,6 +418,25 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     const std::stop_token& stop = {},
                                     const std::function<void(double)>& on_progress = {});
 
+/// The effects that sit between the tissue and the cells and are affine in the tissue's force:
+/// fit_steps_with_effects puts these inside each step's tissue fit.
+bool effect_inside_tissue_fit(std::string_view name);
+
+/// The steps of `input` (in its order) with each region that the workflow compares fitted again
+/// (fit_region) with the named effects that effect_inside_tissue_fit admits in its model, at
+/// their fitted parameters (`effects`, as fit_extended_model gives them), as a ForceTransform:
+/// stress_relaxation (with the lag its region's earlier steps carry in), hysteresis and
+/// impact_transient (its onset between two frames chosen per step, as the workflow chooses it:
+/// the best fit). Each step's kbar, n, cbar and m are then the tissue's under those effects, and
+/// each region's model force is what its cells report. The other effects change nothing here,
+/// nor do the regions the workflow leaves out. Throws std::invalid_argument for an unknown
+/// effect, a parameter missing from an estimate, or fit settings other than the default fit
+/// (Identifiable, P declared).
+std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
+                                                 std::span<const EffectEstimate> effects,
+                                                 const Config& config,
+                                                 const AnalysisSettings& settings);
+
 /// One effect at given parameters on top of the baseline, nothing fitted but each step's n, K
 /// and D (and each step's own choices: sensor_creep's unknown start lags, impact_transient's
 /// onset): what the effect itself can explain of a session whose truth is known, a simulated

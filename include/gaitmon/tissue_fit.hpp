@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
@@ -122,16 +123,31 @@ struct RegionFit {
   }
 };
 
+/// A known map from a region's tissue force to the force its cells report, for a fit with effects
+/// in the model (`gaitmon analyze --effects`): reported = offset_n + linear(tissue force), per
+/// frame of the series. `linear` must be linear; it is given the tissue force in every frame of
+/// the series, 0 in the frames the fit leaves out. The fit then finds the tissue under the
+/// effects, and RegionFit::model_force_n is the reported force. The default fit only
+/// (Identifiable, P declared): the others throw std::invalid_argument given one.
+struct ForceTransform {
+  std::vector<double> offset_n;
+  std::function<void(std::span<const double> tissue_n, std::span<double> reported_n)> linear;
+};
+
 /// Fits one region. `declared` supplies A, B, C, d0 (A/B is usually the step's median contact
 /// ellipse aspect, P and C, d0 from config) and, in Seed8 mode, nothing (the bounds' midpoints are
 /// used). Deterministic. Throws std::invalid_argument if the series lengths differ.
+/// `transform`, if given, sits between the tissue and the cells (ForceTransform).
 RegionFit fit_region(const RegionSeries& series, const EllipsoidParams& declared,
-                     const FitBounds& bounds, const FitSettings& settings);
+                     const FitBounds& bounds, const FitSettings& settings,
+                     const ForceTransform* transform = nullptr);
 
 /// One parameter set shared by several stances of the same region (each series is one stance;
-/// gdot never crosses from one stance to the next).
+/// gdot never crosses from one stance to the next). `transforms` is empty or holds one per stance
+/// (nullptr: none for that stance); a size that differs throws std::invalid_argument.
 RegionFit fit_region_session(std::span<const RegionSeries> stances, const EllipsoidParams& declared,
-                             const FitBounds& bounds, const FitSettings& settings);
+                             const FitBounds& bounds, const FitSettings& settings,
+                             std::span<const ForceTransform* const> transforms = {});
 
 /// eq 58 for one series: RMS(measured - model) / max(measured) x 100.
 double nrmse_pct(std::span<const double> measured, std::span<const double> model);

@@ -398,6 +398,17 @@ std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const In
 void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   const Config config = load_global_config(global);
   const AnalysisSettings settings = settings_from(args);
+  const std::vector<std::string>& names = args.effects_given ? args.effects : config.model.effects;
+  if (settings.fit.mode == FitMode::Seed8 || settings.fit.free_scale) {
+    for (const std::string& name : names) {
+      if (effect_inside_tissue_fit(name)) {
+        throw std::invalid_argument(fmt::format(
+            "--effects {}: each step's tissue is fitted with it inside, which needs the default "
+            "fit; drop --fit seed8 and --free-scale",
+            name));
+      }
+    }
+  }
   check_output_dir(args.out_dir, "--out");
   OutputSet outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"},
                     args.session);
@@ -428,8 +439,6 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     }
     // The shares of the time measured on a 60-s session: one effect's fit takes about seven
     // times as long as all the steps' fits, and the session-level fits a twentieth of those.
-    const std::vector<std::string>& names =
-        args.effects_given ? args.effects : config.model.effects;
     const double steps_end = names.empty() ? 0.95 : 0.25;
     const auto start = std::chrono::steady_clock::now();
     analyses = analyse_steps(ok_steps, layout, config, settings, [&](double fraction) {
@@ -439,9 +448,12 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     if (!names.empty()) {
       const auto effects_start = std::chrono::steady_clock::now();
-      extended = fit_extended_model(
-          extended_model_input(ok_steps, analyses, layout, config, names, settings.area), names, {},
-          {}, [&](double fraction) { progress.update(steps_end + (0.95 - steps_end) * fraction); });
+      const DiscrepancyInput input =
+          extended_model_input(ok_steps, analyses, layout, config, names, settings.area);
+      extended = fit_extended_model(input, names, {}, {}, [&](double fraction) {
+        progress.update(steps_end + (0.95 - steps_end) * fraction);
+      });
+      analyses = fit_steps_with_effects(input, extended->effects, config, settings);
       spdlog::debug(
           "fitted the extended model in {:.2f} s",
           std::chrono::duration<double>(std::chrono::steady_clock::now() - effects_start).count());
@@ -499,10 +511,23 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
         "extended model: pooled NRMSE {:.2f} % -> {:.2f} % (held-out {:.2f} % -> {:.2f} %)\n",
         extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
         extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
-    // Without this the table above reads as the extended model's tissue.
-    fmt::print(
-        "note: the tissue parameters above and in regions.csv are the baseline fit's; the "
-        "effects are fitted on top of it, not inside each step's fit\n");
+    // Without this the table above could be read as the tissue under every effect.
+    std::vector<std::string> inside, on_top;
+    for (const EffectEstimate& e : extended->effects) {
+      (effect_inside_tissue_fit(e.name) ? inside : on_top).push_back(e.name);
+    }
+    if (!inside.empty()) {
+      fmt::print(
+          "note: each step's tissue parameters above and in regions.csv are fitted with {} "
+          "inside its model\n",
+          fmt::join(inside, " and "));
+    }
+    if (!on_top.empty()) {
+      fmt::print(
+          "note: {} {} fitted on top of the baseline's tissue parameters, not inside each "
+          "step's fit\n",
+          fmt::join(on_top, " and "), on_top.size() == 1 ? "is" : "are");
+    }
     if (extended->zero_changes > 0) {
       fmt::print(
           "zero channel ({} changes of the step-regions' zeros): held-out NRMSE {:.3f} % -> "

@@ -551,8 +551,10 @@ std::string run_on_terminal(const std::vector<std::string>& args, int* status) {
   return shown;
 }
 
-// With effects the summary still shows the baseline's per-step fits, and says so.
-TEST(AnalyzeCommand, WithEffectsItSaysTheTissueParametersAreTheBaselines) {
+// With a tissue effect each step's tissue is fitted with it inside, and the summary says which
+// effects are inside and which on top of the baseline's fits; the per-step parameters in
+// regions.csv move with it. The seed's fit cannot take an effect inside: refused before any work.
+TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
   const auto dir = test::scratch_dir("analyze-effects-note");
   const std::string session = (analysed().dir / "s.csv").string();
   int status = -1;
@@ -561,14 +563,33 @@ TEST(AnalyzeCommand, WithEffectsItSaysTheTissueParametersAreTheBaselines) {
           &status);
   ASSERT_EQ(status, 0) << with;
   EXPECT_NE(with.find("effect impact_transient:"), std::string::npos) << with;
-  EXPECT_NE(with.find("note: the tissue parameters above and in regions.csv are the baseline "
-                      "fit's"),
+  EXPECT_NE(with.find("note: each step's tissue parameters above and in regions.csv are fitted "
+                      "with impact_transient inside its model"),
             std::string::npos)
       << with;
+  EXPECT_EQ(with.find("on top of"), std::string::npos) << with;
   const std::string without =
       run("analyze " + session + " --out " + (dir / "p").string() + " --effects none", &status);
   ASSERT_EQ(status, 0) << without;
-  EXPECT_EQ(without.find("baseline fit's"), std::string::npos) << without;
+  EXPECT_EQ(without.find("note: each step"), std::string::npos) << without;
+  EXPECT_NE(read_all(dir / "o" / "regions.csv"), read_all(dir / "p" / "regions.csv"));
+
+  const std::string sensor = run(
+      "analyze " + session + " --out " + (dir / "q").string() + " --effects sensor_creep", &status);
+  ASSERT_EQ(status, 0) << sensor;
+  EXPECT_NE(sensor.find("note: sensor_creep is fitted on top of the baseline's tissue "
+                        "parameters, not inside each step's fit"),
+            std::string::npos)
+      << sensor;
+  EXPECT_EQ(read_all(dir / "q" / "regions.csv"), read_all(dir / "p" / "regions.csv"));
+
+  const std::string seed8 = run(
+      "analyze " + session + " --out " + (dir / "r").string() + " --effects hysteresis --fit seed8",
+      &status);
+  EXPECT_NE(status, 0) << seed8;
+  EXPECT_NE(seed8.find("--effects hysteresis"), std::string::npos) << seed8;
+  EXPECT_NE(seed8.find("drop --fit seed8"), std::string::npos) << seed8;
+  EXPECT_FALSE(fs::exists(dir / "r" / "regions.csv"));
 }
 
 // The bar covers the whole job, the extended model's fit and the session-level fits too: it
