@@ -1527,12 +1527,14 @@ bool effect_inside_tissue_fit(std::string_view name) {
   return spec.stage == 0;
 }
 
-std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
-                                                 std::span<const EffectEstimate> effects,
-                                                 const Config& config,
-                                                 const AnalysisSettings& settings) {
-  std::vector<StepAnalysis> out;
-  for (const DiscrepancyStep& ds : input.steps) out.push_back(ds.analysis);
+namespace {
+
+// fit_steps_with_effects for the steps of `input` that `wanted` (by their index in input.steps)
+// takes, into out[that index]; the others only carry into them what they carry.
+void refit_with_effects(const DiscrepancyInput& input, std::span<const EffectEstimate> effects,
+                        const Config& config, const AnalysisSettings& settings,
+                        const std::function<bool(std::size_t)>& wanted,
+                        std::vector<StepAnalysis>& out) {
   const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
   std::vector<FixedEffect> inside;
   for (const EffectEstimate& e : effects) {
@@ -1550,7 +1552,7 @@ std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
     }
     inside.push_back({&spec, std::move(theta)});
   }
-  if (inside.empty()) return out;
+  if (inside.empty()) return;
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     throw std::invalid_argument(
         "effects inside the tissue fit need the default fit (identifiable parameters, P "
@@ -1568,13 +1570,22 @@ std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
   fx->chain = fx->model.chain();
   const std::shared_ptr<const Effects> shared = fx;
   std::map<std::pair<Foot, int>, std::size_t> step_of;
-  for (std::size_t i = 0; i < out.size(); ++i) step_of[{out[i].foot, out[i].step}] = i;
-  parallel_for(shared->prep.units.size(), [&](std::size_t ui) {
+  for (std::size_t i = 0; i < input.steps.size(); ++i) {
+    const StepAnalysis& a = input.steps[i].analysis;
+    step_of[{a.foot, a.step}] = i;
+  }
+  const Chain& chain = shared->chain;
+  std::vector<std::size_t> refit;
+  for (std::size_t ui = 0; ui < shared->prep.units.size(); ++ui) {
     const Unit& u = shared->prep.units[ui];
-    const Chain& chain = shared->chain;
-    const bool affected =
-        std::any_of(chain.begin(), chain.end(), [&](const Applied* e) { return e->affects(u); });
-    if (!affected) return;
+    if (wanted(step_of.at({u.foot, u.step})) &&
+        std::any_of(chain.begin(), chain.end(), [&](const Applied* e) { return e->affects(u); })) {
+      refit.push_back(ui);
+    }
+  }
+  parallel_for(refit.size(), [&](std::size_t ri) {
+    const std::size_t ui = refit[ri];
+    const Unit& u = shared->prep.units[ui];
     std::size_t choices = 1;
     for (const Applied* e : chain) {
       if (e->affects(u)) choices = std::max(choices, e->choices(u));
@@ -1617,8 +1628,42 @@ std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
     ra.fit = std::move(*best);
     ra.effects = std::move(best_transform);
   });
-  for (StepAnalysis& step : out) set_model_totals(step);
+  std::vector<std::size_t> touched;
+  for (std::size_t ui : refit) {
+    const Unit& u = shared->prep.units[ui];
+    touched.push_back(step_of.at({u.foot, u.step}));
+  }
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  for (std::size_t i : touched) set_model_totals(out[i]);
+}
+
+}  // namespace
+
+std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
+                                                 std::span<const EffectEstimate> effects,
+                                                 const Config& config,
+                                                 const AnalysisSettings& settings) {
+  std::vector<StepAnalysis> out;
+  for (const DiscrepancyStep& ds : input.steps) out.push_back(ds.analysis);
+  refit_with_effects(
+      input, effects, config, settings, [](std::size_t) { return true; }, out);
   return out;
+}
+
+StepAnalysis fit_step_with_effects(const DiscrepancyInput& input, std::size_t index,
+                                   std::span<const EffectEstimate> effects, const Config& config,
+                                   const AnalysisSettings& settings) {
+  if (index >= input.steps.size()) {
+    throw std::invalid_argument("fit_step_with_effects: step " + std::to_string(index) + " of " +
+                                std::to_string(input.steps.size()));
+  }
+  // Only out[index] is read or written.
+  std::vector<StepAnalysis> out(input.steps.size());
+  out[index] = input.steps[index].analysis;
+  refit_with_effects(
+      input, effects, config, settings, [index](std::size_t i) { return i == index; }, out);
+  return std::move(out[index]);
 }
 
 FixedEffectEvaluation evaluate_effect_at(const DiscrepancyInput& input, std::string_view effect,

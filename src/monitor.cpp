@@ -16,6 +16,7 @@
 #include <deque>
 #include <exception>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <new>
 #include <optional>
@@ -128,6 +129,40 @@ EffectsReport effects_report(const ExtendedModelFit& fit, std::span<const Step> 
   return report;
 }
 
+/// The latest estimate's effects that sit inside the tissue fit (effect_inside_tissue_fit), as
+/// each step after it is fitted with them.
+struct InsideEffects {
+  std::vector<EffectEstimate> estimates;
+  std::vector<std::string> names;
+  std::string joined;      ///< FitReport::effects_inside
+  std::int64_t utime = 0;  ///< of the EffectsReport that published the estimate
+  double history_s = 0.0;  ///< how far back a foot's earlier steps still carry into its step
+};
+
+// stress_relaxation carries a step's lag into the next ones, decaying with its time constant:
+// after 20 of them e^-20 (2e-9) of it is left, far below a bit.
+constexpr double kCarriedTimeConstants = 20.0;
+
+// Null where no effect of the estimate sits inside the tissue fit.
+std::shared_ptr<const InsideEffects> inside_effects(const ExtendedModelFit& fit,
+                                                    std::int64_t utime) {
+  auto inside = std::make_shared<InsideEffects>();
+  for (const EffectEstimate& effect : fit.effects) {
+    if (!effect_inside_tissue_fit(effect.name)) continue;
+    inside->estimates.push_back(effect);
+    inside->names.push_back(effect.name);
+    inside->joined += (inside->joined.empty() ? "" : ",") + effect.name;
+    for (const ParamEstimate& p : effect.params) {
+      if (effect.name == "stress_relaxation" && p.name == "tau_s") {
+        inside->history_s = std::max(inside->history_s, kCarriedTimeConstants * p.value);
+      }
+    }
+  }
+  if (inside->estimates.empty()) return nullptr;
+  inside->utime = utime;
+  return inside;
+}
+
 // Nearest rank: the smallest value with at least p of the values at or below it.
 double percentile(std::vector<double>& values, double p) {
   if (values.empty()) return 0.0;
@@ -176,7 +211,9 @@ struct Monitor::Impl {
     std::size_t fresh = 0;  ///< steps in the window added since the last fit took its copy
     bool fitting = false;   ///< a fit is queued or running
     std::optional<EffectsReport> last;  ///< the latest published
-    bool last_is_current = false;       ///< `last` is of the window as it is now
+    /// Of the latest estimate published while running, for the steps fitted after it.
+    std::shared_ptr<const InsideEffects> inside;
+    bool last_is_current = false;  ///< `last` is of the window as it is now
   };
   /// Detector-thread state of one foot.
   struct FootState {
@@ -541,7 +578,13 @@ struct Monitor::Impl {
       try {
         try {
           analysis = analyse_step(job->step, *job->layout, config, options.analysis, &cache);
-          ready->report = fit_report(*analysis, ready->failed);
+          std::shared_ptr<const InsideEffects> inside;
+          const std::optional<StepAnalysis> extended = fit_with_effects(*job, *analysis, inside);
+          ready->report = fit_report(extended ? *extended : *analysis, ready->failed);
+          if (extended) {
+            ready->report.effects_inside = inside->joined;
+            ready->report.effects_utime = inside->utime;
+          }
         } catch (const std::exception& e) {
           // Logged before its report is built, which may fail too.
           if (auto held = fit_log.allow()) {
@@ -563,6 +606,58 @@ struct Monitor::Impl {
       if (analysis && !config.model.effects.empty()) {
         remember_for_effects(job->arrival, std::move(job->step), std::move(*analysis), job->layout);
       }
+    }
+  }
+
+  /// The step fitted again with the latest estimate's effects inside its tissue fit, given the
+  /// earlier steps of its foot in the window that still carry into it (as `analyze --effects`
+  /// fits a session's steps, with the history the window holds when the step is fitted).
+  /// nullopt, and the baseline published, before the first estimate, where no configured effect
+  /// sits inside the tissue fit, and where this fit failed (logged). `used` is the estimate.
+  std::optional<StepAnalysis> fit_with_effects(const Job& job, const StepAnalysis& baseline,
+                                               std::shared_ptr<const InsideEffects>& used) {
+    if (config.model.effects.empty()) return std::nullopt;
+    {
+      const std::lock_guard lock(effects_mutex);
+      used = effect_window.inside;
+    }
+    if (!used) return std::nullopt;
+    try {
+      std::vector<Step> steps;
+      std::vector<StepAnalysis> analyses;
+      {
+        const std::lock_guard lock(effects_mutex);
+        const EffectWindow& w = effect_window;
+        // Only earlier steps by the foot's own clock: after a device restart the steps before it
+        // run ahead of it, and the restart broke the tissue's history anyway.
+        const double from_s = job.step.t_heel_strike_s - used->history_s;
+        if (used->history_s > 0.0 && w.layout &&
+            w.layout->sensor_count() == job.layout->sensor_count()) {
+          for (const auto& [arrival, entry] : w.steps) {
+            const Step& s = entry.first;
+            if (s.foot == job.step.foot && s.t_heel_strike_s < job.step.t_heel_strike_s &&
+                s.t_toe_off_s > from_s) {
+              steps.push_back(s);
+              analyses.push_back(entry.second);
+            }
+          }
+        }
+      }
+      steps.push_back(job.step);
+      analyses.push_back(baseline);
+      const DiscrepancyInput input = extended_model_input(
+          steps, std::move(analyses), *job.layout, config, used->names, options.analysis.area);
+      return fit_step_with_effects(input, input.steps.size() - 1, used->estimates, config,
+                                   options.analysis);
+    } catch (const std::exception& e) {
+      if (auto held = effects_log.allow()) {
+        spdlog::warn(
+            "monitor: foot {} step {}: the fit with {} inside failed, the baseline fit is "
+            "published: {} ({} similar suppressed)",
+            foot_name(job.foot), job.step.index, used->joined, e.what(), *held);
+      }
+      used.reset();
+      return std::nullopt;
     }
   }
 
@@ -676,6 +771,7 @@ struct Monitor::Impl {
   bool fit_effects(bool final_estimate) noexcept {
     std::size_t count = 0;
     std::optional<EffectsReport> report;
+    std::shared_ptr<const InsideEffects> inside;
     try {
       std::vector<Step> steps;
       std::vector<StepAnalysis> analyses;
@@ -706,6 +802,7 @@ struct Monitor::Impl {
       report->final_estimate = final_estimate;
       report->utime = now_utime();
       send(*report);
+      inside = inside_effects(fit, report->utime);
     } catch (const FitStopped&) {
       spdlog::debug("monitor: the extended model's fit to {} steps stopped", count);
     } catch (const std::exception& e) {
@@ -720,6 +817,7 @@ struct Monitor::Impl {
     const bool sent = report.has_value();
     effect_window.last_is_current = sent && effect_window.fresh == 0;
     if (report) effect_window.last = std::move(report);
+    if (inside) effect_window.inside = std::move(inside);
     effect_window.fitting = false;
     return sent;
   }
@@ -915,6 +1013,14 @@ Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publis
     throw std::invalid_argument(
         "Monitor: workers, max_step_backlog and status_period_s must be "
         "positive");
+  }
+  const bool inside = std::any_of(config.model.effects.begin(), config.model.effects.end(),
+                                  [](const std::string& e) { return effect_inside_tissue_fit(e); });
+  if (inside &&
+      (options.analysis.fit.mode != FitMode::Identifiable || options.analysis.fit.free_scale)) {
+    throw std::invalid_argument(
+        "Monitor: [model] effects inside the tissue fit need the default fit (identifiable "
+        "parameters, P declared)");
   }
   // Checked once here: a segmenter that cannot be built would reject every frame.
   (void)StepSegmenter(Foot::Left, 1, config.segmentation, 0.0,

@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -513,6 +514,59 @@ TEST(Discrepancy, EffectsOutsideTheTissueLeaveEachStepsFitAsItIs) {
   seed8.fit.mode = FitMode::Seed8;
   EXPECT_THROW(fit_steps_with_effects(input, relaxation, shipped_config(), seed8),
                std::invalid_argument);
+}
+
+// The live monitor fits each new step alone, given its foot's earlier steps: the same fit as the
+// whole session's, since only those carry anything into it (relaxation's lag, tau 0.3 s here).
+TEST(Discrepancy, OneStepIsFittedWithTheEffectsAsTheWholeSessionFitsIt) {
+  const DiscrepancyInput input =
+      clean_session({"stress_relaxation", {{"strength", 0.4}, {"tau_s", 0.3}}}, 8, 5);
+  const AnalysisSettings settings = discrepancy_analysis_settings();
+  const std::vector<EffectEstimate> relaxation{
+      {"stress_relaxation", {{"strength", 0.4, 0.01}, {"tau_s", 0.3, 0.01}}}};
+  const std::vector<StepAnalysis> all =
+      fit_steps_with_effects(input, relaxation, shipped_config(), settings);
+  ASSERT_EQ(all.size(), input.steps.size());
+  int compared = 0;
+  for (std::size_t i = 0; i < input.steps.size(); ++i) {
+    const StepAnalysis& target = input.steps[i].analysis;
+    // That foot's steps up to this one, as the monitor's window gives them.
+    DiscrepancyInput history = input;
+    history.steps.clear();
+    std::size_t index = 0;
+    for (const DiscrepancyStep& ds : input.steps) {
+      if (ds.analysis.foot != target.foot || ds.analysis.t_heel_strike_s > target.t_heel_strike_s) {
+        continue;
+      }
+      if (&ds == &input.steps[i]) index = history.steps.size();
+      history.steps.push_back(ds);
+    }
+    for (const DiscrepancyInput* in : std::array<const DiscrepancyInput*, 2>{&input, &history}) {
+      const StepAnalysis one = fit_step_with_effects(*in, in == &input ? i : index, relaxation,
+                                                     shipped_config(), settings);
+      ASSERT_EQ(one.foot, all[i].foot);
+      ASSERT_EQ(one.step, all[i].step);
+      EXPECT_EQ(one.nrmse_total_pct, all[i].nrmse_total_pct) << i;
+      for (Region region : kRegions) {
+        const RegionFit& a = one.at(region).fit;
+        const RegionFit& b = all[i].at(region).fit;
+        EXPECT_EQ(one.at(region).effects != nullptr, all[i].at(region).effects != nullptr) << i;
+        EXPECT_EQ(a.kbar_n_per_mm3.value, b.kbar_n_per_mm3.value) << i;
+        EXPECT_EQ(a.n.value, b.n.value) << i;
+        EXPECT_EQ(a.cbar_ns_per_mm3.value, b.cbar_ns_per_mm3.value) << i;
+        EXPECT_EQ(a.m.value, b.m.value) << i;
+      }
+      ++compared;
+    }
+    // Refitted: not the baseline's.
+    EXPECT_NE(all[i].at(Region::Heel).fit.kbar_n_per_mm3.value,
+              target.at(Region::Heel).fit.kbar_n_per_mm3.value)
+        << i;
+  }
+  EXPECT_EQ(compared, 2 * static_cast<int>(input.steps.size()));
+  EXPECT_THROW(
+      fit_step_with_effects(input, input.steps.size(), relaxation, shipped_config(), settings),
+      std::invalid_argument);
 }
 
 // With the parameters the session was made with, an effect explains what it added, down to the

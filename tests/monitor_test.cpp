@@ -56,6 +56,16 @@ std::vector<Step> batch_steps(const fs::path& session, const Config& config) {
   return steps;
 }
 
+// The complete steps, in the order the segmenters finalise them: the monitor's for frames in
+// file order.
+std::vector<Step> complete_steps(const fs::path& session, const Config& config) {
+  std::vector<Step> ok;
+  for (Step& step : batch_steps(session, config)) {
+    if (step.status == StepStatus::Ok) ok.push_back(std::move(step));
+  }
+  return ok;
+}
+
 // Fits cut short (one start, five iterations): for tests about the plumbing, not the numbers.
 AnalysisSettings quick_fits() {
   AnalysisSettings settings;
@@ -434,11 +444,7 @@ TEST_P(MonitorEffects, OfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
   config.model.effects = {GetParam()};
   SessionHeader header;
   const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
-  // In the order the segmenters finalise them, which is the monitor's for frames in file order.
-  std::vector<Step> ok;
-  for (Step& step : batch_steps(demo_30s(), config)) {
-    if (step.status == StepStatus::Ok) ok.push_back(std::move(step));
-  }
+  const std::vector<Step> ok = complete_steps(demo_30s(), config);
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
 
   // The whole session fits in a window of 100; a window of 20 keeps the latest 20 finalised.
@@ -505,6 +511,116 @@ TEST_P(MonitorEffects, OfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
 
 INSTANTIATE_TEST_SUITE_P(ImpactAndCrosstalk, MonitorEffects,
                          ::testing::Values("impact_transient", "crosstalk"));
+
+// Each step fitted after an estimate is fitted with its effects inside the tissue fit, as
+// `analyze --effects` fits it (fit_step_with_effects), given its foot's earlier steps in the
+// window that still carry into it (stress_relaxation's lag: those ending within 20 tau of its
+// heel strike). One worker: each step is then fitted after every earlier one is in the window,
+// and which estimate it was fitted with is what its report names.
+class MonitorEffectsInside : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
+  Config config = shipped_config();
+  config.model.effects = {GetParam()};
+  config.monitor.workers = 1;
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  const std::vector<Step> ok = complete_steps(demo_30s(), config);
+  const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  {
+    Monitor monitor(config, options, publisher);
+    offer_all(monitor, frames);
+  }
+  std::map<std::int64_t, EffectsReport> estimates;
+  for (const EffectsReport& r : publisher.effects()) {
+    if (!r.final_estimate) estimates[r.utime] = r;
+  }
+  ASSERT_FALSE(estimates.empty());
+  const std::vector<FitReport> fits = publisher.fits();
+  ASSERT_EQ(fits.size(), ok.size());
+  std::size_t before = 0;
+  std::size_t compared = 0;
+  std::size_t changed_steps = 0;
+  for (const FitReport& fit : fits) {
+    SCOPED_TRACE(fmt::format("foot {} step {}", foot_name(fit.foot), fit.step));
+    if (fit.effects_utime == 0) {
+      EXPECT_EQ(fit.effects_inside, "");
+      EXPECT_EQ(compared, 0u) << "a step after the first estimate is fitted with it";
+      ++before;
+      continue;
+    }
+    EXPECT_EQ(fit.effects_inside, GetParam());
+    ASSERT_EQ(estimates.count(fit.effects_utime), 1u) << "a published estimate's";
+    if (compared == 4) continue;  // enough for the sanitizer builds
+    std::vector<EffectEstimate> estimate{{GetParam(), {}}};
+    double history_s = 0.0;
+    for (const EffectParamReport& p : estimates.at(fit.effects_utime).params) {
+      estimate.front().params.push_back({p.name, p.value, p.se});
+      if (p.name == "tau_s") history_s = 20.0 * p.value;
+    }
+    const auto self = std::find_if(ok.begin(), ok.end(), [&](const Step& s) {
+      return s.foot == fit.foot && s.index == fit.step;
+    });
+    ASSERT_NE(self, ok.end());
+    std::vector<Step> steps;
+    for (auto it = ok.begin(); it != self; ++it) {
+      if (it->foot == fit.foot && it->t_toe_off_s > self->t_heel_strike_s - history_s) {
+        steps.push_back(*it);
+      }
+    }
+    if (history_s > 0.0 && compared == 0) {
+      EXPECT_GE(steps.size(), 1u) << "a history to carry";
+    }
+    steps.push_back(*self);
+    std::vector<StepAnalysis> analyses;
+    for (const Step& step : steps)
+      analyses.push_back(analyse_step(step, layout, config, quick_fits()));
+    const StepAnalysis expected =
+        fit_step_with_effects(extended_model_input(steps, std::move(analyses), layout, config,
+                                                   config.model.effects, quick_fits().area),
+                              steps.size() - 1, estimate, config, quick_fits());
+    const StepAnalysis baseline = analyse_step(*self, layout, config, quick_fits());
+    expect_close(fit.nrmse_total_pct, expected.nrmse_total_pct, "total NRMSE");
+    bool changed = false;
+    for (const RegionAnalysis& r : expected.regions) {
+      const RegionFitReport& got = fit.regions[index_of(r.region)];
+      EXPECT_EQ(got.status, expected_status(r.fit)) << region_name(r.region);
+      if (r.fit.status != FitStatus::Ok) continue;
+      expect_close(got.kbar_n_per_mm3, r.fit.kbar_n_per_mm3.value, "kbar");
+      expect_close(got.n, r.fit.n.value, "n");
+      expect_close(got.cbar_ns_per_mm3, r.fit.cbar_ns_per_mm3.value, "cbar");
+      expect_close(got.m, r.fit.m.value, "m");
+      changed = changed || got.kbar_n_per_mm3 != baseline.at(r.region).fit.kbar_n_per_mm3.value;
+    }
+    if (changed) ++changed_steps;
+    ++compared;
+  }
+  EXPECT_GE(before, 5u) << "the first estimate needs a step per fold";
+  EXPECT_EQ(compared, 4u);
+  // Not all: the demo's impact estimate (2.4 N over 12.5 ms) can fall between two frames.
+  EXPECT_GE(changed_steps, 1u) << "not the baseline's fits";
+}
+
+INSTANTIATE_TEST_SUITE_P(ImpactAndRelaxation, MonitorEffectsInside,
+                         ::testing::Values("impact_transient", "stress_relaxation"));
+
+// As `analyze --effects` refuses them: seed8's and the free-scale fit cannot take a map.
+TEST(Monitor, RefusesATissueEffectInsideAFitThatCannotTakeIt) {
+  Config config = shipped_config();
+  RecordingPublisher publisher;
+  MonitorOptions seed8;
+  seed8.analysis.fit.mode = FitMode::Seed8;
+  MonitorOptions free_scale;
+  free_scale.analysis.fit.free_scale = true;
+  config.model.effects = {"sensor_creep", "hysteresis"};
+  EXPECT_THROW(Monitor(config, seed8, publisher), std::invalid_argument);
+  EXPECT_THROW(Monitor(config, free_scale, publisher), std::invalid_argument);
+  config.model.effects = {"sensor_creep"};  // on top of the tissue fit: any fit takes it
+  EXPECT_NO_THROW(Monitor(config, seed8, publisher));
+}
 
 // close() (the commands' SIGINT and SIGTERM) makes the shutdown publish the latest estimate as
 // the final one instead of fitting the window again, which could outlast the 2-s shutdown.

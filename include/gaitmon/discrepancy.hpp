@@ -437,6 +437,14 @@ std::vector<StepAnalysis> fit_steps_with_effects(const DiscrepancyInput& input,
                                                  const Config& config,
                                                  const AnalysisSettings& settings);
 
+/// input.steps[index] as fit_steps_with_effects fits it, without fitting the others: they only
+/// give it what they carry in (stress_relaxation's lag of its region's earlier steps). The live
+/// monitor fits each new step so, with its window's earlier steps of that foot. Throws as
+/// fit_steps_with_effects does, and std::invalid_argument for an index out of range.
+StepAnalysis fit_step_with_effects(const DiscrepancyInput& input, std::size_t index,
+                                   std::span<const EffectEstimate> effects, const Config& config,
+                                   const AnalysisSettings& settings);
+
 /// One effect at given parameters on top of the baseline, nothing fitted but each step's n, K
 /// and D (and each step's own choices: sensor_creep's unknown start lags, impact_transient's
 /// onset): what the effect itself can explain of a session whose truth is known, a simulated

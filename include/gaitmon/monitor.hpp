@@ -27,6 +27,10 @@
 //    the new steps are as many as the old (5, 10, 20, ...; every half window once full), so
 //    that no step waits for such a fit; each estimate is published as an EffectsReport. Over a
 //    session no longer than the window, the final one equals `gaitmon analyze --effects` on it.
+//    Once an estimate is out, each step the workers fit after it is fitted again with that
+//    estimate's effects inside its tissue fit (fit_step_with_effects, given the earlier steps of
+//    its foot in the window that carry into it), and its FitReport names them (effects_inside,
+//    effects_utime); a step whose such fit fails is published with its baseline fit.
 //
 // Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
 // wrap, divided by 1e6 (for replays that is the session's t_s, which the drivers encode as
@@ -132,7 +136,9 @@ struct MonitorCounters {
 class Monitor {
  public:
   /// Starts the detector thread and the workers. Throws std::invalid_argument if the sample
-  /// rate is not positive or a setting is out of its range (load_config has checked those).
+  /// rate is not positive, a setting is out of its range (load_config has checked those), or
+  /// an effect of [model] effects sits inside the tissue fit and options.analysis is not the
+  /// default fit (fit_steps_with_effects).
   /// The publisher must outlive the monitor.
   Monitor(const Config& config, MonitorOptions options, Publisher& publisher);
   /// Calls stop().

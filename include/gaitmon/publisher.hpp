@@ -66,6 +66,10 @@ struct FitReport {
   double t_toe_off_s = 0.0;
   double nrmse_total_pct = 0.0;
   double latency_ms = 0.0;  ///< from the step's finalisation (end of step known) to publication
+  /// The tissue effects inside this step's fit, comma-separated, at the parameters of the
+  /// effects estimate published at `effects_utime`; empty and 0 for the baseline model.
+  std::string effects_inside;
+  std::int64_t effects_utime = 0;
   std::array<RegionFitReport, kRegionCount> regions{};
 };
 

@@ -248,7 +248,9 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
   for (const EffectEstimate& e : fit->effects) {
     nlohmann::json params = nlohmann::json::object();
     for (const ParamEstimate& p : e.params) params[p.name] = {{"value", p.value}, {"se", p.se}};
-    effects.push_back({{"name", e.name}, {"params", params}});
+    effects.push_back({{"name", e.name},
+                       {"inside_tissue_fit", effect_inside_tissue_fit(e.name)},
+                       {"params", params}});
   }
   nlohmann::json regions = nlohmann::json::object();
   for (const RegionComparison& c : fit->regions) {

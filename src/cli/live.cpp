@@ -128,6 +128,10 @@ void StepPrinter::publish(const FitReport& report) {
       fmt::format_to(std::back_inserter(line), "  {} {}", region_name(r.region), r.status);
     }
   }
+  // Without it a refitted step's kbar could be read as the baseline's.
+  if (!report.effects_inside.empty()) {
+    fmt::format_to(std::back_inserter(line), "  ({} inside)", report.effects_inside);
+  }
   print(line);
 }
 

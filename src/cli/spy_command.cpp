@@ -87,6 +87,8 @@ json to_json(const FitReport& r) {
           {"t_toe_off_s", r.t_toe_off_s},
           {"nrmse_total_pct", r.nrmse_total_pct},
           {"latency_ms", r.latency_ms},
+          {"effects_inside", r.effects_inside},
+          {"effects_utime", r.effects_utime},
           {"regions", std::move(regions)}};
 }
 

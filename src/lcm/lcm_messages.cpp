@@ -51,6 +51,8 @@ void copy_fit_fields(const From& in, To& out) {
   out.t_toe_off_s = in.t_toe_off_s;
   out.nrmse_total_pct = in.nrmse_total_pct;
   out.latency_ms = in.latency_ms;
+  out.effects_inside = in.effects_inside;
+  out.effects_utime = in.effects_utime;
 }
 
 template <typename From, typename To>

@@ -39,7 +39,8 @@ std::vector<gaitmon::SensorFrame> ten_minute_session() {
   return gaitmon::test::session_frames(dir / "ten.csv");
 }
 
-/// Keeps only what the benchmarks report: the fits' latencies.
+/// Keeps only what the benchmarks report: the fits' latencies, and those of the fits with
+/// effects inside.
 class LatencyPublisher : public gaitmon::Publisher {
  public:
   void publish(const gaitmon::FrameReport&) override {}
@@ -50,15 +51,21 @@ class LatencyPublisher : public gaitmon::Publisher {
   void publish(const gaitmon::FitReport& r) override {
     const std::lock_guard lock(mutex_);
     latencies_ms_.push_back(r.latency_ms);
+    if (!r.effects_inside.empty()) inside_ms_.push_back(r.latency_ms);
   }
   std::vector<double> latencies_ms() const {
     const std::lock_guard lock(mutex_);
     return latencies_ms_;
   }
+  std::vector<double> inside_ms() const {
+    const std::lock_guard lock(mutex_);
+    return inside_ms_;
+  }
 
  private:
   mutable std::mutex mutex_;
   std::vector<double> latencies_ms_;
+  std::vector<double> inside_ms_;
 };
 
 double percentile(std::vector<double> v, double p) {
@@ -187,14 +194,18 @@ BENCHMARK(BM_MonitorReplayTenMinutes)
     ->Unit(benchmark::kSecond);
 
 // Frames of the bundled 60 s demo offered at their own pace (as a live insole delivers them);
-// the latency of each fit from the step's finalisation to its publication.
+// the latency of each fit from the step's finalisation to its publication. With effects
+// (stress_relaxation), each step after the first estimate is fitted with it inside.
 void BM_MonitorLatencyRealTime(benchmark::State& state) {
   static const std::vector<gaitmon::SensorFrame> frames =
       gaitmon::test::session_frames(gaitmon::test::demo_session());
+  gaitmon::Config with = config();
+  if (state.range(0) != 0) with.model.effects = {"stress_relaxation"};
   std::vector<double> latencies;
+  std::vector<double> inside;
   for (auto _ : state) {
     LatencyPublisher publisher;
-    gaitmon::Monitor monitor(config(), gaitmon::MonitorOptions{}, publisher);
+    gaitmon::Monitor monitor(with, gaitmon::MonitorOptions{}, publisher);
     const auto start = Clock::now();
     const std::uint32_t t0 = frames.front().device_time_us;
     for (const auto& frame : frames) {
@@ -204,13 +215,26 @@ void BM_MonitorLatencyRealTime(benchmark::State& state) {
     monitor.stop();
     const auto l = publisher.latencies_ms();
     latencies.insert(latencies.end(), l.begin(), l.end());
+    const auto in = publisher.inside_ms();
+    inside.insert(inside.end(), in.begin(), in.end());
   }
   state.counters["fits"] = static_cast<double>(latencies.size());
   state.counters["p50_ms"] = percentile(latencies, 0.50);
   state.counters["p99_ms"] = percentile(latencies, 0.99);
   state.counters["max_ms"] = percentile(latencies, 1.0);
+  if (state.range(0) != 0) {
+    state.counters["inside_fits"] = static_cast<double>(inside.size());
+    state.counters["inside_p50_ms"] = percentile(inside, 0.50);
+    state.counters["inside_p99_ms"] = percentile(inside, 0.99);
+  }
 }
-BENCHMARK(BM_MonitorLatencyRealTime)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
+BENCHMARK(BM_MonitorLatencyRealTime)
+    ->ArgName("effects")
+    ->Arg(0)
+    ->Arg(1)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->Unit(benchmark::kSecond);
 
 // How long shutdown takes once the driver has stopped: the 60 s demo offered as fast as the
 // monitor takes it, with [model] effects = stress_relaxation, then stop() timed from the call to

@@ -568,6 +568,14 @@ TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
             std::string::npos)
       << with;
   EXPECT_EQ(with.find("on top of"), std::string::npos) << with;
+  const auto effects_of = [&](const char* out) {
+    return nlohmann::json::parse(read_all(dir / out / "session.json"))
+        .at("extended_model")
+        .at("effects")
+        .at(0);
+  };
+  EXPECT_EQ(effects_of("o").at("name"), "impact_transient");
+  EXPECT_EQ(effects_of("o").at("inside_tissue_fit"), true);
   const std::string without =
       run("analyze " + session + " --out " + (dir / "p").string() + " --effects none", &status);
   ASSERT_EQ(status, 0) << without;
@@ -582,6 +590,7 @@ TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
             std::string::npos)
       << sensor;
   EXPECT_EQ(read_all(dir / "q" / "regions.csv"), read_all(dir / "p" / "regions.csv"));
+  EXPECT_EQ(effects_of("q").at("inside_tissue_fit"), false);
 
   const std::string seed8 = run(
       "analyze " + session + " --out " + (dir / "r").string() + " --effects hysteresis --fit seed8",

@@ -250,6 +250,9 @@ TEST(Live, PrintsOneLinePerFittedStepAndForwardsEveryMessage) {
   printer.publish(FrameReport{});
   printer.publish(StepEvent{});
   printer.publish(sample_fit());
+  FitReport inside = sample_fit();
+  inside.effects_inside = "stress_relaxation,hysteresis";
+  printer.publish(inside);
   printer.publish(StatusReport{});
   printer.publish(RawFrameReport{});
   printer.publish(effects);
@@ -258,13 +261,18 @@ TEST(Live, PrintsOneLinePerFittedStepAndForwardsEveryMessage) {
   const std::string out = testing::internal::GetCapturedStdout();
 
   using Kind = test::RecordingPublisher::Kind;
-  EXPECT_EQ(next.order(), (std::vector<Kind>{Kind::Frame, Kind::Step, Kind::Fit, Kind::Status,
-                                             Kind::Raw, Kind::Effects, Kind::Effects}));
+  EXPECT_EQ(next.order(),
+            (std::vector<Kind>{Kind::Frame, Kind::Step, Kind::Fit, Kind::Fit, Kind::Status,
+                               Kind::Raw, Kind::Effects, Kind::Effects}));
   EXPECT_EQ(out,
             "R step   12  stance 0.620 s  kbar N/mm3 | cbar Ns/mm3:  heel 0.1170|0.01100  "
             "midfoot_posterior no_contact  midfoot_anterior no_contact  met1_2 "
             "fit_failed:too_few_frames  met3_5 no_contact  toe1 no_contact  toe2 no_contact  "
             "toes3_5 no_contact\n"
+            "R step   12  stance 0.620 s  kbar N/mm3 | cbar Ns/mm3:  heel 0.1170|0.01100  "
+            "midfoot_posterior no_contact  midfoot_anterior no_contact  met1_2 "
+            "fit_failed:too_few_frames  met3_5 no_contact  toe1 no_contact  toe2 no_contact  "
+            "toes3_5 no_contact  (stress_relaxation,hysteresis inside)\n"
             "effects over 24 steps (1.0-14.5 s): impact_transient.amplitude_n = 80 +- 2.5; "
             "impact_transient.duration_s = 0.04 (no SE); pooled NRMSE 2.00 % -> 1.00 % (held-out "
             "2.25 % -> 1.50 %)\n"

@@ -145,6 +145,8 @@ json lua_expected_fit() {
           {"t_toe_off_s", r.t_toe_off_s},
           {"nrmse_total_pct", r.nrmse_total_pct},
           {"latency_ms", r.latency_ms},
+          {"effects_inside", r.effects_inside},
+          {"effects_utime", r.effects_utime},
           {"regions", regions}};
 }
 
@@ -331,6 +333,8 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
   EXPECT_EQ((*fit)["t_toe_off_s"], 30.75);
   EXPECT_EQ((*fit)["nrmse_total_pct"], 4.5);
   EXPECT_EQ((*fit)["latency_ms"], 1.875);
+  EXPECT_EQ((*fit)["effects_inside"], "stress_relaxation,hysteresis");
+  EXPECT_EQ((*fit)["effects_utime"], 1763737199000000);
   const FitReport sample = test::sample_fit();
   ASSERT_EQ((*fit)["regions"].size(), 8U);
   for (std::size_t i = 0; i < 8; ++i) {

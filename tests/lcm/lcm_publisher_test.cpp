@@ -137,6 +137,8 @@ TEST_F(LcmPublisherMemq, FitReportArrivesAsFitT) {
   EXPECT_EQ(m.t_toe_off_s, 30.75);
   EXPECT_EQ(m.nrmse_total_pct, 4.5);
   EXPECT_EQ(m.latency_ms, 1.875);
+  EXPECT_EQ(m.effects_inside, "stress_relaxation,hysteresis");
+  EXPECT_EQ(m.effects_utime, 1763737199000000);
   const char* const names[] = {
       "heel",   "midfoot_posterior", "midfoot_anterior", "met1_2", "met3_5", "toe1", "toe2",
       "toes3_5"};

@@ -90,6 +90,8 @@ void expect_same(const FitReport& a, const FitReport& b) {
   EXPECT_EQ(a.t_toe_off_s, b.t_toe_off_s);
   EXPECT_EQ(a.nrmse_total_pct, b.nrmse_total_pct);
   EXPECT_EQ(a.latency_ms, b.latency_ms);
+  EXPECT_EQ(a.effects_inside, b.effects_inside);
+  EXPECT_EQ(a.effects_utime, b.effects_utime);
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     SCOPED_TRACE(i);
     const auto& x = a.regions[i];

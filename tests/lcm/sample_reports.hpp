@@ -53,6 +53,8 @@ inline FitReport sample_fit() {
   r.t_toe_off_s = 30.75;
   r.nrmse_total_pct = 4.5;
   r.latency_ms = 1.875;
+  r.effects_inside = "stress_relaxation,hysteresis";
+  r.effects_utime = 1763737199000000;
   for (std::size_t i = 0; i < kRegionCount; ++i) {
     const double k = static_cast<double>(i);
     RegionFitReport& g = r.regions[i];
