@@ -531,8 +531,15 @@ TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
   MonitorOptions options = quick_replay();
   options.sample_rate_hz = header.sample_rate_hz;
   {
+    // The rest only once the first estimate is out: offered at once, most steps could be
+    // fitted before it.
+    const auto later = std::find_if(frames.begin(), frames.end(), [](const SensorFrame& f) {
+      return f.device_time_us > 10'000'000;
+    });
     Monitor monitor(config, options, publisher);
-    offer_all(monitor, frames);
+    offer_all(monitor, std::vector<SensorFrame>(frames.begin(), later));
+    ASSERT_TRUE(wait_until([&] { return !publisher.effects().empty(); }));
+    offer_all(monitor, std::vector<SensorFrame>(later, frames.end()));
   }
   std::map<std::int64_t, EffectsReport> estimates;
   for (const EffectsReport& r : publisher.effects()) {
