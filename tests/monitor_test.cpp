@@ -551,6 +551,7 @@ TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
   std::size_t before = 0;
   std::size_t compared = 0;
   std::size_t changed_steps = 0;
+  constexpr std::size_t kCompared = 12;
   for (const FitReport& fit : fits) {
     SCOPED_TRACE(fmt::format("foot {} step {}", foot_name(fit.foot), fit.step));
     if (fit.effects_utime == 0) {
@@ -561,7 +562,7 @@ TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
     }
     EXPECT_EQ(fit.effects_inside, GetParam());
     ASSERT_EQ(estimates.count(fit.effects_utime), 1u) << "a published estimate's";
-    if (compared == 4) continue;  // enough for the sanitizer builds
+    if (compared == kCompared) continue;  // enough, and short enough for the sanitizer builds
     std::vector<EffectEstimate> estimate{{GetParam(), {}}};
     double history_s = 0.0;
     for (const EffectParamReport& p : estimates.at(fit.effects_utime).params) {
@@ -606,9 +607,10 @@ TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
     ++compared;
   }
   EXPECT_GE(before, 5u) << "the first estimate needs a step per fold";
-  EXPECT_EQ(compared, 4u);
-  // Not all: the demo's impact estimate (2.4 N over 12.5 ms) can fall between two frames.
-  EXPECT_GE(changed_steps, 1u) << "not the baseline's fits";
+  EXPECT_EQ(compared, kCompared);
+  // Not all: the demo's impact estimate (about 2.4 N over 12.5 ms) can fall between two frames
+  // (5-6 of the 12 steps changed in 10 runs; with relaxation 10-12).
+  EXPECT_GE(changed_steps, 3u) << "not the baseline's fits";
 }
 
 INSTANTIATE_TEST_SUITE_P(ImpactAndRelaxation, MonitorEffectsInside,
