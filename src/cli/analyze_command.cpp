@@ -497,6 +497,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     input.steps = steps;
     input.analyses = analyses;
     input.session = &session;
+    input.extended = extended ? &*extended : nullptr;
     outputs.add("report.html", render_report_html(input));
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
@@ -514,10 +515,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
         extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
         extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
     // Without this the table above could be read as the tissue under every effect.
-    std::vector<std::string> inside, on_top;
-    for (const EffectEstimate& e : extended->effects) {
-      (effect_inside_tissue_fit(e.name) ? inside : on_top).push_back(e.name);
-    }
+    const auto [inside, on_top] = place_effects(*extended);
     if (!inside.empty()) {
       fmt::print(
           "note: each step's tissue parameters above and in regions.csv are fitted with {} "

@@ -2,6 +2,7 @@
 #include "report_html.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
@@ -432,6 +433,48 @@ std::string step_table(std::span<const StepRow> steps) {
   return out;
 }
 
+std::string estimate_cell(const ParamEstimate& p) {
+  return fmt::format("{} ({})", num(p.value), std::isfinite(p.se) ? num(p.se) : "undetermined");
+}
+
+// Without it the parameters and model forces below could be read as the baseline's.
+std::string effects_section(const ExtendedModelFit& fit) {
+  const EffectPlacement placed = place_effects(fit);
+  std::string out = "<section id=\"effects\"><h2>Effects in the model (--effects)</h2>";
+  if (!placed.inside.empty()) {
+    fmt::format_to(std::back_inserter(out),
+                   "<p class=\"note\">Each step's tissue parameters and model forces below are "
+                   "fitted with <b>{}</b> inside its model: the model force is what the cells "
+                   "report of the tissue's force through them.</p>",
+                   escape(fmt::format("{}", fmt::join(placed.inside, " and "))));
+  }
+  if (!placed.on_top.empty()) {
+    fmt::format_to(std::back_inserter(out),
+                   "<p class=\"note\"><b>{}</b> {} fitted on top of the tissue parameters "
+                   "below, not inside each step's fit.</p>",
+                   escape(fmt::format("{}", fmt::join(placed.on_top, " and "))),
+                   placed.on_top.size() == 1 ? "is" : "are");
+  }
+  out +=
+      "<table><tr><th>effect</th><th>parameter</th><th>value (SE)</th><th>in each step's "
+      "fit</th></tr>";
+  for (const EffectEstimate& e : fit.effects) {
+    const bool inside = effect_inside_tissue_fit(e.name);
+    for (const ParamEstimate& p : e.params) {
+      fmt::format_to(std::back_inserter(out),
+                     "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>", escape(e.name),
+                     escape(p.name), estimate_cell(p), inside ? "inside" : "on top");
+    }
+  }
+  fmt::format_to(std::back_inserter(out),
+                 "</table><p>Pooled NRMSE over the step-regions compared: {:.2f} % without the "
+                 "effects, {:.2f} % with them; held out (k-fold over steps) {:.2f} % and "
+                 "{:.2f} %.</p></section>",
+                 fit.baseline_nrmse_pct, fit.extended_nrmse_pct, fit.baseline_heldout_nrmse_pct,
+                 fit.extended_heldout_nrmse_pct);
+  return out;
+}
+
 constexpr std::string_view kStyle =
     "body{font-family:sans-serif;margin:24px;color:#222;max-width:1320px}"
     "h1{font-size:22px}h2{font-size:18px;margin-top:28px;border-bottom:1px solid #ccc}"
@@ -444,6 +487,14 @@ constexpr std::string_view kStyle =
     ".note{background:#fff8e6;border:1px solid #f0d080;padding:8px;font-size:13px}";
 
 }  // namespace
+
+EffectPlacement place_effects(const ExtendedModelFit& fit) {
+  EffectPlacement placed;
+  for (const EffectEstimate& e : fit.effects) {
+    (effect_inside_tissue_fit(e.name) ? placed.inside : placed.on_top).push_back(e.name);
+  }
+  return placed;
+}
 
 std::string render_report_html(const ReportInput& in) {
   std::string out = "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>";
@@ -491,7 +542,10 @@ std::string render_report_html(const ReportInput& in) {
   for (Region region : kRegions) {
     fmt::format_to(std::back_inserter(out), " <a href=\"#{0}\">{0}</a>", region_name(region));
   }
-  out += " &middot; <a href=\"#steps\">steps</a></p>";
+  out += " &middot; <a href=\"#steps\">steps</a>";
+  if (in.extended != nullptr) out += " &middot; <a href=\"#effects\">effects</a>";
+  out += "</p>";
+  if (in.extended != nullptr) out += effects_section(*in.extended);
   for (const RegionSessionAnalysis& r : in.session->regions) out += region_section(in, r);
   out += step_table(in.steps);
   out += "</body></html>\n";

@@ -4,9 +4,11 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/config.hpp"
+#include "gaitmon/discrepancy.hpp"
 #include "gaitmon/segmentation.hpp"
 
 namespace gaitmon::cli {
@@ -31,7 +33,16 @@ struct ReportInput {
   std::span<const StepRow> steps;
   std::span<const StepAnalysis> analyses;  ///< Ok steps, by foot then step
   const SessionAnalysis* session = nullptr;
+  const ExtendedModelFit* extended = nullptr;  ///< of --effects; null without
 };
+
+/// The effects of an extended model by where they sit: inside each step's tissue fit
+/// (effect_inside_tissue_fit) or on top of the baseline's tissue parameters, in its order.
+struct EffectPlacement {
+  std::vector<std::string> inside;
+  std::vector<std::string> on_top;
+};
+EffectPlacement place_effects(const ExtendedModelFit& fit);
 
 /// The whole report as one HTML document.
 std::string render_report_html(const ReportInput& input);

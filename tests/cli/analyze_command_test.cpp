@@ -558,9 +558,9 @@ TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
   const auto dir = test::scratch_dir("analyze-effects-note");
   const std::string session = (analysed().dir / "s.csv").string();
   int status = -1;
-  const std::string with =
-      run("analyze " + session + " --out " + (dir / "o").string() + " --effects impact_transient",
-          &status);
+  const std::string with = run("analyze " + session + " --out " + (dir / "o").string() +
+                                   " --effects impact_transient --report",
+                               &status);
   ASSERT_EQ(status, 0) << with;
   EXPECT_NE(with.find("effect impact_transient:"), std::string::npos) << with;
   EXPECT_NE(with.find("note: each step's tissue parameters above and in regions.csv are fitted "
@@ -576,14 +576,23 @@ TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
   };
   EXPECT_EQ(effects_of("o").at("name"), "impact_transient");
   EXPECT_EQ(effects_of("o").at("inside_tissue_fit"), true);
+  // The report says so too, above the regions' parameters and forces.
+  const std::string report = read_all(dir / "o" / "report.html");
+  const auto said = report.find("fitted with <b>impact_transient</b> inside its model");
+  EXPECT_NE(said, std::string::npos);
+  EXPECT_LT(said, report.find("<section id=\"heel\">"));
+  EXPECT_NE(report.find("<td>impact_transient</td><td>amplitude_n</td>"), std::string::npos);
   const std::string without =
-      run("analyze " + session + " --out " + (dir / "p").string() + " --effects none", &status);
+      run("analyze " + session + " --out " + (dir / "p").string() + " --effects none --report",
+          &status);
   ASSERT_EQ(status, 0) << without;
   EXPECT_EQ(without.find("note: each step"), std::string::npos) << without;
   EXPECT_NE(read_all(dir / "o" / "regions.csv"), read_all(dir / "p" / "regions.csv"));
+  EXPECT_EQ(read_all(dir / "p" / "report.html").find("id=\"effects\""), std::string::npos);
 
   const std::string sensor = run(
-      "analyze " + session + " --out " + (dir / "q").string() + " --effects sensor_creep", &status);
+      "analyze " + session + " --out " + (dir / "q").string() + " --effects sensor_creep --report",
+      &status);
   ASSERT_EQ(status, 0) << sensor;
   EXPECT_NE(sensor.find("note: sensor_creep is fitted on top of the baseline's tissue "
                         "parameters, not inside each step's fit"),
@@ -591,6 +600,9 @@ TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
       << sensor;
   EXPECT_EQ(read_all(dir / "q" / "regions.csv"), read_all(dir / "p" / "regions.csv"));
   EXPECT_EQ(effects_of("q").at("inside_tissue_fit"), false);
+  EXPECT_NE(read_all(dir / "q" / "report.html")
+                .find("<b>sensor_creep</b> is fitted on top of the tissue parameters below"),
+            std::string::npos);
 
   const std::string seed8 = run(
       "analyze " + session + " --out " + (dir / "r").string() + " --effects hysteresis --fit seed8",
