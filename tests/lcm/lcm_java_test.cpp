@@ -74,7 +74,8 @@ public class Decode {
         gaitmon.fit_t fit = new gaitmon.fit_t(e.data);
         System.out.println("fit " + fit.foot + " " + fit.step + " " + fit.latency_ms + " "
             + fit.regions[3].region_name + " " + fit.regions[3].kbar_n_per_mm3 + " "
-            + fit.regions[6].status.replace(' ', '_'));
+            + fit.regions[6].status.replace(' ', '_') + " " + fit.effects_inside + " "
+            + fit.effects_utime);
       }
     }
   }
@@ -120,8 +121,8 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
       "event GAITMON_EFFECTS gaitmon.effects_t 1763737200623456"};
   EXPECT_EQ(events, expected) << output;
   std::istringstream fit(fit_line);
-  std::string word, foot, step, latency, region, kbar, status;
-  fit >> word >> foot >> step >> latency >> region >> kbar >> status;
+  std::string word, foot, step, latency, region, kbar, status, inside, effects_utime;
+  fit >> word >> foot >> step >> latency >> region >> kbar >> status >> inside >> effects_utime;
   EXPECT_EQ(word, "fit") << output;
   EXPECT_EQ(foot, "1");
   EXPECT_EQ(step, "23");
@@ -129,6 +130,8 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
   EXPECT_EQ(region, "met1_2");
   EXPECT_EQ(std::stod(kbar), 0.117 + 0.001 * 3);  // as sample_fit() computes it
   EXPECT_EQ(status, "fit_failed:no_convergence");
+  EXPECT_EQ(inside, "stress_relaxation,hysteresis");
+  EXPECT_EQ(effects_utime, "1763737199000000");
 }
 
 }  // namespace
