@@ -68,6 +68,7 @@ class Chart {
                    "\" stroke-width=\"{}\" stroke-opacity=\"{}\" points=\"", width, opacity);
     for (std::size_t i = 0; i < xs.size() && i < ys.size(); ++i) {
       fmt::format_to(std::back_inserter(svg_), "{:.1f},{:.1f} ", px(xs[i]), py(ys[i]));
+      if (i > 0) trace(px(xs[i - 1]), py(ys[i - 1]), px(xs[i]), py(ys[i]));
     }
     svg_ += "\"/>";
   }
@@ -76,6 +77,7 @@ class Chart {
     fmt::format_to(std::back_inserter(svg_),
                    "<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"{}\" fill=\"{}\" fill-opacity=\"{}\"/>",
                    px(x), py(y), r, colour, opacity);
+    drawn_.emplace_back(px(x), py(y));
   }
 
   /// A box from q1 to q3 with the median, centred at x, half-width in pixels.
@@ -106,17 +108,29 @@ class Chart {
                    kTop + plot_h() + 16, escape(label));
   }
 
+  /// The legend in the top corner that covers fewer of the points drawn so far (the right one
+  /// on a tie): a forefoot's force and area peak late in the stance, under the right corner.
   void legend(std::span<const std::pair<std::string_view, std::string_view>> entries) {
-    int y = kTop + 6;
+    const int height = 14 * static_cast<int>(entries.size()) + 4;
+    const auto covered = [&](int left) {
+      return std::count_if(drawn_.begin(), drawn_.end(), [&](const auto& p) {
+        return p.first >= left && p.first <= left + kLegendWidth && p.second >= kTop &&
+               p.second <= kTop + 1 + height;
+      });
+    };
+    const int right = w_ - kRight - 12 - kLegendWidth;
+    const int left = kLeft + 12;
+    const int x = covered(left) < covered(right) ? left : right;
     fmt::format_to(std::back_inserter(svg_),
-                   "<rect x=\"{}\" y=\"{}\" width=\"112\" height=\"{}\" fill=\"#fff\" "
-                   "fill-opacity=\"0.85\"/>",
-                   w_ - kRight - 124, kTop + 1, 14 * entries.size() + 4);
+                   "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"#fff\" "
+                   "fill-opacity=\"0.85\" class=\"legend-box\"/>",
+                   x, kTop + 1, kLegendWidth, height);
+    int y = kTop + 6;
     for (const auto& [colour, label] : entries) {
       fmt::format_to(std::back_inserter(svg_),
                      "<rect x=\"{}\" y=\"{}\" width=\"14\" height=\"4\" fill=\"{}\"/>"
                      "<text x=\"{}\" y=\"{}\" class=\"legend\">{}</text>",
-                     w_ - kRight - 120, y, colour, w_ - kRight - 102, y + 5, escape(label));
+                     x + 4, y, colour, x + 22, y + 5, escape(label));
       y += 14;
     }
   }
@@ -128,9 +142,23 @@ class Chart {
   static constexpr int kRight = 12;
   static constexpr int kTop = 26;
   static constexpr int kBottom = 42;
+  static constexpr int kLegendWidth = 112;
 
   double plot_w() const { return w_ - kLeft - kRight; }
   double plot_h() const { return h_ - kTop - kBottom; }
+
+  /// Points every few pixels along a segment, so that a legend is kept off a line whose
+  /// vertices lie outside its box.
+  void trace(double x0, double y0, double x1, double y1) {
+    if (!std::isfinite(x0) || !std::isfinite(y0) || !std::isfinite(x1) || !std::isfinite(y1)) {
+      return;
+    }
+    const int pieces = 1 + static_cast<int>(std::min(std::hypot(x1 - x0, y1 - y0) / 4.0, 1000.0));
+    for (int k = 0; k <= pieces; ++k) {
+      const double f = static_cast<double>(k) / pieces;
+      drawn_.emplace_back(x0 + f * (x1 - x0), y0 + f * (y1 - y0));
+    }
+  }
 
   void axes(const std::string& x_label, const std::string& y_label) {
     fmt::format_to(std::back_inserter(svg_),
@@ -167,6 +195,7 @@ class Chart {
   Range x_;
   Range y_;
   std::string svg_;
+  std::vector<std::pair<double, double>> drawn_;  ///< along every line, and every dot, in pixels
 };
 
 constexpr std::string_view kMeasured = "#222222";

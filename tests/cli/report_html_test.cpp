@@ -179,6 +179,38 @@ TEST(ReportHtml, DrawsTheTypicalStepAndAllStepsOfAFittedRegion) {
   EXPECT_EQ(count(html, "<circle "), 4u * 3u);
 }
 
+/// The x of every legend's box, in the order the charts are drawn.
+std::vector<double> legend_xs(const std::string& html) {
+  std::vector<double> xs;
+  const std::string_view box = "class=\"legend-box\"";
+  for (auto at = html.find(box); at != std::string::npos; at = html.find(box, at + 1)) {
+    const auto rect = html.rfind("<rect x=\"", at);
+    xs.push_back(std::stod(html.substr(rect + 9)));
+  }
+  return xs;
+}
+
+// A legend sits in the top corner the lines leave free: the right one where the force and area
+// peak early (the heel), the left one where they peak at the end of the stance (a forefoot).
+TEST(ReportHtml, PutsEachLegendInTheTopCornerTheLinesLeaveFree) {
+  Fixture early;
+  const std::vector<double> right = legend_xs(render_report_html(early.input()));
+  ASSERT_EQ(right.size(), 3u);
+  // Charts 420 px wide; the plot area runs from x = 64 to 408.
+  for (double x : right) EXPECT_GT(x, 210.0);
+
+  Fixture late;
+  for (StepAnalysis& s : late.analyses) {
+    RegionAnalysis& heel = s.regions[index_of(Region::Heel)];
+    heel.series.area_mm2 = {0.0, 300.0, 900.0, 1500.0, 1800.0};
+    heel.series.force_n = {0.0, 40.0, 120.0, 240.0, 300.0};
+    heel.fit.model_force_n = {0.0, 45.0, 115.0, 245.0, 298.0};
+  }
+  const std::vector<double> left = legend_xs(render_report_html(late.input()));
+  ASSERT_EQ(left.size(), 3u);
+  for (double x : left) EXPECT_LT(x, 210.0);
+}
+
 TEST(ReportHtml, SaysWhyARegionHasNoChartsAndEscapesItsReasons) {
   const Fixture f;
   const std::string html = render_report_html(f.input());
