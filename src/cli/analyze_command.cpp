@@ -337,16 +337,37 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
              settings.fit.free_scale ? ", free scale" : "");
   fmt::print("{:<19}{:>8}{:>10}{:>12}{:>10}{:>13}{:>10}{:>12}{:>12}\n", "region", "fitted",
              "contact", "kbar N/mm3", "n", "cbar Ns/mm3", "m", "NRMSE %", "session %");
+  bool marked = false;
   for (const RegionSessionAnalysis& r : session.regions) {
-    fmt::print("{:<19}{:>8}{:>10}{:>12.4f}{:>10.3f}{:>13.5f}{:>10.3f}{:>12.1f}{:>12}\n",
-               region_name(r.region), r.steps_fitted, r.steps_with_contact, r.kbar_n_per_mm3.median,
-               r.n.median, r.cbar_ns_per_mm3.median, r.m.median, r.nrmse_pct.median,
-               r.session_fit.status == FitStatus::Ok
-                   ? fmt::format("{:.1f}", r.session_fit.nrmse_pct)
-                   : std::string(fit_status_name(r.session_fit.status)));
+    // A median the fits left at a bound of its range in most steps is where the optimiser
+    // stopped, not what the data say; such a number must not read like the others.
+    const auto median = [&](const Spread& spread, const Estimate RegionFit::*estimate,
+                            int decimals) {
+      int at_bound = 0;
+      for (const StepAnalysis& s : analyses) {
+        const RegionFit& fit = s.at(r.region).fit;
+        if (fit.status == FitStatus::Ok && (fit.*estimate).at_bound) ++at_bound;
+      }
+      const bool mark = r.steps_fitted > 0 && 2 * at_bound >= r.steps_fitted;
+      marked = marked || mark;
+      return fmt::format("{:.{}f}{}", spread.median, decimals, mark ? "*" : " ");
+    };
+    fmt::print(
+        "{:<19}{:>8}{:>10}{:>13}{:>11}{:>14}{:>11}{:>11.1f}{:>12}\n", region_name(r.region),
+        r.steps_fitted, r.steps_with_contact,
+        median(r.kbar_n_per_mm3, &RegionFit::kbar_n_per_mm3, 4), median(r.n, &RegionFit::n, 3),
+        median(r.cbar_ns_per_mm3, &RegionFit::cbar_ns_per_mm3, 5), median(r.m, &RegionFit::m, 3),
+        r.nrmse_pct.median,
+        r.session_fit.status == FitStatus::Ok ? fmt::format("{:.1f}", r.session_fit.nrmse_pct)
+                                              : std::string(fit_status_name(r.session_fit.status)));
   }
   fmt::print("medians across steps; total-force NRMSE median {:.1f} % (IQR {:.1f} %)\n",
              session.nrmse_total_pct.median, session.nrmse_total_pct.iqr());
+  if (marked) {
+    fmt::print(
+        "* at a bound of its fit range in at least half of the region's steps: the data do not "
+        "determine it there (regions.csv: at_bound)\n");
+  }
   std::vector<std::string> on_ellipse;
   for (const RegionSessionAnalysis& r : session.regions) {
     if (r.steps_on_ellipse > 0) {

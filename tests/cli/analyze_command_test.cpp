@@ -236,6 +236,54 @@ TEST(AnalyzeCommand, PrintsASummaryPerRegion) {
   EXPECT_EQ(a.output.find("warning"), std::string::npos) << a.output;
 }
 
+// A median that most steps' fits left at a bound of its range is marked, with a footnote: the
+// toes' damping, which their whole-cell areas cannot show, and nothing at the heel, whose
+// footprint determines all four. The marks agree with regions.csv's at_bound column.
+TEST(AnalyzeCommand, MarksTheMediansThatMostStepsLeftAtABound) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  EXPECT_NE(a.output.find("\n* at a bound of its fit range in at least half of the region's "
+                          "steps: the data do not determine it there (regions.csv: at_bound)\n"),
+            std::string::npos)
+      << a.output;
+  const std::vector<std::string> lines = lines_of(a.dir / "out" / "regions.csv");
+  ASSERT_FALSE(lines.empty());
+  const std::vector<std::string> header = fields(lines.front());
+  const auto column = [&](const std::string& name) {
+    return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
+  };
+  const std::array<std::string, 4> params = {"kbar_n_per_mm3", "n", "cbar_ns_per_mm3", "m"};
+  std::map<std::string, std::pair<int, std::array<int, 4>>> counts;  // ok rows, at a bound
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const auto f = fields(lines[i]);
+    if (f[column("status")] != "ok") continue;
+    auto& [ok, at_bound] = counts[f[2]];
+    ++ok;
+    const std::string bound = ";" + f[column("at_bound")] + ";";
+    for (std::size_t p = 0; p < params.size(); ++p) {
+      if (bound.find(";" + params[p] + ";") != std::string::npos) ++at_bound[p];
+    }
+  }
+  std::map<std::string, std::array<bool, 4>> marks;
+  std::istringstream summary(a.output);
+  for (std::string line; std::getline(summary, line);) {
+    std::istringstream words(line);
+    std::string region, fitted, contact;
+    std::array<std::string, 4> values;
+    words >> region >> fitted >> contact >> values[0] >> values[1] >> values[2] >> values[3];
+    if (!counts.count(region)) continue;
+    for (std::size_t p = 0; p < params.size(); ++p) marks[region][p] = values[p].back() == '*';
+  }
+  ASSERT_EQ(marks.size(), counts.size()) << a.output;
+  for (const auto& [region, c] : counts) {
+    for (std::size_t p = 0; p < params.size(); ++p) {
+      EXPECT_EQ(marks[region][p], 2 * c.second[p] >= c.first) << region << " " << params[p];
+    }
+  }
+  EXPECT_TRUE(marks["toes3_5"][2]) << a.output;
+  EXPECT_EQ(marks["heel"], (std::array<bool, 4>{})) << a.output;
+}
+
 // The toes' cells determine no footprint, so their fits fall back to the contact ellipse; the
 // summary, session.json and the report say so for them and for no other region.
 TEST(AnalyzeCommand, SaysWhichRegionsWereFittedOnTheContactEllipse) {
