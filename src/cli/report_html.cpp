@@ -202,6 +202,7 @@ constexpr std::string_view kMeasured = "#222222";
 constexpr std::string_view kModel = "#d62728";
 constexpr std::string_view kArea = "#1f77b4";
 constexpr std::string_view kSeed = "#ff7f0e";
+constexpr std::string_view kRight = "#2ca02c";
 constexpr std::size_t kMaxOverlaid = 60;
 
 std::vector<double> since_heel_strike(const StepAnalysis& s) {
@@ -307,15 +308,16 @@ struct ParamView {
   const Estimate RegionFit::*estimate;
   const Spread RegionSessionAnalysis::*spread;
   int pooled = -1;  ///< index in MaterialVector (pooling.hpp), -1 for the declared geometry
+  const Estimate MaterialParams::*pooled_estimate = nullptr;  ///< the fitted four only
 };
 
 constexpr ParamView kFitted[] = {
     {"kbar", "N/mm\u00b3", &EllipsoidParams::kbar_n_per_mm3, &RegionFit::kbar_n_per_mm3,
-     &RegionSessionAnalysis::kbar_n_per_mm3, 0},
-    {"n", "", &EllipsoidParams::n, &RegionFit::n, &RegionSessionAnalysis::n, 1},
+     &RegionSessionAnalysis::kbar_n_per_mm3, 0, &MaterialParams::kbar_n_per_mm3},
+    {"n", "", &EllipsoidParams::n, &RegionFit::n, &RegionSessionAnalysis::n, 1, &MaterialParams::n},
     {"cbar", "N s/mm\u00b3", &EllipsoidParams::cbar_ns_per_mm3, &RegionFit::cbar_ns_per_mm3,
-     &RegionSessionAnalysis::cbar_ns_per_mm3, 2},
-    {"m", "", &EllipsoidParams::m, &RegionFit::m, &RegionSessionAnalysis::m, 3},
+     &RegionSessionAnalysis::cbar_ns_per_mm3, 2, &MaterialParams::cbar_ns_per_mm3},
+    {"m", "", &EllipsoidParams::m, &RegionFit::m, &RegionSessionAnalysis::m, 3, &MaterialParams::m},
 };
 
 constexpr ParamView kAll[] = {
@@ -355,6 +357,52 @@ std::string strip_chart(std::span<const StepAnalysis> analyses, Region region, c
   c.mean_sd(1.5, mean, sd, kSeed);
   c.x_category(0.6, "this session");
   c.x_category(1.5, "App. I");
+  return c.finish();
+}
+
+/// One fitted parameter per step against its heel strike, a colour per foot, with each foot's
+/// pooled per-step values as a line where the steps were pooled: a drift over the walk (warm-up,
+/// fatigue, a sensor warming) shows here and in no distribution.
+std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSessionAnalysis& r,
+                         const ParamView& p) {
+  struct FootCourse {
+    std::vector<double> t, own, t_pooled, pooled;
+  };
+  std::array<FootCourse, 2> feet;
+  Range x, y;
+  for (std::size_t i = 0; i < analyses.size(); ++i) {
+    const StepAnalysis& s = analyses[i];
+    const RegionFit& f = s.at(r.region).fit;
+    if (f.status != FitStatus::Ok) continue;
+    FootCourse& course = feet[s.foot == Foot::Left ? 0 : 1];
+    course.t.push_back(s.t_heel_strike_s);
+    course.own.push_back((f.*p.estimate).value);
+    x.add(s.t_heel_strike_s);
+    y.add(course.own.back());
+    if (i < r.pooled_per_step.size() && r.pooled_per_step[i]) {
+      course.t_pooled.push_back(s.t_heel_strike_s);
+      course.pooled.push_back(((*r.pooled_per_step[i]).*p.pooled_estimate).value);
+      y.add(course.pooled.back());
+    }
+  }
+  const std::string y_label =
+      *p.unit ? fmt::format("{} ({})", p.label, p.unit) : std::string(p.label);
+  Chart c(420, 240, x.padded(0.03), y.padded(0.08), fmt::format("{} over the session", p.label),
+          "heel strike (s)", y_label);
+  const std::array<std::string_view, 2> colours = {kArea, kRight};
+  bool pooled = false;
+  for (std::size_t foot = 0; foot < feet.size(); ++foot) {
+    for (std::size_t k = 0; k < feet[foot].t.size(); ++k) {
+      c.dot(feet[foot].t[k], feet[foot].own[k], colours[foot], 2.2, 0.6);
+    }
+    if (feet[foot].pooled.empty()) continue;
+    c.line(feet[foot].t_pooled, feet[foot].pooled, colours[foot], 1.5);
+    pooled = true;
+  }
+  std::vector<std::pair<std::string_view, std::string_view>> legend = {{kArea, "left, each step"},
+                                                                       {kRight, "right"}};
+  if (pooled) legend.emplace_back(kMeasured, "lines: each foot pooled");
+  c.legend(legend);
   return c.finish();
 }
 
@@ -435,6 +483,9 @@ std::string region_section(const ReportInput& in, const RegionSessionAnalysis& r
     for (const ParamView& p : kFitted) {
       out += strip_chart(in.analyses, r.region, p, r.*p.spread, seed);
     }
+    out += "</div><div class=\"row\">";
+    out += course_chart(in.analyses, r, kFitted[0]);
+    out += course_chart(in.analyses, r, kFitted[2]);
     out += "</div>";
   } else {
     out += "<p>No step of this region was fitted.</p>";

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -173,10 +174,76 @@ TEST(ReportHtml, DrawsTheTypicalStepAndAllStepsOfAFittedRegion) {
   EXPECT_TRUE(has(html, ">typical step (L 2, NRMSE 3.0 %)</text>"));
   EXPECT_TRUE(has(html, ">all steps (3 of 3 shown)</text>"));
   EXPECT_TRUE(has(html, ">contact area given to the fit</text>"));
-  // Three per-step charts of the heel's (force, model, area), four strips, on the heel alone.
-  EXPECT_EQ(count(html, "<svg "), 7u);
-  // A dot per step fitted in each strip: the failed fit has none.
-  EXPECT_EQ(count(html, "<circle "), 4u * 3u);
+  EXPECT_TRUE(has(html, ">kbar over the session</text>"));
+  EXPECT_TRUE(has(html, ">cbar over the session</text>"));
+  // Three per-step charts of the heel's (force, model, area), four strips and two courses over
+  // the session, on the heel alone.
+  EXPECT_EQ(count(html, "<svg "), 9u);
+  // A dot per step fitted in each strip and each course: the failed fit has none.
+  EXPECT_EQ(count(html, "<circle "), 6u * 3u);
+}
+
+/// The `<svg>` elements of the page, in order.
+std::vector<std::string> charts(const std::string& html) {
+  std::vector<std::string> out;
+  for (auto at = html.find("<svg "); at != std::string::npos; at = html.find("<svg ", at + 1)) {
+    out.push_back(html.substr(at, html.find("</svg>", at) - at));
+  }
+  return out;
+}
+
+/// (cx, fill) of every circle of one chart, in the order drawn.
+std::vector<std::pair<double, std::string>> dots(const std::string& svg) {
+  std::vector<std::pair<double, std::string>> out;
+  for (auto at = svg.find("<circle cx=\""); at != std::string::npos;
+       at = svg.find("<circle cx=\"", at + 1)) {
+    const auto fill = svg.find("fill=\"", at) + 6;
+    out.emplace_back(std::stod(svg.substr(at + 12)), svg.substr(fill, svg.find('"', fill) - fill));
+  }
+  return out;
+}
+
+// kbar over the session: a dot per fitted step at its heel strike, blue for the left foot and
+// green for the right, and where the steps were pooled a line per foot through their pooled
+// values; nothing for the step whose fit failed.
+TEST(ReportHtml, DrawsEachStepsStiffnessAgainstItsHeelStrikePerFoot) {
+  Fixture f;
+  RegionSessionAnalysis& heel = f.session.regions[index_of(Region::Heel)];
+  heel.pooled_per_step.resize(f.analyses.size());
+  for (std::size_t i = 0; i + 1 < f.analyses.size(); ++i) {
+    MaterialParams p;
+    p.kbar_n_per_mm3.value = 0.115;
+    heel.pooled_per_step[i] = p;
+  }
+  const std::vector<std::string> svgs = charts(render_report_html(f.input()));
+  ASSERT_EQ(svgs.size(), 9u);
+  const std::string& kbar = svgs[7];
+  ASSERT_TRUE(has(kbar, ">kbar over the session</text>"));
+  const auto d = dots(kbar);
+  // The analyses are by foot: L 0 (0.1 s), L 2 (1.1 s), R 1 (0.6 s); L 4 failed.
+  ASSERT_EQ(d.size(), 3u);
+  EXPECT_EQ(d[0].second, "#1f77b4");
+  EXPECT_EQ(d[1].second, "#1f77b4");
+  EXPECT_EQ(d[2].second, "#2ca02c");
+  EXPECT_LT(d[0].first, d[2].first);
+  EXPECT_LT(d[2].first, d[1].first);
+  // Each foot's pooled line, the left one through two steps at one value: level.
+  EXPECT_EQ(count(kbar, "<polyline "), 2u);
+  const auto left = kbar.find("<polyline fill=\"none\" stroke=\"#1f77b4\"");
+  ASSERT_NE(left, std::string::npos);
+  const auto points = kbar.find("points=\"", left) + 8;
+  std::istringstream xy(kbar.substr(points, kbar.find('"', points) - points));
+  double x0, y0, x1, y1;
+  char comma;
+  xy >> x0 >> comma >> y0 >> x1 >> comma >> y1;
+  EXPECT_LT(x0, x1);
+  EXPECT_DOUBLE_EQ(y0, y1);
+  EXPECT_TRUE(has(kbar, ">lines: each foot pooled</text>"));
+
+  const std::vector<std::string> unpooled = charts(render_report_html(Fixture().input()));
+  ASSERT_EQ(unpooled.size(), 9u);
+  EXPECT_EQ(count(unpooled[7], "<polyline "), 0u);
+  EXPECT_FALSE(has(unpooled[7], ">lines: each foot pooled</text>"));
 }
 
 /// The x of every legend's box, in the order the charts are drawn.
@@ -194,8 +261,9 @@ std::vector<double> legend_xs(const std::string& html) {
 // peak early (the heel), the left one where they peak at the end of the stance (a forefoot).
 TEST(ReportHtml, PutsEachLegendInTheTopCornerTheLinesLeaveFree) {
   Fixture early;
-  const std::vector<double> right = legend_xs(render_report_html(early.input()));
-  ASSERT_EQ(right.size(), 3u);
+  std::vector<double> right = legend_xs(render_report_html(early.input()));
+  ASSERT_EQ(right.size(), 5u);
+  right.resize(3);  // the force and area charts
   // Charts 420 px wide; the plot area runs from x = 64 to 408.
   for (double x : right) EXPECT_GT(x, 210.0);
 
@@ -206,8 +274,9 @@ TEST(ReportHtml, PutsEachLegendInTheTopCornerTheLinesLeaveFree) {
     heel.series.force_n = {0.0, 40.0, 120.0, 240.0, 300.0};
     heel.fit.model_force_n = {0.0, 45.0, 115.0, 245.0, 298.0};
   }
-  const std::vector<double> left = legend_xs(render_report_html(late.input()));
-  ASSERT_EQ(left.size(), 3u);
+  std::vector<double> left = legend_xs(render_report_html(late.input()));
+  ASSERT_EQ(left.size(), 5u);
+  left.resize(3);
   for (double x : left) EXPECT_LT(x, 210.0);
 }
 
