@@ -401,7 +401,7 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
   }
   std::vector<std::pair<std::string_view, std::string_view>> legend = {{kArea, "left, each step"},
                                                                        {kRight, "right"}};
-  if (pooled) legend.emplace_back(kMeasured, "lines: each foot pooled");
+  if (pooled) legend.emplace_back(kMeasured, "pooled (lines)");
   c.legend(legend);
   return c.finish();
 }

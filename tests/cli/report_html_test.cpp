@@ -238,12 +238,12 @@ TEST(ReportHtml, DrawsEachStepsStiffnessAgainstItsHeelStrikePerFoot) {
   xy >> x0 >> comma >> y0 >> x1 >> comma >> y1;
   EXPECT_LT(x0, x1);
   EXPECT_DOUBLE_EQ(y0, y1);
-  EXPECT_TRUE(has(kbar, ">lines: each foot pooled</text>"));
+  EXPECT_TRUE(has(kbar, ">pooled (lines)</text>"));
 
   const std::vector<std::string> unpooled = charts(render_report_html(Fixture().input()));
   ASSERT_EQ(unpooled.size(), 9u);
   EXPECT_EQ(count(unpooled[7], "<polyline "), 0u);
-  EXPECT_FALSE(has(unpooled[7], ">lines: each foot pooled</text>"));
+  EXPECT_FALSE(has(unpooled[7], ">pooled (lines)</text>"));
 }
 
 /// The x of every legend's box, in the order the charts are drawn.
