@@ -202,7 +202,8 @@ constexpr std::string_view kMeasured = "#222222";
 constexpr std::string_view kModel = "#d62728";
 constexpr std::string_view kArea = "#1f77b4";
 constexpr std::string_view kSeed = "#ff7f0e";
-constexpr std::string_view kRight = "#2ca02c";
+constexpr std::string_view kLeftFoot = kArea;
+constexpr std::string_view kRightFoot = "#2ca02c";
 constexpr std::size_t kMaxOverlaid = 60;
 
 std::vector<double> since_heel_strike(const StepAnalysis& s) {
@@ -369,6 +370,8 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
     std::vector<double> t, own, t_pooled, pooled;
   };
   std::array<FootCourse, 2> feet;
+  // pooled_per_step is aligned with the steps analyse_session was given, which are these.
+  const bool aligned = r.pooled_per_step.size() == analyses.size();
   Range x, y;
   for (std::size_t i = 0; i < analyses.size(); ++i) {
     const StepAnalysis& s = analyses[i];
@@ -379,7 +382,7 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
     course.own.push_back((f.*p.estimate).value);
     x.add(s.t_heel_strike_s);
     y.add(course.own.back());
-    if (i < r.pooled_per_step.size() && r.pooled_per_step[i]) {
+    if (aligned && r.pooled_per_step[i]) {
       course.t_pooled.push_back(s.t_heel_strike_s);
       course.pooled.push_back(((*r.pooled_per_step[i]).*p.pooled_estimate).value);
       y.add(course.pooled.back());
@@ -389,7 +392,7 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
       *p.unit ? fmt::format("{} ({})", p.label, p.unit) : std::string(p.label);
   Chart c(420, 240, x.padded(0.03), y.padded(0.08), fmt::format("{} over the session", p.label),
           "heel strike (s)", y_label);
-  const std::array<std::string_view, 2> colours = {kArea, kRight};
+  const std::array<std::string_view, 2> colours = {kLeftFoot, kRightFoot};
   bool pooled = false;
   for (std::size_t foot = 0; foot < feet.size(); ++foot) {
     for (std::size_t k = 0; k < feet[foot].t.size(); ++k) {
@@ -399,8 +402,8 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
     c.line(feet[foot].t_pooled, feet[foot].pooled, colours[foot], 1.5);
     pooled = true;
   }
-  std::vector<std::pair<std::string_view, std::string_view>> legend = {{kArea, "left, each step"},
-                                                                       {kRight, "right"}};
+  std::vector<std::pair<std::string_view, std::string_view>> legend = {
+      {kLeftFoot, "left, each step"}, {kRightFoot, "right"}};
   if (pooled) legend.emplace_back(kMeasured, "pooled (lines)");
   c.legend(legend);
   return c.finish();
