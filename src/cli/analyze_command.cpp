@@ -187,6 +187,15 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
   return out;
 }
 
+/// How many of the region's steps were fitted Ok with the parameter at a bound of its range.
+int steps_at_bound(const std::vector<StepAnalysis>& analyses, Region region,
+                   const Estimate RegionFit::*estimate) {
+  return static_cast<int>(std::count_if(analyses.begin(), analyses.end(), [&](const auto& s) {
+    const RegionFit& fit = s.at(region).fit;
+    return fit.status == FitStatus::Ok && (fit.*estimate).at_bound;
+  }));
+}
+
 nlohmann::json spread_json(const Spread& s) {
   return {{"count", s.count}, {"median", s.median}, {"q1", s.q1}, {"q3", s.q3}, {"iqr", s.iqr()}};
 }
@@ -313,6 +322,11 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
           {"cbar_ns_per_mm3", spread_json(r.cbar_ns_per_mm3)},
           {"m", spread_json(r.m)},
           {"nrmse_pct", spread_json(r.nrmse_pct)}}},
+        {"steps_at_bound",
+         {{"kbar_n_per_mm3", steps_at_bound(analyses, r.region, &RegionFit::kbar_n_per_mm3)},
+          {"n", steps_at_bound(analyses, r.region, &RegionFit::n)},
+          {"cbar_ns_per_mm3", steps_at_bound(analyses, r.region, &RegionFit::cbar_ns_per_mm3)},
+          {"m", steps_at_bound(analyses, r.region, &RegionFit::m)}}},
         {"appendix_i",
          {{"mean", nlohmann::json(seed.mean)},
           {"sd", nlohmann::json(seed.sd)},
@@ -343,11 +357,7 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
     // stopped, not what the data say; such a number must not read like the others.
     const auto median = [&](const Spread& spread, const Estimate RegionFit::*estimate,
                             int decimals) {
-      int at_bound = 0;
-      for (const StepAnalysis& s : analyses) {
-        const RegionFit& fit = s.at(r.region).fit;
-        if (fit.status == FitStatus::Ok && (fit.*estimate).at_bound) ++at_bound;
-      }
+      const int at_bound = steps_at_bound(analyses, r.region, estimate);
       const bool mark = r.steps_fitted > 0 && 2 * at_bound >= r.steps_fitted;
       marked = marked || mark;
       return fmt::format("{:.{}f}{}", spread.median, decimals, mark ? "*" : " ");

@@ -238,7 +238,8 @@ TEST(AnalyzeCommand, PrintsASummaryPerRegion) {
 
 // A median that most steps' fits left at a bound of its range is marked, with a footnote: the
 // toes' damping, which their whole-cell areas cannot show, and nothing at the heel, whose
-// footprint determines all four. The marks agree with regions.csv's at_bound column.
+// footprint determines all four. The marks, and session.json's counts of the steps at a bound,
+// agree with regions.csv's at_bound column.
 TEST(AnalyzeCommand, MarksTheMediansThatMostStepsLeftAtABound) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
@@ -275,9 +276,12 @@ TEST(AnalyzeCommand, MarksTheMediansThatMostStepsLeftAtABound) {
     for (std::size_t p = 0; p < params.size(); ++p) marks[region][p] = values[p].back() == '*';
   }
   ASSERT_EQ(marks.size(), counts.size()) << a.output;
+  const auto j = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
   for (const auto& [region, c] : counts) {
+    const auto& at_bound = j.at("regions").at(region).at("steps_at_bound");
     for (std::size_t p = 0; p < params.size(); ++p) {
       EXPECT_EQ(marks[region][p], 2 * c.second[p] >= c.first) << region << " " << params[p];
+      EXPECT_EQ(at_bound.at(params[p]).get<int>(), c.second[p]) << region << " " << params[p];
     }
   }
   EXPECT_TRUE(marks["toes3_5"][2]) << a.output;
