@@ -105,7 +105,21 @@ struct RegionCells {
   double height_mm = 0.0;
   double box_width_mm = 0.0;  ///< the cells' bounding box, cell edges included
   double box_height_mm = 0.0;
-  std::size_t nearest_to_centre = 0;  ///< position in `sensors`
+
+  /// The position in `sensors` of the cell whose centre is nearest (x, y), the first on a tie.
+  std::size_t nearest(double x, double y) const {
+    std::size_t best = 0;
+    double best_d2 = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < sensors.size(); ++i) {
+      const double dx = x_mm[i] - x;
+      const double dy = y_mm[i] - y;
+      if (dx * dx + dy * dy < best_d2) {
+        best_d2 = dx * dx + dy * dy;
+        best = i;
+      }
+    }
+    return best;
+  }
 
   /// The area-preserving stretch of x (y shrinks by the same factor) that gives a contact
   /// ellipse of aspect A/B the aspect of the region's box, so it grows into the region's cells
@@ -134,22 +148,13 @@ RegionCells gather_cells(const InsoleLayout& layout, Region region) {
   cells.box_height_mm = *y_hi - *y_lo + cells.height_mm;
   cells.centre_x_mm = 0.5 * (*x_lo + *x_hi);
   cells.centre_y_mm = 0.5 * (*y_lo + *y_hi);
-  double best = std::numeric_limits<double>::infinity();
-  for (std::size_t i = 0; i < cells.sensors.size(); ++i) {
-    const double dx = cells.x_mm[i] - cells.centre_x_mm;
-    const double dy = cells.y_mm[i] - cells.centre_y_mm;
-    if (dx * dx + dy * dy < best) {
-      best = dx * dx + dy * dy;
-      cells.nearest_to_centre = i;
-    }
-  }
   return cells;
 }
 
 /// Writes one region's cell loads (N) into `out` (one per cell of `cells`).
 void rasterise_into(const RegionCells& cells, const EllipsoidParams& params, double d_mm,
                     double ddot_mm_per_s, ModelVariant variant, Rasterisation mode, double force_n,
-                    std::span<double> out) {
+                    PlacementShift shift, std::span<double> out) {
   std::fill(out.begin(), out.end(), 0.0);
   if (!(force_n > 0.0) || !(d_mm > 0.0)) return;
   const PressureField field(params, d_mm, ddot_mm_per_s, variant);
@@ -158,16 +163,18 @@ void rasterise_into(const RegionCells& cells, const EllipsoidParams& params, dou
   const double rB = field.radii().rB_mm / stretch;
   const double w = cells.width_mm;
   const double h = cells.height_mm;
+  const double centre_x = cells.centre_x_mm + shift.x_mm;
+  const double centre_y = cells.centre_y_mm + shift.y_mm;
   const auto rho2_at = [&](double x, double y) {
-    const double u = (x - cells.centre_x_mm) / rA;
-    const double v = (y - cells.centre_y_mm) / rB;
+    const double u = (x - centre_x) / rA;
+    const double v = (y - centre_y) / rB;
     return u * u + v * v;
   };
   double total = 0.0;
   for (std::size_t i = 0; i < cells.sensors.size(); ++i) {
     // Cells wholly beyond the ellipse's bounding box carry nothing either way.
-    if (std::abs(cells.x_mm[i] - cells.centre_x_mm) - 0.5 * w > rA ||
-        std::abs(cells.y_mm[i] - cells.centre_y_mm) - 0.5 * h > rB) {
+    if (std::abs(cells.x_mm[i] - centre_x) - 0.5 * w > rA ||
+        std::abs(cells.y_mm[i] - centre_y) - 0.5 * h > rB) {
       continue;
     }
     double mean_pressure = 0.0;
@@ -191,7 +198,7 @@ void rasterise_into(const RegionCells& cells, const EllipsoidParams& params, dou
     const double scale = force_n / total;
     for (double& load : out) load *= scale;
   } else {
-    out[cells.nearest_to_centre] = force_n;
+    out[cells.nearest(centre_x, centre_y)] = force_n;
   }
 }
 
@@ -214,6 +221,8 @@ void validate(const SimulationOptions& o) {
   require(o.max_bias_bits >= 0 && o.max_bias_bits <= 50, "max_bias_bits", "must be in [0, 50]");
   require(o.tissue_step_sd_pct >= 0.0 && o.tissue_step_sd_pct <= 100.0, "tissue_step_sd_pct",
           "must be in [0, 100]");
+  require(o.placement_sd_mm >= 0.0 && o.placement_sd_mm <= 10.0, "placement_sd_mm",
+          "must be in [0, 10]");
   for (Region r : kRegions) {
     const auto& p = o.region_params[index_of(r)];
     if (!p) continue;
@@ -300,6 +309,7 @@ struct StanceTally {
   std::array<double, kRegionCount> peak_force_n{};
   double peak_total_force_n = 0.0;
   std::array<double, kRegionCount> kbar_factor{}, cbar_factor{};
+  PlacementShift shift;
 };
 
 /// Every effect applied, in order, with every parameter (defaults filled in).
@@ -331,6 +341,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                   {"noise_sd_bits", o.noise_sd_bits},
                   {"max_bias_bits", o.max_bias_bits},
                   {"tissue_step_sd_pct", o.tissue_step_sd_pct},
+                  {"placement_sd_mm", o.placement_sd_mm},
                   {"effects", effects_json(o)},
                   {"subject", o.subject}};
   j["sample_rate_hz"] = truth.sample_rate_hz;
@@ -387,6 +398,10 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
     if (o.tissue_step_sd_pct > 0.0) {
       steps[std::string(foot_name(s.foot))].back()["tissue_factors"] = factors;
     }
+    if (o.placement_sd_mm > 0.0) {
+      steps[std::string(foot_name(s.foot))].back()["placement_shift_mm"] = {
+          {"x", s.placement_shift.x_mm}, {"y", s.placement_shift.y_mm}};
+    }
   }
   j["dc_bias_bits"] = biases;
   j["steps"] = steps;
@@ -434,10 +449,10 @@ double contact_area_for_elastic_force(const EllipsoidParams& params, double targ
 std::vector<double> rasterise_region(const InsoleLayout& layout, Region region,
                                      const EllipsoidParams& params, double d_mm,
                                      double ddot_mm_per_s, ModelVariant variant, Rasterisation mode,
-                                     double force_n) {
+                                     double force_n, PlacementShift shift) {
   const RegionCells cells = gather_cells(layout, region);
   std::vector<double> loads(cells.sensors.size());
-  rasterise_into(cells, params, d_mm, ddot_mm_per_s, variant, mode, force_n, loads);
+  rasterise_into(cells, params, d_mm, ddot_mm_per_s, variant, mode, force_n, shift, loads);
   return loads;
 }
 
@@ -506,6 +521,14 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
       }
     }
   }
+  if (options.placement_sd_mm > 0.0) {
+    for (auto& foot_tallies : tallies) {
+      for (StanceTally& tally : foot_tallies) {
+        tally.shift.x_mm = options.placement_sd_mm * rng.normal();
+        tally.shift.y_mm = options.placement_sd_mm * rng.normal();
+      }
+    }
+  }
 
   SessionHeader header;
   header.insole_size = options.size;
@@ -561,7 +584,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
           }
           region_n.resize(cells[ri].sensors.size());
           rasterise_into(cells[ri], params, contact->d_mm, contact->ddot_mm_per_s, options.model,
-                         options.rasterisation, force, region_n);
+                         options.rasterisation, force, tally.shift, region_n);
           for (std::size_t i = 0; i < region_n.size(); ++i) {
             cell_n[cells[ri].sensors[i]] = region_n[i];
           }
@@ -615,6 +638,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
       step.peak_total_force_n = tally.peak_total_force_n;
       step.kbar_factor = tally.kbar_factor;
       step.cbar_factor = tally.cbar_factor;
+      step.placement_shift = tally.shift;
       truth.steps.push_back(step);
     }
   }

@@ -183,6 +183,39 @@ TEST(Simulator, CellCentreLoadsFollowThePressureAtCellCentres) {
   }
 }
 
+// A placement shift moves the whole contact ellipse on the grid: each cell then reads the
+// pressure at its centre measured from the shifted centre, and the loads still sum to the force.
+TEST(Simulator, PlacementShiftMovesTheFootprintOnTheCellGrid) {
+  const PlacementShift shift{2.5, -4.0};
+  for (Region region : {Region::Heel, Region::Met1_2}) {
+    const EllipsoidParams p = seed_means(region);
+    const double d = deformation(p, 0.5 * sensor_area(region));
+    const double force = closed_form_force(p, d, 0.0);
+    const Cells cells = region_cells(region);
+    const double ra = footprint_ra(cells, p, d);
+    const double rb = footprint_rb(cells, p, d);
+    std::vector<double> expected(cells.x.size(), 0.0);
+    double total = 0.0;
+    for (std::size_t i = 0; i < cells.x.size(); ++i) {
+      const double u = (cells.x[i] - cells.cx - shift.x_mm) / ra;
+      const double v = (cells.y[i] - cells.cy - shift.y_mm) / rb;
+      expected[i] = std::max(0.0, pressure(p, d, 0.0, u * u + v * v));
+      total += expected[i];
+    }
+    ASSERT_GT(total, 0.0);
+    const auto loads = rasterise_region(layout_37_38(), region, p, d, 0.0, ModelVariant::Correct,
+                                        Rasterisation::CellCentre, force, shift);
+    const auto centred = rasterise_region(layout_37_38(), region, p, d, 0.0, ModelVariant::Correct,
+                                          Rasterisation::CellCentre, force);
+    double moved = 0.0;
+    for (std::size_t i = 0; i < loads.size(); ++i) {
+      EXPECT_NEAR(loads[i], force * expected[i] / total, 1e-9 * force) << region_name(region);
+      moved += std::abs(loads[i] - centred[i]);
+    }
+    EXPECT_GT(moved, 0.05 * force) << region_name(region);
+  }
+}
+
 TEST(Simulator, CellCentreGivesATinyContactToTheNearestCell) {
   const EllipsoidParams p = seed_means(Region::Heel);
   const double d = deformation(p, 10.0);  // a 10 mm^2 ellipse: no cell centre inside
@@ -407,6 +440,49 @@ TEST(Simulator, TissueStepVariationScattersKbarAndCbarByTheSdAskedFor) {
   EXPECT_EQ(factors["cbar"].get<double>(), first_left->cbar_factor[heel]);
 }
 
+// The placement shifts are drawn only when asked for: without them the session keeps its bytes;
+// with them each stance's offsets scatter by the SD asked for, the same for every region of the
+// foot, and the truth JSON records them per step.
+TEST(Simulator, PlacementVariationShiftsEachStanceByTheSdAskedFor) {
+  const auto dir = test::scratch_dir("sim-placement");
+  SimulationOptions o = short_options(5);
+  o.duration_s = 60.0;
+  const SimulationTruth fixed =
+      simulate_session(shipped_config(), o, dir / "fixed.csv", dir / "fixed.json");
+  o.placement_sd_mm = 0.0;
+  simulate_session(shipped_config(), o, dir / "zero.csv", dir / "zero.json");
+  EXPECT_EQ(slurp(dir / "fixed.csv"), slurp(dir / "zero.csv"));
+  for (const SimulatedStep& step : fixed.steps) {
+    EXPECT_EQ(step.placement_shift.x_mm, 0.0);
+    EXPECT_EQ(step.placement_shift.y_mm, 0.0);
+  }
+  EXPECT_FALSE(nlohmann::json::parse(slurp(dir / "fixed.json"))["steps"]["L"][0].contains(
+      "placement_shift_mm"));
+
+  o.placement_sd_mm = 3.0;
+  const SimulationTruth moved =
+      simulate_session(shipped_config(), o, dir / "moved.csv", dir / "moved.json");
+  ASSERT_EQ(moved.steps.size(), fixed.steps.size());
+  EXPECT_NE(slurp(dir / "fixed.csv"), slurp(dir / "moved.csv"));
+  std::vector<double> x, y;
+  for (const SimulatedStep& step : moved.steps) {
+    x.push_back(step.placement_shift.x_mm);
+    y.push_back(step.placement_shift.y_mm);
+  }
+  ASSERT_GE(x.size(), 100u);
+  EXPECT_NEAR(test::sample_sd(x), 3.0, 0.5);
+  EXPECT_NEAR(test::sample_sd(y), 3.0, 0.5);
+  const nlohmann::json truth = nlohmann::json::parse(slurp(dir / "moved.json"));
+  EXPECT_EQ(truth["options"]["placement_sd_mm"].get<double>(), 3.0);
+  const auto first_right =
+      std::find_if(moved.steps.begin(), moved.steps.end(),
+                   [](const SimulatedStep& s) { return s.foot == Foot::Right; });
+  ASSERT_NE(first_right, moved.steps.end());
+  const nlohmann::json& shift = truth["steps"]["R"][0]["placement_shift_mm"];
+  EXPECT_EQ(shift["x"].get<double>(), first_right->placement_shift.x_mm);
+  EXPECT_EQ(shift["y"].get<double>(), first_right->placement_shift.y_mm);
+}
+
 TEST(Simulator, WrittenSessionReadsBackAndTheTruthIsPlausible) {
   const auto dir = test::scratch_dir("sim-readback");
   SimulationOptions o = short_options(11);
@@ -561,6 +637,9 @@ TEST(Simulator, RejectsBadOptions) {
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   o.tissue_step_sd_pct = 101.0;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.placement_sd_mm = 10.5;
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   EllipsoidParams flat = seed_means(Region::Toe1);

@@ -19,20 +19,21 @@
 // area is chosen, by bisection on the model, so that its peak ELASTIC force is
 // kPeakElasticForceShare x body weight, capped so that the contact ellipse is at most 0.9 x the
 // region's sensor area and 0.95 x the largest ellipse inside the region's bounding box (the truth
-// says where the cap bound). The footprint is centred on that box and stretched, keeping its
-// area, from the ellipsoid's aspect A/B to the box's aspect: the insole only sees a region's own
-// cells, and an ellipse spilling out of one side would make the measured area stop growing while
-// the force still grows. Force against area, all the fit sees, is unchanged by the stretch. The
-// force grows about as area^(2+n), so the 40 N events span about 85 % of the contact: with the
-// defaults a stance from heel strike to toe off lasts about 0.50-0.66 s, like the seed's 52-60
-// frames. The tissue is the same in every step unless tissue_step_sd_pct says otherwise.
+// says where the cap bound). The footprint is centred on that box (unless placement_sd_mm moves it
+// per stance) and stretched, keeping its area, from the ellipsoid's aspect A/B to the box's aspect:
+// the insole only sees a region's own cells, and an ellipse spilling out of one side would make the
+// measured area stop growing while the force still grows. Force against area, all the fit sees, is
+// unchanged by the stretch. The force grows about as area^(2+n), so the 40 N events span about 85 %
+// of the contact: with the defaults a stance from heel strike to toe off lasts about 0.50-0.66 s,
+// like the seed's 52-60 frames. The tissue is the same in every step unless tissue_step_sd_pct says
+// otherwise.
 //
 // Determinism: one std::mt19937_64 seeded with the seed drives every draw in a fixed order
 // (phase, gait durations, dc biases of L then R sensors, the tissue's step factors if asked
-// for, then noise per frame, L then R, in sensor order); uniform doubles are the top 53 bits
-// of a draw, normals come from Box-Muller. So the draws are the same on every machine. The physics
-// uses libm's pow, cos and log, which can differ in the last bit between C libraries; the bytes are
-// identical for a given build and library.
+// for, the placement shifts if asked for, then noise per frame, L then R, in sensor order); uniform
+// doubles are the top 53 bits of a draw, normals come from Box-Muller. So the draws are the same on
+// every machine. The physics uses libm's pow, cos and log, which can differ in the last bit between
+// C libraries; the bytes are identical for a given build and library.
 #pragma once
 
 #include <array>
@@ -87,6 +88,12 @@ inline constexpr double kMaxContactFractionOfInscribedEllipse = 0.95;
 /// their defaults (simulation_effect_params).
 using EffectParams = std::map<std::string, double>;
 
+/// How far one stance moved the foot's footprints from their regions' box centres, mm.
+struct PlacementShift {
+  double x_mm = 0.0;  ///< lateral-medial
+  double y_mm = 0.0;  ///< anterior-posterior
+};
+
 struct GaitTiming {
   double stride_s = 1.10;         ///< heel strike to the same foot's next heel strike, (0.5, 3]
   double stance_fraction = 0.62;  ///< contact (any load) / stride duration, [0.3, 0.8]
@@ -107,6 +114,12 @@ struct SimulationOptions {
   /// every step at the region's parameters). The contact area keeps its course, so the force
   /// follows the factors. For checking estimators that pool the steps (pooling.hpp).
   double tissue_step_sd_pct = 0.0;
+  /// Step-to-step placement of the foot on the insole: each stance shifts all of the foot's
+  /// footprints by independent normal offsets with this SD along x and y, in mm ([0, 10]; 0
+  /// keeps every footprint on its region's box centre). A real foot does not land on the same
+  /// spot of the cell grid every step, so the raster's error in the measured area changes from
+  /// step to step instead of repeating (README, "How honest the standard errors are").
+  double placement_sd_mm = 0.0;
   int max_bias_bits = 2;  ///< per-sensor dc bias, uniform integer in 0..max, [0, 50]
   /// Per region; empty means the seed's Appendix I means for the size (Config::seed_tissue).
   std::array<std::optional<EllipsoidParams>, kRegionCount> region_params;
@@ -136,6 +149,8 @@ struct SimulatedStep {
   /// Per region, the factors on kbar and cbar of this stance
   /// (SimulationOptions::tissue_step_sd_pct).
   std::array<double, kRegionCount> kbar_factor{}, cbar_factor{};
+  /// Where this stance put the foot (SimulationOptions::placement_sd_mm).
+  PlacementShift placement_shift;
 };
 
 struct SimulatedRegion {
@@ -184,12 +199,12 @@ std::pair<double, double> planned_contact_area_mm2(const SimulatedRegion& simula
 /// Per-cell loads (N), in the order of layout.region_sensors(region), for one region whose
 /// ellipsoid is deformed by d at rate ddot: the contact ellipse (radii from eqs 5, 6, axes along
 /// the grid's x and y) is centred at the centroid of the region's cells in the grid frame
-/// (Sensor::grid_x_mm, grid_y_mm; cells are sensor width x height there), and the loads are
-/// rescaled to sum to `force_n` (all zero if force_n <= 0 or d <= 0).
+/// (Sensor::grid_x_mm, grid_y_mm; cells are sensor width x height there) moved by `shift`, and
+/// the loads are rescaled to sum to `force_n` (all zero if force_n <= 0 or d <= 0).
 std::vector<double> rasterise_region(const InsoleLayout& layout, Region region,
                                      const EllipsoidParams& params, double d_mm,
                                      double ddot_mm_per_s, ModelVariant variant, Rasterisation mode,
-                                     double force_n);
+                                     double force_n, PlacementShift shift = {});
 
 /// One region of one foot at one frame, as a tissue-stage effect sees it.
 struct TissueSample {

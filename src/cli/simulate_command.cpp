@@ -253,6 +253,11 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "step at the region's parameters")
       ->check(number_in(0.0, 100.0))
       ->capture_default_str();
+  sub->add_option("--placement-sd", args->options.placement_sd_mm,
+                  "Step-to-step SD of where the foot lands on the insole, mm along each axis; 0 "
+                  "puts every footprint on its region's centre")
+      ->check(number_in(0.0, 10.0))
+      ->capture_default_str();
   sub->add_option("--max-bias", args->options.max_bias_bits,
                   "Per-sensor dc bias, uniform integer 0..MAX bits")
       ->check(CLI::Range(0, 50))
