@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -387,18 +388,32 @@ TEST(Simulator, SameSeedSameBytesOtherSeedOtherBytes) {
   }
 }
 
+SimulationOptions minute_options() {
+  SimulationOptions o = short_options(5);
+  o.duration_s = 60.0;
+  return o;
+}
+
+// Simulates `o` as it is and again after `ask_for_zero` sets a variation to 0, which must keep
+// every byte: the variation's draws are made only when it is asked for.
+SimulationTruth simulate_kept_by_zero(const std::filesystem::path& dir, SimulationOptions o,
+                                      void (*ask_for_zero)(SimulationOptions&)) {
+  const SimulationTruth fixed =
+      simulate_session(shipped_config(), o, dir / "fixed.csv", dir / "fixed.json");
+  ask_for_zero(o);
+  simulate_session(shipped_config(), o, dir / "zero.csv", dir / "zero.json");
+  EXPECT_EQ(slurp(dir / "fixed.csv"), slurp(dir / "zero.csv"));
+  return fixed;
+}
+
 // The step-to-step tissue variation draws its factors only when asked for: without it the session
 // keeps its bytes and every factor is 1; with it the factors' logarithms scatter by the SD asked
 // for, and the peak forces follow them.
 TEST(Simulator, TissueStepVariationScattersKbarAndCbarByTheSdAskedFor) {
   const auto dir = test::scratch_dir("sim-step-sd");
-  SimulationOptions o = short_options(5);
-  o.duration_s = 60.0;
+  SimulationOptions o = minute_options();
   const SimulationTruth fixed =
-      simulate_session(shipped_config(), o, dir / "fixed.csv", dir / "fixed.json");
-  o.tissue_step_sd_pct = 0.0;
-  simulate_session(shipped_config(), o, dir / "zero.csv", dir / "zero.json");
-  EXPECT_EQ(slurp(dir / "fixed.csv"), slurp(dir / "zero.csv"));
+      simulate_kept_by_zero(dir, o, [](SimulationOptions& z) { z.tissue_step_sd_pct = 0.0; });
   for (const SimulatedStep& step : fixed.steps) {
     for (Region r : kRegions) {
       EXPECT_EQ(step.kbar_factor[index_of(r)], 1.0);
@@ -445,13 +460,9 @@ TEST(Simulator, TissueStepVariationScattersKbarAndCbarByTheSdAskedFor) {
 // foot, and the truth JSON records them per step.
 TEST(Simulator, PlacementVariationShiftsEachStanceByTheSdAskedFor) {
   const auto dir = test::scratch_dir("sim-placement");
-  SimulationOptions o = short_options(5);
-  o.duration_s = 60.0;
+  SimulationOptions o = minute_options();
   const SimulationTruth fixed =
-      simulate_session(shipped_config(), o, dir / "fixed.csv", dir / "fixed.json");
-  o.placement_sd_mm = 0.0;
-  simulate_session(shipped_config(), o, dir / "zero.csv", dir / "zero.json");
-  EXPECT_EQ(slurp(dir / "fixed.csv"), slurp(dir / "zero.csv"));
+      simulate_kept_by_zero(dir, o, [](SimulationOptions& z) { z.placement_sd_mm = 0.0; });
   for (const SimulatedStep& step : fixed.steps) {
     EXPECT_EQ(step.placement_shift.x_mm, 0.0);
     EXPECT_EQ(step.placement_shift.y_mm, 0.0);
