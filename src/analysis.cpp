@@ -146,6 +146,28 @@ void set_model_totals(StepAnalysis& step) {
 
 namespace {
 
+// Positions in a MaterialVector.
+constexpr std::size_t kLnKbar = 0;
+constexpr std::size_t kLnCbar = 2;
+
+// The trend of one parameter over the steps that have estimates, leaving out those whose fit
+// held it at a bound: a value pinned there says nothing of the tissue's course.
+std::optional<LogTrend> step_trend(std::span<const StepAnalysis> steps,
+                                   const std::vector<std::size_t>& estimated_steps,
+                                   const std::vector<MaterialEstimate>& estimates,
+                                   std::size_t index, const Estimate RegionFit::*parameter,
+                                   Region region) {
+  std::vector<double> t, value, variance;
+  for (std::size_t k = 0; k < estimates.size(); ++k) {
+    const StepAnalysis& step = steps[estimated_steps[k]];
+    if ((step.at(region).fit.*parameter).at_bound) continue;
+    t.push_back(step.t_heel_strike_s);
+    value.push_back(estimates[k].value[index]);
+    variance.push_back(estimates[k].covariance[index][index]);
+  }
+  return log_trend(t, value, variance);
+}
+
 RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region region,
                                      const Config& config, InsoleSize size,
                                      const AnalysisSettings& settings) {
@@ -189,6 +211,10 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
   }
+  r.kbar_trend =
+      step_trend(steps, estimated_steps, estimates, kLnKbar, &RegionFit::kbar_n_per_mm3, region);
+  r.cbar_trend =
+      step_trend(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region);
   r.pooled_per_step.resize(steps.size());
   if (r.pooling.pooled) {
     for (std::size_t k = 0; k < estimated_steps.size(); ++k) {

@@ -223,6 +223,8 @@ void validate(const SimulationOptions& o) {
           "must be in [0, 100]");
   require(o.placement_sd_mm >= 0.0 && o.placement_sd_mm <= 10.0, "placement_sd_mm",
           "must be in [0, 10]");
+  require(o.tissue_drift_pct_per_min >= -20.0 && o.tissue_drift_pct_per_min <= 20.0,
+          "tissue_drift_pct_per_min", "must be in [-20, 20]");
   for (Region r : kRegions) {
     const auto& p = o.region_params[index_of(r)];
     if (!p) continue;
@@ -342,6 +344,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                   {"max_bias_bits", o.max_bias_bits},
                   {"tissue_step_sd_pct", o.tissue_step_sd_pct},
                   {"placement_sd_mm", o.placement_sd_mm},
+                  {"tissue_drift_pct_per_min", o.tissue_drift_pct_per_min},
                   {"effects", effects_json(o)},
                   {"subject", o.subject}};
   j["sample_rate_hz"] = truth.sample_rate_hz;
@@ -395,7 +398,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                                                      {"peak_total_force_n", s.peak_total_force_n},
                                                      {"peak_force_n", peaks}});
     // Only when the tissue varies: otherwise every factor is 1.
-    if (o.tissue_step_sd_pct > 0.0) {
+    if (o.tissue_step_sd_pct > 0.0 || o.tissue_drift_pct_per_min != 0.0) {
       steps[std::string(foot_name(s.foot))].back()["tissue_factors"] = factors;
     }
     if (o.placement_sd_mm > 0.0) {
@@ -512,12 +515,15 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
                                                   std::vector<StanceTally>(stances[1].size())};
   // Drawn only when asked for, so that sessions without variation keep their bytes.
   const double step_sd = options.tissue_step_sd_pct / 100.0;
-  for (auto& foot_tallies : tallies) {
-    for (StanceTally& tally : foot_tallies) {
+  const double drift_per_min = 1.0 + options.tissue_drift_pct_per_min / 100.0;
+  for (std::size_t fi = 0; fi < tallies.size(); ++fi) {
+    for (std::size_t c = 0; c < tallies[fi].size(); ++c) {
+      StanceTally& tally = tallies[fi][c];
+      const double drift = std::pow(drift_per_min, stances[fi][c].start_s / 60.0);
       for (Region r : kRegions) {
         const std::size_t ri = index_of(r);
-        tally.kbar_factor[ri] = step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0;
-        tally.cbar_factor[ri] = step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0;
+        tally.kbar_factor[ri] = drift * (step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0);
+        tally.cbar_factor[ri] = drift * (step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0);
       }
     }
   }

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <vector>
 
@@ -270,6 +271,56 @@ TEST(AnalyseSession, FitsEachRegionOverAllStepsAndSummarisesTheSteps) {
   }
   EXPECT_LT(s.regions[index_of(Region::Heel)].session_fit.nrmse_pct, 10.0);
   EXPECT_EQ(s.nrmse_total_pct.count, static_cast<int>(steps.size()));
+}
+
+// A minute's walk whose tissue softens by 10 % a minute (simulate --tissue-drift), and the same
+// walk without: the heel's per-step kbar trend finds the drift within three standard errors of
+// the simulator's and calls it one (|z| >= 3), and finds none without it. Steps that hold a
+// parameter at a bound are left out of its trend: the toes' cbar, at its bound in most steps,
+// has fewer steps or none.
+TEST(AnalyseSession, FindsATissueDriftAndNoneWithoutOne) {
+  const Config config = load_config(default_config_path());
+  const InsoleLayout layout(config.insole(InsoleSize::S41_42), config.sensor);
+  const auto dir = test::scratch_dir("analysis-drift");
+  const auto analyse = [&](double drift_pct_per_min) {
+    SimulationOptions options;
+    options.size = InsoleSize::S41_42;
+    options.duration_s = 60.0;
+    options.seed = 7;
+    options.tissue_drift_pct_per_min = drift_pct_per_min;
+    simulate_session(config, options, dir / "s.csv", dir / "s.truth.json");
+    std::vector<StepAnalysis> steps;
+    segment_session(dir / "s.csv", config, [&](Step&& step) {
+      if (step.status == StepStatus::Ok) steps.push_back(analyse_step(step, layout, config, {}));
+    });
+    return analyse_session(steps, config, InsoleSize::S41_42, {});
+  };
+  const SessionAnalysis drifting = analyse(-10.0);
+  const SessionAnalysis steady = analyse(0.0);
+  const RegionSessionAnalysis& heel = drifting.regions[index_of(Region::Heel)];
+  ASSERT_TRUE(heel.kbar_trend && heel.cbar_trend);
+  std::printf("heel kbar %+.2f +- %.2f %% per minute (truth -10), cbar %+.2f +- %.2f\n",
+              heel.kbar_trend->pct_per_min, heel.kbar_trend->se_pct_per_min,
+              heel.cbar_trend->pct_per_min, heel.cbar_trend->se_pct_per_min);
+  EXPECT_GE(heel.kbar_trend->steps, 100);
+  EXPECT_GT(heel.kbar_trend->span_min, 0.9);
+  EXPECT_NEAR(heel.kbar_trend->pct_per_min, -10.0, 3.0 * heel.kbar_trend->se_pct_per_min);
+  EXPECT_LE(heel.kbar_trend->z(), -3.0);
+  EXPECT_NEAR(heel.cbar_trend->pct_per_min, -10.0, 3.0 * heel.cbar_trend->se_pct_per_min);
+  const RegionSessionAnalysis& still = steady.regions[index_of(Region::Heel)];
+  ASSERT_TRUE(still.kbar_trend && still.cbar_trend);
+  std::printf("without the drift: heel kbar %+.2f +- %.2f, cbar %+.2f +- %.2f\n",
+              still.kbar_trend->pct_per_min, still.kbar_trend->se_pct_per_min,
+              still.cbar_trend->pct_per_min, still.cbar_trend->se_pct_per_min);
+  EXPECT_LT(std::abs(still.kbar_trend->z()), 3.0);
+  EXPECT_LT(std::abs(still.cbar_trend->z()), 3.0);
+  for (Region region : kRegions) {
+    const RegionSessionAnalysis& r = steady.regions[index_of(region)];
+    if (r.cbar_trend) {
+      EXPECT_LE(r.cbar_trend->steps, r.steps_fitted) << region_name(region);
+    }
+  }
+  EXPECT_FALSE(steady.regions[index_of(Region::Toe2)].cbar_trend);
 }
 
 // The session counts the steps whose fit fell back to the contact ellipse: every step of the

@@ -455,6 +455,29 @@ TEST(Simulator, TissueStepVariationScattersKbarAndCbarByTheSdAskedFor) {
   EXPECT_EQ(factors["cbar"].get<double>(), first_left->cbar_factor[heel]);
 }
 
+// A tissue drift multiplies each stance's kbar and cbar by (1 + pct / 100) to the power of its
+// start in minutes, and at 0 keeps every byte.
+TEST(Simulator, TissueDriftScalesEachStanceByItsStartTime) {
+  const auto dir = test::scratch_dir("sim-drift");
+  SimulationOptions o = minute_options();
+  simulate_kept_by_zero(dir, o, [](SimulationOptions& z) { z.tissue_drift_pct_per_min = 0.0; });
+  o.tissue_drift_pct_per_min = -10.0;
+  const SimulationTruth drifting =
+      simulate_session(shipped_config(), o, dir / "drift.csv", dir / "drift.json");
+  ASSERT_GE(drifting.steps.size(), 100u);
+  for (const SimulatedStep& step : drifting.steps) {
+    const double expected = std::pow(0.9, step.t_contact_start_s / 60.0);
+    for (Region r : kRegions) {
+      EXPECT_NEAR(step.kbar_factor[index_of(r)], expected, 1e-12);
+      EXPECT_NEAR(step.cbar_factor[index_of(r)], expected, 1e-12);
+    }
+  }
+  EXPECT_LT(drifting.steps.back().kbar_factor[0], 0.92);
+  const nlohmann::json truth = nlohmann::json::parse(slurp(dir / "drift.json"));
+  EXPECT_EQ(truth["options"]["tissue_drift_pct_per_min"].get<double>(), -10.0);
+  EXPECT_TRUE(truth["steps"]["L"][0].contains("tissue_factors"));
+}
+
 // The placement shifts are drawn only when asked for: without them the session keeps its bytes;
 // with them each stance's offsets scatter by the SD asked for, the same for every region of the
 // foot, and the truth JSON records them per step.
@@ -651,6 +674,9 @@ TEST(Simulator, RejectsBadOptions) {
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   o.placement_sd_mm = 10.5;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.tissue_drift_pct_per_min = -21.0;
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   EllipsoidParams flat = seed_means(Region::Toe1);

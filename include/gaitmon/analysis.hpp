@@ -12,6 +12,7 @@
 
 #include "gaitmon/config.hpp"
 #include "gaitmon/contact_ellipse.hpp"
+#include "gaitmon/drift.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/pooling.hpp"
 #include "gaitmon/segmentation.hpp"
@@ -133,6 +134,10 @@ struct RegionSessionAnalysis {
   /// Aligned with analyse_session's `steps`: each step's pooled kbar, n, cbar, m, or nothing
   /// where the step was not pooled (no contact, a failed fit, or too few steps to pool).
   std::vector<std::optional<MaterialParams>> pooled_per_step;
+  /// The per-step kbar's and cbar's trends over the session (drift.hpp), over the steps whose
+  /// four parameters the data determine and which left that parameter off its bounds; nothing
+  /// with fewer than kMinTrendSteps such steps.
+  std::optional<LogTrend> kbar_trend, cbar_trend;
   /// Across the steps fitted Ok.
   Spread A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m, nrmse_pct;
 };

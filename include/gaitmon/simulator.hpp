@@ -25,8 +25,8 @@
 // measured area stop growing while the force still grows. Force against area, all the fit sees, is
 // unchanged by the stretch. The force grows about as area^(2+n), so the 40 N events span about 85 %
 // of the contact: with the defaults a stance from heel strike to toe off lasts about 0.50-0.66 s,
-// like the seed's 52-60 frames. The tissue is the same in every step unless tissue_step_sd_pct says
-// otherwise.
+// like the seed's 52-60 frames. The tissue is the same in every step unless tissue_step_sd_pct or
+// tissue_drift_pct_per_min says otherwise.
 //
 // Determinism: one std::mt19937_64 seeded with the seed drives every draw in a fixed order
 // (phase, gait durations, dc biases of L then R sensors, the tissue's step factors if asked
@@ -114,6 +114,10 @@ struct SimulationOptions {
   /// every step at the region's parameters). The contact area keeps its course, so the force
   /// follows the factors. For checking estimators that pool the steps (pooling.hpp).
   double tissue_step_sd_pct = 0.0;
+  /// A steady change of the tissue over the session: a stance starting t minutes into the
+  /// recording has kbar and cbar multiplied by (1 + pct / 100)^t, on top of the step factors
+  /// ([-20, 20]; 0 keeps them). For checking the drift estimate (drift.hpp).
+  double tissue_drift_pct_per_min = 0.0;
   /// Step-to-step placement of the foot on the insole: each stance shifts all of the foot's
   /// footprints by independent normal offsets with this SD along x and y, in mm ([0, 10]; 0
   /// keeps every footprint on its region's box centre). A real foot does not land on the same
@@ -147,7 +151,7 @@ struct SimulatedStep {
   std::array<double, kRegionCount> peak_force_n{};  ///< per region, over the recorded frames
   double peak_total_force_n = 0.0;
   /// Per region, the factors on kbar and cbar of this stance
-  /// (SimulationOptions::tissue_step_sd_pct).
+  /// (SimulationOptions::tissue_step_sd_pct and tissue_drift_pct_per_min).
   std::array<double, kRegionCount> kbar_factor{}, cbar_factor{};
   /// Where this stance put the foot (SimulationOptions::placement_sd_mm).
   PlacementShift placement_shift;

@@ -187,6 +187,10 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
   return out;
 }
 
+/// How many standard errors a trend must reach for the summary to call it a drift: with ~20
+/// region trends per session, 3 keeps a chance one from showing in most sessions.
+constexpr double kDriftZ = 3.0;
+
 /// How many of the region's steps were fitted Ok with the parameter at a bound of its range.
 int steps_at_bound(const std::vector<StepAnalysis>& analyses, Region region,
                    const Estimate RegionFit::*estimate) {
@@ -235,6 +239,17 @@ nlohmann::json pooling_json(const PooledEstimates& p) {
           {"note",
            "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
            "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp)"}};
+}
+
+nlohmann::json trend_json(const std::optional<LogTrend>& t) {
+  if (!t) return nullptr;
+  return {{"steps", t->steps},
+          {"span_min", t->span_min},
+          {"ln_slope_per_min", t->ln_slope_per_min},
+          {"se_ln_slope_per_min", t->se_ln_slope_per_min},
+          {"pct_per_min", t->pct_per_min},
+          {"se_pct_per_min", t->se_pct_per_min},
+          {"z", t->z()}};
 }
 
 nlohmann::json bounds_json(const FitBounds& b) {
@@ -327,6 +342,16 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
           {"n", steps_at_bound(analyses, r.region, &RegionFit::n)},
           {"cbar_ns_per_mm3", steps_at_bound(analyses, r.region, &RegionFit::cbar_ns_per_mm3)},
           {"m", steps_at_bound(analyses, r.region, &RegionFit::m)}}},
+        {"drift",
+         {{"kbar", trend_json(r.kbar_trend)},
+          {"cbar", trend_json(r.cbar_trend)},
+          {"note",
+           fmt::format("change per minute over the session, compounded, from a weighted "
+                       "regression of each step's ln kbar and ln cbar on its heel strike (null: "
+                       "fewer than {} steps off the bounds, or spanning less than {:.0f} s); z is "
+                       "the slope of the log over its standard error, and beyond about 3 a drift "
+                       "(include/gaitmon/drift.hpp)",
+                       kMinTrendSteps, kMinTrendSpan_s)}}},
         {"appendix_i",
          {{"mean", nlohmann::json(seed.mean)},
           {"sd", nlohmann::json(seed.sd)},
@@ -377,6 +402,29 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
     fmt::print(
         "* at a bound of its fit range in at least half of the region's steps: the data do not "
         "determine it there (regions.csv: at_bound)\n");
+  }
+  std::vector<std::string> drifts;
+  bool any_trend = false;
+  for (const RegionSessionAnalysis& r : session.regions) {
+    for (const auto& [name, trend] : {std::pair{"kbar", &r.kbar_trend}, {"cbar", &r.cbar_trend}}) {
+      any_trend = any_trend || trend->has_value();
+      if (*trend && std::abs((*trend)->z()) >= kDriftZ) {
+        drifts.push_back(fmt::format("{} {} {:+.1f} +- {:.1f}", region_name(r.region), name,
+                                     (*trend)->pct_per_min, (*trend)->se_pct_per_min));
+      }
+    }
+  }
+  if (!any_trend) {
+    fmt::print(
+        "drift: not estimated; no region has {} steps spanning {:.0f} s or more with kbar or cbar "
+        "off its bounds\n",
+        kMinTrendSteps, kMinTrendSpan_s);
+  } else if (drifts.empty()) {
+    fmt::print("no region's kbar or cbar drifts over the session by {} standard errors or more\n",
+               kDriftZ);
+  } else {
+    fmt::print("drift over the session, % per minute (session.json: drift): {}\n",
+               fmt::join(drifts, "; "));
   }
   std::vector<std::string> on_ellipse;
   for (const RegionSessionAnalysis& r : session.regions) {

@@ -310,14 +310,18 @@ struct ParamView {
   const Spread RegionSessionAnalysis::*spread;
   int pooled = -1;  ///< index in MaterialVector (pooling.hpp), -1 for the declared geometry
   const Estimate MaterialParams::*pooled_estimate = nullptr;  ///< the fitted four only
+  /// Its trend over the session, for kbar and cbar (drift.hpp).
+  const std::optional<LogTrend> RegionSessionAnalysis::*trend = nullptr;
 };
 
 constexpr ParamView kFitted[] = {
     {"kbar", "N/mm\u00b3", &EllipsoidParams::kbar_n_per_mm3, &RegionFit::kbar_n_per_mm3,
-     &RegionSessionAnalysis::kbar_n_per_mm3, 0, &MaterialParams::kbar_n_per_mm3},
+     &RegionSessionAnalysis::kbar_n_per_mm3, 0, &MaterialParams::kbar_n_per_mm3,
+     &RegionSessionAnalysis::kbar_trend},
     {"n", "", &EllipsoidParams::n, &RegionFit::n, &RegionSessionAnalysis::n, 1, &MaterialParams::n},
     {"cbar", "N s/mm\u00b3", &EllipsoidParams::cbar_ns_per_mm3, &RegionFit::cbar_ns_per_mm3,
-     &RegionSessionAnalysis::cbar_ns_per_mm3, 2, &MaterialParams::cbar_ns_per_mm3},
+     &RegionSessionAnalysis::cbar_ns_per_mm3, 2, &MaterialParams::cbar_ns_per_mm3,
+     &RegionSessionAnalysis::cbar_trend},
     {"m", "", &EllipsoidParams::m, &RegionFit::m, &RegionSessionAnalysis::m, 3, &MaterialParams::m},
 };
 
@@ -362,8 +366,9 @@ std::string strip_chart(std::span<const StepAnalysis> analyses, Region region, c
 }
 
 /// One fitted parameter per step against its heel strike, a colour per foot, with each foot's
-/// pooled per-step values as a line where the steps were pooled: a drift over the walk (warm-up,
-/// fatigue, a sensor warming) shows here and in no distribution.
+/// pooled per-step values as a line where the steps were pooled, and the trend over the session
+/// where there is one: a drift over the walk (warm-up, fatigue, a sensor warming) shows here and
+/// in no distribution.
 std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSessionAnalysis& r,
                          const ParamView& p) {
   struct FootCourse {
@@ -388,6 +393,13 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
       y.add(course.pooled.back());
     }
   }
+  const LogTrend* trend = p.trend != nullptr && r.*p.trend ? &*(r.*p.trend) : nullptr;
+  const std::array<double, 2> ends = {x.lo, x.hi};
+  std::array<double, 2> trend_ends{};
+  if (trend != nullptr) {
+    trend_ends = {trend->at(x.lo), trend->at(x.hi)};
+    for (double v : trend_ends) y.add(v);
+  }
   const std::string y_label =
       *p.unit ? fmt::format("{} ({})", p.label, p.unit) : std::string(p.label);
   Chart c(420, 240, x.padded(0.03), y.padded(0.08), fmt::format("{} over the session", p.label),
@@ -405,6 +417,13 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
   std::vector<std::pair<std::string_view, std::string_view>> legend = {
       {kLeftFoot, "left, each step"}, {kRightFoot, "right"}};
   if (pooled) legend.emplace_back(kMeasured, "pooled (lines)");
+  std::string trend_label;
+  if (trend != nullptr) {
+    c.line(ends, trend_ends, kModel, 2.0, 0.8);
+    trend_label =
+        fmt::format("{:+.1f} \u00b1 {:.1f} %/min", trend->pct_per_min, trend->se_pct_per_min);
+    legend.emplace_back(kModel, trend_label);
+  }
   c.legend(legend);
   return c.finish();
 }

@@ -253,6 +253,11 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "step at the region's parameters")
       ->check(number_in(0.0, 100.0))
       ->capture_default_str();
+  sub->add_option("--tissue-drift", args->options.tissue_drift_pct_per_min,
+                  "Steady change of kbar and cbar over the session, % per minute (compounded); "
+                  "0 keeps the tissue")
+      ->check(number_in(-20.0, 20.0))
+      ->capture_default_str();
   sub->add_option("--placement-sd", args->options.placement_sd_mm,
                   "Step-to-step SD of where the foot lands on the insole, mm along each axis; 0 "
                   "puts every footprint on its region's centre")

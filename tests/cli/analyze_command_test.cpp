@@ -1,5 +1,6 @@
 // `gaitmon analyze` end to end: its files, their headers, the report, and its errors.
 #include <fcntl.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <pty.h>
@@ -8,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -286,6 +288,79 @@ TEST(AnalyzeCommand, MarksTheMediansThatMostStepsLeftAtABound) {
   }
   EXPECT_TRUE(marks["toes3_5"][2]) << a.output;
   EXPECT_EQ(marks["heel"], (std::array<bool, 4>{})) << a.output;
+}
+
+// session.json gives each region's kbar and cbar trend over the session; the summary names
+// exactly those whose |z| reaches 3, with their change and standard error, or says that none
+// does. Every trend counts no more steps than were fitted. Returns the summary's drift line.
+std::string check_drift_outputs(const fs::path& out, const std::string& output) {
+  const auto j = nlohmann::json::parse(read_all(out / "session.json"));
+  std::vector<std::string> clear;
+  int trends = 0;
+  for (const auto& [region, r] : j.at("regions").items()) {
+    for (const std::string name : {"kbar", "cbar"}) {
+      const auto& t = r.at("drift").at(name);
+      if (t.is_null()) continue;
+      ++trends;
+      const double pct = t.at("pct_per_min").get<double>();
+      const double se = t.at("se_pct_per_min").get<double>();
+      const double b = t.at("ln_slope_per_min").get<double>();
+      const double se_b = t.at("se_ln_slope_per_min").get<double>();
+      EXPECT_GT(se_b, 0.0) << region << " " << name;
+      EXPECT_NEAR(pct, 100.0 * std::expm1(b), 1e-9 * std::abs(pct));
+      EXPECT_NEAR(se, 100.0 * std::exp(b) * se_b, 1e-9 * se);
+      EXPECT_NEAR(t.at("z").get<double>(), b / se_b, 1e-9 * std::abs(b / se_b));
+      EXPECT_LE(t.at("steps").get<int>(), r.at("steps_fitted").get<int>());
+      EXPECT_GE(t.at("steps").get<int>(), 5);
+      EXPECT_GE(t.at("span_min").get<double>(), 0.5);
+      if (std::abs(b / se_b) >= 3.0) {
+        clear.push_back(fmt::format("{} {} {:+.1f} +- {:.1f}", region, name, pct, se));
+      }
+    }
+  }
+  if (trends == 0) {
+    const std::string none =
+        "drift: not estimated; no region has 5 steps spanning 30 s or more "
+        "with kbar or cbar off its bounds";
+    EXPECT_NE(output.find("\n" + none + "\n"), std::string::npos) << output;
+    return none;
+  }
+  EXPECT_GE(trends, 5) << "the heel, midfoot and metatarsals have a kbar trend at least";
+  EXPECT_TRUE(j.at("regions").at("heel").at("drift").at("kbar").is_object());
+  if (clear.empty()) {
+    const std::string none =
+        "no region's kbar or cbar drifts over the session by 3 standard errors or more";
+    EXPECT_NE(output.find("\n" + none + "\n"), std::string::npos) << output;
+    return none;
+  }
+  const auto at = output.find("\ndrift over the session, % per minute (session.json: drift): ");
+  if (at == std::string::npos) {
+    ADD_FAILURE() << output;
+    return {};
+  }
+  const std::string line = output.substr(at + 1, output.find('\n', at + 1) - at - 1);
+  for (const std::string& c : clear) EXPECT_NE(line.find(c), std::string::npos) << line;
+  EXPECT_EQ(std::count(line.begin(), line.end(), ';') + 1, static_cast<long>(clear.size()));
+  return line;
+}
+
+// The fixture's six seconds give no trend; on a minute's walk whose tissue softens by 15 % a
+// minute (simulate --tissue-drift) the heel's kbar is called a drift.
+TEST(AnalyzeCommand, ReportsEachRegionsDriftAndNamesTheClearOnes) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  EXPECT_EQ(check_drift_outputs(a.dir / "out", a.output).rfind("drift: not estimated", 0), 0u);
+
+  const fs::path dir = test::scratch_dir("analyze-drift");
+  int status = -1;
+  std::string out = run("simulate --size 41-42 --duration 60 --seed 7 --tissue-drift -15 --out " +
+                            (dir / "s.csv").string(),
+                        &status);
+  ASSERT_EQ(status, 0) << out;
+  out = run("analyze " + (dir / "s.csv").string() + " --out " + (dir / "out").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  const std::string line = check_drift_outputs(dir / "out", out);
+  EXPECT_NE(line.find(" heel kbar -1"), std::string::npos) << line;
 }
 
 // The toes' cells determine no footprint, so their fits fall back to the contact ellipse; the

@@ -203,6 +203,20 @@ std::vector<std::pair<double, std::string>> dots(const std::string& svg) {
   return out;
 }
 
+/// The points of the first line drawn in `colour`, in pixels; none if there is no such line.
+std::vector<std::pair<double, double>> polyline_points(const std::string& svg,
+                                                       const std::string& colour) {
+  const auto line = svg.find("<polyline fill=\"none\" stroke=\"" + colour + "\"");
+  if (line == std::string::npos) return {};
+  const auto points = svg.find("points=\"", line) + 8;
+  std::istringstream xy(svg.substr(points, svg.find('"', points) - points));
+  std::vector<std::pair<double, double>> out;
+  double x, y;
+  char comma;
+  while (xy >> x >> comma >> y) out.emplace_back(x, y);
+  return out;
+}
+
 // kbar over the session: a dot per fitted step at its heel strike, blue for the left foot and
 // green for the right, and where the steps were pooled a line per foot through their pooled
 // values; nothing for the step whose fit failed.
@@ -229,21 +243,40 @@ TEST(ReportHtml, DrawsEachStepsStiffnessAgainstItsHeelStrikePerFoot) {
   EXPECT_LT(d[2].first, d[1].first);
   // Each foot's pooled line, the left one through two steps at one value: level.
   EXPECT_EQ(count(kbar, "<polyline "), 2u);
-  const auto left = kbar.find("<polyline fill=\"none\" stroke=\"#1f77b4\"");
-  ASSERT_NE(left, std::string::npos);
-  const auto points = kbar.find("points=\"", left) + 8;
-  std::istringstream xy(kbar.substr(points, kbar.find('"', points) - points));
-  double x0, y0, x1, y1;
-  char comma;
-  xy >> x0 >> comma >> y0 >> x1 >> comma >> y1;
-  EXPECT_LT(x0, x1);
-  EXPECT_DOUBLE_EQ(y0, y1);
+  const auto left = polyline_points(kbar, "#1f77b4");
+  ASSERT_EQ(left.size(), 2u) << kbar;
+  EXPECT_LT(left[0].first, left[1].first);
+  EXPECT_DOUBLE_EQ(left[0].second, left[1].second);
   EXPECT_TRUE(has(kbar, ">pooled (lines)</text>"));
 
   const std::vector<std::string> unpooled = charts(render_report_html(Fixture().input()));
   ASSERT_EQ(unpooled.size(), 9u);
   EXPECT_EQ(count(unpooled[7], "<polyline "), 0u);
   EXPECT_FALSE(has(unpooled[7], ">pooled (lines)</text>"));
+}
+
+// A region's trend over the session is drawn as a line across the steps' span, falling where
+// the trend falls, and its change per minute goes in the legend; without one there is no line.
+TEST(ReportHtml, DrawsTheTrendOverTheSessionWhereThereIsOne) {
+  Fixture f;
+  LogTrend trend;
+  trend.steps = 5;
+  trend.centre_s = 0.6;
+  trend.ln_at_centre = std::log(0.12);
+  trend.ln_slope_per_min = -3.0;
+  trend.pct_per_min = -5.0;
+  trend.se_pct_per_min = 1.2;
+  f.session.regions[index_of(Region::Heel)].kbar_trend = trend;
+  const std::vector<std::string> svgs = charts(render_report_html(f.input()));
+  ASSERT_EQ(svgs.size(), 9u);
+  const std::string& kbar = svgs[7];
+  // Two points: the first and last heel strike.
+  const auto line = polyline_points(kbar, "#d62728");
+  ASSERT_EQ(line.size(), 2u) << kbar;
+  EXPECT_LT(line[0].first, line[1].first);
+  EXPECT_LT(line[0].second, line[1].second) << "a falling trend runs down the chart";
+  EXPECT_TRUE(has(kbar, ">-5.0 \u00b1 1.2 %/min</text>")) << kbar;
+  EXPECT_FALSE(has(svgs[8], "stroke=\"#d62728\"")) << "the cbar chart has no trend here";
 }
 
 /// The x of every legend's box, in the order the charts are drawn.
