@@ -136,7 +136,7 @@ struct RegionSessionAnalysis {
   std::vector<std::optional<MaterialParams>> pooled_per_step;
   /// The per-step kbar's and cbar's trends over the session (drift.hpp), over the steps whose
   /// four parameters the data determine and which left that parameter off its bounds; nothing
-  /// with fewer than kMinTrendSteps such steps.
+  /// with fewer than kMinTrendSteps such steps or spanning less than kMinTrendSpan_s.
   std::optional<LogTrend> kbar_trend, cbar_trend;
   /// Across the steps fitted Ok.
   Spread A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m, nrmse_pct;
