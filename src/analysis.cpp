@@ -150,22 +150,29 @@ namespace {
 constexpr std::size_t kLnKbar = 0;
 constexpr std::size_t kLnCbar = 2;
 
-// The trend of one parameter over the steps that have estimates, leaving out those whose fit
-// held it at a bound: a value pinned there says nothing of the tissue's course.
-std::optional<LogTrend> step_trend(std::span<const StepAnalysis> steps,
-                                   const std::vector<std::size_t>& estimated_steps,
-                                   const std::vector<MaterialEstimate>& estimates,
-                                   std::size_t index, const Estimate RegionFit::*parameter,
-                                   Region region) {
+// One parameter's course over the session and its difference between the feet, from the steps
+// that have estimates, leaving out those whose fit held it at a bound: a value pinned there says
+// nothing of the tissue. With `footprint_only`, also those fitted on the contact ellipse, whose
+// area moves in whole cells and does not determine the damping (README, "How the fit works").
+std::pair<std::optional<LogTrend>, std::optional<FootAsymmetry>> step_course(
+    std::span<const StepAnalysis> steps, const std::vector<std::size_t>& estimated_steps,
+    const std::vector<MaterialEstimate>& estimates, std::size_t index,
+    const Estimate RegionFit::*parameter, Region region, bool footprint_only, double pair_sd_pct) {
+  std::vector<Foot> feet;
   std::vector<double> t, value, variance;
   for (std::size_t k = 0; k < estimates.size(); ++k) {
     const StepAnalysis& step = steps[estimated_steps[k]];
-    if ((step.at(region).fit.*parameter).at_bound) continue;
+    const RegionAnalysis& ra = step.at(region);
+    if ((ra.fit.*parameter).at_bound || (footprint_only && ra.area == AreaSource::Ellipse)) {
+      continue;
+    }
+    feet.push_back(step.foot);
     t.push_back(step.t_heel_strike_s);
     value.push_back(estimates[k].value[index]);
     variance.push_back(estimates[k].covariance[index][index]);
   }
-  return log_trend(t, value, variance);
+  return {log_trend(t, value, variance, feet),
+          foot_asymmetry(feet, t, value, variance, pair_sd_pct / 100.0)};
 }
 
 RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region region,
@@ -211,10 +218,12 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
   }
-  r.kbar_trend =
-      step_trend(steps, estimated_steps, estimates, kLnKbar, &RegionFit::kbar_n_per_mm3, region);
-  r.cbar_trend =
-      step_trend(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region);
+  std::tie(r.kbar_trend, r.kbar_asymmetry) =
+      step_course(steps, estimated_steps, estimates, kLnKbar, &RegionFit::kbar_n_per_mm3, region,
+                  false, config.asymmetry.kbar_pair_sd_pct[index_of(region)]);
+  std::tie(r.cbar_trend, r.cbar_asymmetry) =
+      step_course(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region,
+                  true, config.asymmetry.cbar_pair_sd_pct[index_of(region)]);
   r.pooled_per_step.resize(steps.size());
   if (r.pooling.pooled) {
     for (std::size_t k = 0; k < estimated_steps.size(); ++k) {

@@ -592,6 +592,26 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
   table.finish();
 }
 
+void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry) {
+  for (const auto& [key, sds] : {std::pair{"kbar_pair_sd_pct", &asymmetry.kbar_pair_sd_pct},
+                                 {"cbar_pair_sd_pct", &asymmetry.cbar_pair_sd_pct}}) {
+    TableReader regions = table.table(key);
+    refuse_unknown_names(
+        regions, [](std::string_view name) { return parse_region(name).has_value(); },
+        joined_region_names());
+    for (Region region : kRegions) {
+      const std::string name(region_name(region));
+      const double sd = regions.number(name);
+      if (!(sd >= 0.0 && sd <= 100.0)) {
+        regions.fail(name, fmt::format("must be in [0, 100], got {}", sd));
+      }
+      (*sds)[index_of(region)] = sd;
+    }
+    regions.finish();
+  }
+  table.finish();
+}
+
 // A one-of-several string setting; the reason lists the choices.
 template <typename T, std::size_t N>
 T choice(TableReader& table, std::string_view key,
@@ -746,6 +766,7 @@ Config load_config(const fs::path& main_file) {
   read_segmentation(root.table("segmentation"), config.sample_rate_hz, config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
   read_model(root.table("model"), file, config.model);
+  read_asymmetry(root.table("asymmetry"), config.asymmetry);
   read_wire(root.table("wire"), config.wire);
   read_serial(root.table("serial"), config.serial);
   read_ring(root.table("ring"), config.ring);

@@ -1,11 +1,11 @@
-// Weighted least squares of a log parameter on time, its scale from the residuals (drift.hpp).
+// A log parameter's trend over the session from the steps' regression (drift.hpp).
 #include "gaitmon/drift.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <stdexcept>
-#include <string>
+
+#include "step_regression.hpp"
 
 namespace gaitmon {
 
@@ -20,58 +20,22 @@ double LogTrend::at(double t_s) const {
 }
 
 std::optional<LogTrend> log_trend(std::span<const double> t_s, std::span<const double> log_value,
-                                  std::span<const double> variance) {
-  if (t_s.size() != log_value.size() || t_s.size() != variance.size()) {
-    throw std::invalid_argument("log_trend: " + std::to_string(t_s.size()) + " times, " +
-                                std::to_string(log_value.size()) + " values and " +
-                                std::to_string(variance.size()) + " variances");
-  }
-  for (std::size_t i = 0; i < t_s.size(); ++i) {
-    if (!std::isfinite(t_s[i]) || !std::isfinite(log_value[i]) || !std::isfinite(variance[i]) ||
-        !(variance[i] > 0.0)) {
-      throw std::invalid_argument("log_trend: step " + std::to_string(i) +
-                                  " has a time, value or variance that is not finite, or a "
-                                  "variance that is not positive");
-    }
-  }
-  const auto n = static_cast<int>(t_s.size());
-  if (n < kMinTrendSteps) return std::nullopt;
+                                  std::span<const double> variance, std::span<const Foot> feet) {
+  detail::check_steps("log_trend", feet, t_s, log_value, variance);
+  if (static_cast<int>(t_s.size()) < kMinTrendSteps) return std::nullopt;
   const auto [t_lo, t_hi] = std::minmax_element(t_s.begin(), t_s.end());
   if (!(*t_hi - *t_lo >= kMinTrendSpan_s)) return std::nullopt;
-  // Centred on the weighted mean time, the slope and intercept decouple.
-  double sw = 0.0, swt = 0.0, swy = 0.0;
-  for (std::size_t i = 0; i < t_s.size(); ++i) {
-    const double w = 1.0 / variance[i];
-    const double t = t_s[i] / 60.0;
-    sw += w;
-    swt += w * t;
-    swy += w * log_value[i];
-  }
-  const double t_mean = swt / sw;
-  const double y_mean = swy / sw;
-  double stt = 0.0, sty = 0.0;
-  for (std::size_t i = 0; i < t_s.size(); ++i) {
-    const double w = 1.0 / variance[i];
-    const double dt = t_s[i] / 60.0 - t_mean;
-    stt += w * dt * dt;
-    sty += w * dt * (log_value[i] - y_mean);
-  }
-  const double slope = sty / stt;
-  double chi2 = 0.0;
-  for (std::size_t i = 0; i < t_s.size(); ++i) {
-    const double r = log_value[i] - y_mean - slope * (t_s[i] / 60.0 - t_mean);
-    chi2 += r * r / variance[i];
-  }
-  const double se_slope = std::sqrt(chi2 / (n - 2) / stt);
+  const auto fit = detail::regress_steps(feet, t_s, log_value, variance);
+  if (!fit) return std::nullopt;
   LogTrend trend;
-  trend.steps = n;
+  trend.steps = fit->steps;
   trend.span_min = (*t_hi - *t_lo) / 60.0;
-  trend.centre_s = 60.0 * t_mean;
-  trend.ln_at_centre = y_mean;
-  trend.ln_slope_per_min = slope;
-  trend.se_ln_slope_per_min = se_slope;
-  trend.pct_per_min = 100.0 * std::expm1(slope);
-  trend.se_pct_per_min = 100.0 * std::exp(slope) * se_slope;
+  trend.centre_s = 60.0 * fit->centre_min;
+  trend.ln_at_centre = fit->ln_at_centre;
+  trend.ln_slope_per_min = fit->slope_per_min;
+  trend.se_ln_slope_per_min = fit->se_slope_per_min;
+  trend.pct_per_min = 100.0 * std::expm1(fit->slope_per_min);
+  trend.se_pct_per_min = 100.0 * std::exp(fit->slope_per_min) * fit->se_slope_per_min;
   return trend;
 }
 

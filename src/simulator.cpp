@@ -225,6 +225,8 @@ void validate(const SimulationOptions& o) {
           "must be in [0, 10]");
   require(o.tissue_drift_pct_per_min >= -20.0 && o.tissue_drift_pct_per_min <= 20.0,
           "tissue_drift_pct_per_min", "must be in [-20, 20]");
+  require(o.tissue_asymmetry_pct >= -50.0 && o.tissue_asymmetry_pct <= 50.0, "tissue_asymmetry_pct",
+          "must be in [-50, 50]");
   for (Region r : kRegions) {
     const auto& p = o.region_params[index_of(r)];
     if (!p) continue;
@@ -345,6 +347,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                   {"tissue_step_sd_pct", o.tissue_step_sd_pct},
                   {"placement_sd_mm", o.placement_sd_mm},
                   {"tissue_drift_pct_per_min", o.tissue_drift_pct_per_min},
+                  {"tissue_asymmetry_pct", o.tissue_asymmetry_pct},
                   {"effects", effects_json(o)},
                   {"subject", o.subject}};
   j["sample_rate_hz"] = truth.sample_rate_hz;
@@ -398,7 +401,8 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                                                      {"peak_total_force_n", s.peak_total_force_n},
                                                      {"peak_force_n", peaks}});
     // Only when the tissue varies: otherwise every factor is 1.
-    if (o.tissue_step_sd_pct > 0.0 || o.tissue_drift_pct_per_min != 0.0) {
+    if (o.tissue_step_sd_pct > 0.0 || o.tissue_drift_pct_per_min != 0.0 ||
+        o.tissue_asymmetry_pct != 0.0) {
       steps[std::string(foot_name(s.foot))].back()["tissue_factors"] = factors;
     }
     if (o.placement_sd_mm > 0.0) {
@@ -517,13 +521,15 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
   const double step_sd = options.tissue_step_sd_pct / 100.0;
   const double drift_per_min = 1.0 + options.tissue_drift_pct_per_min / 100.0;
   for (std::size_t fi = 0; fi < tallies.size(); ++fi) {
+    const double foot_factor =
+        kFeet[fi] == Foot::Right ? 1.0 + options.tissue_asymmetry_pct / 100.0 : 1.0;
     for (std::size_t c = 0; c < tallies[fi].size(); ++c) {
       StanceTally& tally = tallies[fi][c];
-      const double drift = std::pow(drift_per_min, stances[fi][c].start_s / 60.0);
+      const double steady = foot_factor * std::pow(drift_per_min, stances[fi][c].start_s / 60.0);
       for (Region r : kRegions) {
         const std::size_t ri = index_of(r);
-        tally.kbar_factor[ri] = drift * (step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0);
-        tally.cbar_factor[ri] = drift * (step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0);
+        tally.kbar_factor[ri] = steady * (step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0);
+        tally.cbar_factor[ri] = steady * (step_sd > 0.0 ? std::exp(step_sd * rng.normal()) : 1.0);
       }
     }
   }

@@ -820,6 +820,35 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   EXPECT_EQ(load_config(dir / kMain).model.effects_window_steps, 40);
 }
 
+// [asymmetry]: every region's SD for kbar and cbar, as the shipped file documents them; each
+// must be there, known and in [0, 100].
+TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
+  const AsymmetrySettings a = load_config(shipped_config()).asymmetry;
+  EXPECT_EQ(a.kbar_pair_sd_pct,
+            (std::array<double, kRegionCount>{1.0, 4.5, 4.5, 2.5, 1.5, 0.5, 0.5, 2.0}));
+  EXPECT_EQ(a.cbar_pair_sd_pct,
+            (std::array<double, kRegionCount>{1.5, 4.0, 4.0, 4.5, 5.5, 9.5, 9.5, 2.5}));
+  const std::vector<Refusal> cases = {
+      {"AsymmetryNegative", kMain,
+       replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = -1"),
+       "asymmetry.kbar_pair_sd_pct.heel", "must be in [0, 100], got -1"},
+      {"AsymmetryRegionMissing", kMain, replace("cbar_pair_sd_pct", "toe2 = 9.5, ", ""),
+       "asymmetry.cbar_pair_sd_pct.toe2", "missing"},
+      {"AsymmetryUnknownRegion", kMain,
+       replace("cbar_pair_sd_pct", "toe2 = 9.5", "toe2 = 9.5, toe6 = 1"),
+       "asymmetry.cbar_pair_sd_pct.toe6", "unknown name"},
+      {"AsymmetryNotANumber", kMain,
+       replace("kbar_pair_sd_pct", "met3_5 = 1.5", "met3_5 = \"1.5\""),
+       "asymmetry.kbar_pair_sd_pct.met3_5", "expected a number"},
+      {"AsymmetryMissing", kMain, erase_from_to("[asymmetry]", "[wire]"), "asymmetry", "missing"},
+  };
+  expect_refusals(cases);
+  const fs::path dir = copy_config("AsymmetryTrusted");
+  edit_file(dir / kMain,
+            replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = 0"));
+  EXPECT_EQ(load_config(dir / kMain).asymmetry.kbar_pair_sd_pct[0], 0.0);
+}
+
 TEST(Config, LogLevelDefaultsToInfoAndIsRead) {
   EXPECT_EQ(load_config(shipped_config()).log.level, "info");
   EXPECT_EQ(LogSettings{}.level, "info");

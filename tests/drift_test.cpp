@@ -98,6 +98,28 @@ TEST(Drift, TheStandardErrorMatchesTheScatterWhateverTheVariancesScale) {
   EXPECT_NEAR(static_cast<double>(within) / sessions, 0.95, 0.015);
 }
 
+// Given the feet, each has its own level: steps on one exact line per foot, the right foot 10 %
+// higher, have the line's slope without scatter; without the feet the difference between them is
+// scatter about one line, and the slope's standard error grows with it.
+TEST(Drift, EachFootHasItsOwnLevelWhenTheFeetAreGiven) {
+  std::vector<Foot> feet;
+  std::vector<double> t, y;
+  for (int i = 0; i < 12; ++i) {
+    feet.push_back(i % 2 == 0 ? Foot::Left : Foot::Right);
+    t.push_back(5.0 * i);
+    y.push_back((feet.back() == Foot::Right ? std::log(1.1) : 0.0) +
+                std::log(0.95) * t.back() / 60.0);
+  }
+  const std::vector<double> v(12, 0.01);
+  const auto by_foot = log_trend(t, y, v, feet);
+  const auto one_line = log_trend(t, y, v);
+  ASSERT_TRUE(by_foot && one_line);
+  EXPECT_NEAR(by_foot->pct_per_min, -5.0, 1e-9);
+  EXPECT_NEAR(by_foot->se_pct_per_min, 0.0, 1e-9);
+  EXPECT_GT(one_line->se_pct_per_min, 1.0);
+  EXPECT_THROW(log_trend(t, y, v, std::vector<Foot>(11, Foot::Left)), std::invalid_argument);
+}
+
 // Four steps, or steps within less than 30 s, give no trend; 30 s of steps give one.
 TEST(Drift, TooFewStepsOrTooShortASpanGiveNoTrend) {
   const std::vector<double> y{0, 1, 2, 3, 4, 5};

@@ -478,6 +478,37 @@ TEST(Simulator, TissueDriftScalesEachStanceByItsStartTime) {
   EXPECT_TRUE(truth["steps"]["L"][0].contains("tissue_factors"));
 }
 
+// A difference between the feet scales every right-foot stance's kbar and cbar and no left one;
+// without it the session keeps its bytes. The right foot's peak forces follow the factor.
+TEST(Simulator, TissueAsymmetryScalesTheRightFootsStances) {
+  const auto dir = test::scratch_dir("sim-asymmetry");
+  SimulationOptions o = minute_options();
+  const SimulationTruth even =
+      simulate_kept_by_zero(dir, o, [](SimulationOptions& z) { z.tissue_asymmetry_pct = 0.0; });
+  o.tissue_asymmetry_pct = 20.0;
+  const SimulationTruth uneven =
+      simulate_session(shipped_config(), o, dir / "uneven.csv", dir / "uneven.json");
+  ASSERT_EQ(uneven.steps.size(), even.steps.size());
+  std::array<int, 2> feet{};
+  for (std::size_t i = 0; i < uneven.steps.size(); ++i) {
+    const SimulatedStep& step = uneven.steps[i];
+    const double expected = step.foot == Foot::Right ? 1.2 : 1.0;
+    ++feet[static_cast<std::size_t>(step.foot)];
+    for (Region r : kRegions) {
+      EXPECT_DOUBLE_EQ(step.kbar_factor[index_of(r)], expected);
+      EXPECT_DOUBLE_EQ(step.cbar_factor[index_of(r)], expected);
+    }
+    if (!step.partial && step.foot == Foot::Right) {
+      EXPECT_GT(step.peak_force_n[0], 1.1 * even.steps[i].peak_force_n[0]);
+    }
+  }
+  EXPECT_GE(feet[0], 40);
+  EXPECT_GE(feet[1], 40);
+  const nlohmann::json truth = nlohmann::json::parse(slurp(dir / "uneven.json"));
+  EXPECT_EQ(truth["options"]["tissue_asymmetry_pct"].get<double>(), 20.0);
+  EXPECT_TRUE(truth["steps"]["R"][0].contains("tissue_factors"));
+}
+
 // The placement shifts are drawn only when asked for: without them the session keeps its bytes;
 // with them each stance's offsets scatter by the SD asked for, the same for every region of the
 // foot, and the truth JSON records them per step.
@@ -677,6 +708,9 @@ TEST(Simulator, RejectsBadOptions) {
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   o.tissue_drift_pct_per_min = -21.0;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.tissue_asymmetry_pct = -50.5;
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
   EllipsoidParams flat = seed_means(Region::Toe1);

@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "gaitmon/asymmetry.hpp"
 #include "gaitmon/config.hpp"
 #include "gaitmon/contact_ellipse.hpp"
 #include "gaitmon/drift.hpp"
@@ -135,9 +136,13 @@ struct RegionSessionAnalysis {
   /// where the step was not pooled (no contact, a failed fit, or too few steps to pool).
   std::vector<std::optional<MaterialParams>> pooled_per_step;
   /// The per-step kbar's and cbar's trends over the session (drift.hpp), over the steps whose
-  /// four parameters the data determine and which left that parameter off its bounds; nothing
-  /// with fewer than kMinTrendSteps such steps or spanning less than kMinTrendSpan_s.
+  /// four parameters the data determine and which left that parameter off its bounds, and for cbar
+  /// were fitted on a footprint (the contact ellipse's area does not determine the damping);
+  /// nothing with fewer than kMinTrendSteps such steps or spanning less than kMinTrendSpan_s.
   std::optional<LogTrend> kbar_trend, cbar_trend;
+  /// The right foot's kbar and cbar against the left's (asymmetry.hpp), over the same steps as
+  /// the trends; nothing with fewer than kMinAsymmetryStepsPerFoot such steps of either foot.
+  std::optional<FootAsymmetry> kbar_asymmetry, cbar_asymmetry;
   /// Across the steps fitted Ok.
   Spread A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m, nrmse_pct;
 };

@@ -96,6 +96,14 @@ struct ModelSettings {
   int effects_window_steps = 100;
 };
 
+/// [asymmetry]: how differently the pair of insoles alone makes the same tissue read under the two
+/// feet, per region (indexed by index_of(Region)), as the SD of 100 ln(right / left) of kbar and
+/// of cbar. foot_asymmetry (asymmetry.hpp) adds it to the steps' own standard error.
+struct AsymmetrySettings {
+  std::array<double, kRegionCount> kbar_pair_sd_pct{};
+  std::array<double, kRegionCount> cbar_pair_sd_pct{};
+};
+
 /// [ring]: the lock-free ring between the driver thread and the detector thread.
 struct RingSettings {
   std::size_t capacity_frames = 4096;  ///< 20 s of two feet at 100 Hz
@@ -142,10 +150,11 @@ struct Config {
   SegmentationSettings segmentation;
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;
-  FitBounds fit_bounds;   ///< [fit] of the main file: the tissue fit's parameter bounds
-  ModelSettings model;    ///< [model] of the main file
-  WireSettings wire;      ///< [wire]: the insole frame layout
-  SerialSettings serial;  ///< [serial]: the serial driver
+  FitBounds fit_bounds;         ///< [fit] of the main file: the tissue fit's parameter bounds
+  ModelSettings model;          ///< [model] of the main file
+  AsymmetrySettings asymmetry;  ///< [asymmetry] of the main file
+  WireSettings wire;            ///< [wire]: the insole frame layout
+  SerialSettings serial;        ///< [serial]: the serial driver
   RingSettings ring;
   MonitorSettings monitor;
   LcmSettings lcm;  ///< [lcm] of the main file

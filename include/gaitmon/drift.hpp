@@ -13,6 +13,8 @@
 #include <optional>
 #include <span>
 
+#include "gaitmon/types.hpp"
+
 namespace gaitmon {
 
 /// Fewer steps than this give no trend: two parameters and a scale need some left over.
@@ -39,11 +41,14 @@ struct LogTrend {
 };
 
 /// The trend of `log_value` (one per step) against `t_s` (the steps' times, seconds) weighted by
-/// 1 / `variance`. nullopt with fewer than kMinTrendSteps steps or spanning less than
-/// kMinTrendSpan_s.
+/// 1 / `variance`. With `feet` (one per step) each foot has its own level, so that a difference
+/// between the feet (asymmetry.hpp) does not widen the trend's standard error; the line then
+/// passes through the steps' weighted mean. nullopt with fewer than kMinTrendSteps steps or
+/// spanning less than kMinTrendSpan_s.
 /// Throws std::invalid_argument if the lengths differ, a value is not finite or a variance is
 /// not positive.
 std::optional<LogTrend> log_trend(std::span<const double> t_s, std::span<const double> log_value,
-                                  std::span<const double> variance);
+                                  std::span<const double> variance,
+                                  std::span<const Foot> feet = {});
 
 }  // namespace gaitmon

@@ -25,8 +25,8 @@
 // measured area stop growing while the force still grows. Force against area, all the fit sees, is
 // unchanged by the stretch. The force grows about as area^(2+n), so the 40 N events span about 85 %
 // of the contact: with the defaults a stance from heel strike to toe off lasts about 0.50-0.66 s,
-// like the seed's 52-60 frames. The tissue is the same in every step unless tissue_step_sd_pct or
-// tissue_drift_pct_per_min says otherwise.
+// like the seed's 52-60 frames. The tissue is the same in every step and under both feet unless
+// tissue_step_sd_pct, tissue_drift_pct_per_min or tissue_asymmetry_pct says otherwise.
 //
 // Determinism: one std::mt19937_64 seeded with the seed drives every draw in a fixed order
 // (phase, gait durations, dc biases of L then R sensors, the tissue's step factors if asked
@@ -118,6 +118,10 @@ struct SimulationOptions {
   /// recording has kbar and cbar multiplied by (1 + pct / 100)^t, on top of the step factors
   /// ([-20, 20]; 0 keeps them). For checking the drift estimate (drift.hpp).
   double tissue_drift_pct_per_min = 0.0;
+  /// A difference between the feet: every stance of the right foot has kbar and cbar multiplied
+  /// by 1 + pct / 100, on top of the step and drift factors ([-50, 50]; 0 keeps the feet alike).
+  /// For checking the comparison of the feet (asymmetry.hpp).
+  double tissue_asymmetry_pct = 0.0;
   /// Step-to-step placement of the foot on the insole: each stance shifts all of the foot's
   /// footprints by independent normal offsets with this SD along x and y, in mm ([0, 10]; 0
   /// keeps every footprint on its region's box centre). A real foot does not land on the same
@@ -150,8 +154,8 @@ struct SimulatedStep {
   bool partial = false;  ///< the contact began before the first or ended after the last frame
   std::array<double, kRegionCount> peak_force_n{};  ///< per region, over the recorded frames
   double peak_total_force_n = 0.0;
-  /// Per region, the factors on kbar and cbar of this stance
-  /// (SimulationOptions::tissue_step_sd_pct and tissue_drift_pct_per_min).
+  /// Per region, the factors on kbar and cbar of this stance (SimulationOptions::
+  /// tissue_step_sd_pct, tissue_drift_pct_per_min and tissue_asymmetry_pct).
   std::array<double, kRegionCount> kbar_factor{}, cbar_factor{};
   /// Where this stance put the foot (SimulationOptions::placement_sd_mm).
   PlacementShift placement_shift;

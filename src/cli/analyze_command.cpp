@@ -187,9 +187,9 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
   return out;
 }
 
-/// How many standard errors a trend must reach for the summary to call it a drift: with ~20
-/// region trends per session, 3 keeps a chance one from showing in most sessions.
-constexpr double kDriftZ = 3.0;
+/// How many standard errors a trend or a difference between the feet must reach for the summary
+/// to name it: with ~20 of each per session, 3 keeps a chance one from showing in most sessions.
+constexpr double kNamedZ = 3.0;
 
 /// How many of the region's steps were fitted Ok with the parameter at a bound of its range.
 int steps_at_bound(const std::vector<StepAnalysis>& analyses, Region region,
@@ -250,6 +250,19 @@ nlohmann::json trend_json(const std::optional<LogTrend>& t) {
           {"pct_per_min", t->pct_per_min},
           {"se_pct_per_min", t->se_pct_per_min},
           {"z", t->z()}};
+}
+
+nlohmann::json asymmetry_json(const std::optional<FootAsymmetry>& a) {
+  if (!a) return nullptr;
+  return {{"left_steps", a->left_steps},
+          {"right_steps", a->right_steps},
+          {"ln_right_over_left", a->ln_ratio},
+          {"se_ln_right_over_left", a->se_ln_ratio},
+          {"se_steps_ln_right_over_left", a->se_steps_ln_ratio},
+          {"insole_pair_sd_ln_right_over_left", a->pair_sd_ln_ratio},
+          {"right_over_left_pct", a->pct},
+          {"se_right_over_left_pct", a->se_pct},
+          {"z", a->z()}};
 }
 
 nlohmann::json bounds_json(const FitBounds& b) {
@@ -352,6 +365,18 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                        "the slope of the log over its standard error, and beyond about 3 a drift "
                        "(include/gaitmon/drift.hpp)",
                        kMinTrendSteps, kMinTrendSpan_s)}}},
+        {"asymmetry",
+         {{"kbar", asymmetry_json(r.kbar_asymmetry)},
+          {"cbar", asymmetry_json(r.cbar_asymmetry)},
+          {"note",
+           fmt::format(
+               "how much higher the right foot's value is than the left's, in per cent, "
+               "from a weighted regression of each step's ln kbar and ln cbar on its foot "
+               "and its heel strike (null: fewer than {} steps of either foot off the "
+               "bounds). Its standard error is that of the steps' scatter and the pair of "
+               "insoles' own SD ([asymmetry] of the config) together; z is the log ratio "
+               "over it, and beyond about 3 the feet differ (include/gaitmon/asymmetry.hpp)",
+               kMinAsymmetryStepsPerFoot)}}},
         {"appendix_i",
          {{"mean", nlohmann::json(seed.mean)},
           {"sd", nlohmann::json(seed.sd)},
@@ -361,6 +386,39 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
   j["regions"] = regions;
   j["extended_model"] = effects_json(extended);
   return json_file_text(j);
+}
+
+/// One summary line for the regions' kbar and cbar trends, or their differences between the feet:
+/// those beyond kNamedZ standard errors with `value_se` of each, else why there are none. The toes
+/// are left to session.json: on one to three active cells their estimates scatter with tails
+/// beyond what the standard error says (README, "Left against right").
+template <class Course, class ValueSe>
+void print_named(const SessionAnalysis& session,
+                 const std::optional<Course> RegionSessionAnalysis::*kbar,
+                 const std::optional<Course> RegionSessionAnalysis::*cbar, ValueSe value_se,
+                 const std::string& not_estimated, std::string_view none, std::string_view named) {
+  std::vector<std::string> clear;
+  bool any = false;
+  for (const RegionSessionAnalysis& r : session.regions) {
+    if (is_toe(r.region)) continue;
+    for (const auto& [name, member] : {std::pair{"kbar", kbar}, {"cbar", cbar}}) {
+      const std::optional<Course>& course = r.*member;
+      any = any || course.has_value();
+      if (course && std::abs(course->z()) >= kNamedZ) {
+        const auto [value, se] = value_se(*course);
+        clear.push_back(
+            fmt::format("{} {} {:+.1f} +- {:.1f}", region_name(r.region), name, value, se));
+      }
+    }
+  }
+  if (!any) {
+    fmt::print("{}\n", not_estimated);
+  } else if (clear.empty()) {
+    fmt::print("{} by {} standard errors or more (the toes' are in session.json only)\n", none,
+               kNamedZ);
+  } else {
+    fmt::print("{}: {}\n", named, fmt::join(clear, "; "));
+  }
 }
 
 void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
@@ -403,29 +461,26 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
         "* at a bound of its fit range in at least half of the region's steps: the data do not "
         "determine it there (regions.csv: at_bound)\n");
   }
-  std::vector<std::string> drifts;
-  bool any_trend = false;
-  for (const RegionSessionAnalysis& r : session.regions) {
-    for (const auto& [name, trend] : {std::pair{"kbar", &r.kbar_trend}, {"cbar", &r.cbar_trend}}) {
-      any_trend = any_trend || trend->has_value();
-      if (*trend && std::abs((*trend)->z()) >= kDriftZ) {
-        drifts.push_back(fmt::format("{} {} {:+.1f} +- {:.1f}", region_name(r.region), name,
-                                     (*trend)->pct_per_min, (*trend)->se_pct_per_min));
-      }
-    }
-  }
-  if (!any_trend) {
-    fmt::print(
-        "drift: not estimated; no region has {} steps spanning {:.0f} s or more with kbar or cbar "
-        "off its bounds\n",
-        kMinTrendSteps, kMinTrendSpan_s);
-  } else if (drifts.empty()) {
-    fmt::print("no region's kbar or cbar drifts over the session by {} standard errors or more\n",
-               kDriftZ);
-  } else {
-    fmt::print("drift over the session, % per minute (session.json: drift): {}\n",
-               fmt::join(drifts, "; "));
-  }
+  print_named(
+      session, &RegionSessionAnalysis::kbar_trend, &RegionSessionAnalysis::cbar_trend,
+      [](const LogTrend& t) {
+        return std::pair{t.pct_per_min, t.se_pct_per_min};
+      },
+      fmt::format("drift: not estimated; no region but the toes has {} steps spanning {:.0f} s "
+                  "or more with kbar or cbar off its bounds",
+                  kMinTrendSteps, kMinTrendSpan_s),
+      "no region's kbar or cbar drifts over the session",
+      "drift over the session, % per minute (session.json: drift)");
+  print_named(
+      session, &RegionSessionAnalysis::kbar_asymmetry, &RegionSessionAnalysis::cbar_asymmetry,
+      [](const FootAsymmetry& a) {
+        return std::pair{a.pct, a.se_pct};
+      },
+      fmt::format("left against right: not compared; no region but the toes has {} steps of "
+                  "each foot with kbar or cbar off its bounds",
+                  kMinAsymmetryStepsPerFoot),
+      "no region's kbar or cbar differs between the feet",
+      "right foot against left, % (session.json: asymmetry)");
   std::vector<std::string> on_ellipse;
   for (const RegionSessionAnalysis& r : session.regions) {
     if (r.steps_on_ellipse > 0) {

@@ -517,6 +517,72 @@ std::string region_section(const ReportInput& in, const RegionSessionAnalysis& r
   return out;
 }
 
+/// Each region's kbar and cbar under the right foot against the left, with two standard errors
+/// either side (the steps' and the pair of insoles' together), and the same in a table.
+std::string feet_section(const SessionAnalysis& session) {
+  constexpr std::array<std::string_view, kRegionCount> kShort = {
+      "heel", "midfoot post.", "midfoot ant.", "met1_2", "met3_5", "toe1", "toe2", "toes3_5"};
+  std::string out = "<section id=\"feet\"><h2>Left against right</h2>";
+  Range y;
+  y.add(0.0);
+  bool any = false;
+  for (const RegionSessionAnalysis& r : session.regions) {
+    for (const auto* a : {&r.kbar_asymmetry, &r.cbar_asymmetry}) {
+      if (!*a) continue;
+      any = true;
+      y.add((*a)->pct - 2.0 * (*a)->se_pct);
+      y.add((*a)->pct + 2.0 * (*a)->se_pct);
+    }
+  }
+  if (!any) {
+    fmt::format_to(std::back_inserter(out),
+                   "<p>Not compared: no region has {} steps of each foot with kbar or cbar off its "
+                   "bounds.</p></section>",
+                   kMinAsymmetryStepsPerFoot);
+    return out;
+  }
+  Chart c(760, 260, {-0.5, kRegionCount - 0.5}, y.padded(0.08),
+          "Right foot against left (\u00b1 2 SE)", "", "right / left \u2212 1 (%)");
+  c.line(std::array{-0.5, kRegionCount - 0.5}, std::array{0.0, 0.0}, kMeasured, 1.0);
+  std::string rows;
+  const auto cell = [](const std::optional<FootAsymmetry>& a, Region region) -> std::string {
+    if (!a) return "&ndash;";
+    const std::string text =
+        fmt::format("{:+.1f} &plusmn; {:.1f} (z {:+.1f})", a->pct, a->se_pct, a->z());
+    return std::abs(a->z()) >= 3.0 && !is_toe(region) ? "<b>" + text + "</b>" : text;
+  };
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    const RegionSessionAnalysis& r = session.regions[i];
+    const double x = static_cast<double>(i);
+    if (r.kbar_asymmetry) {
+      c.mean_sd(x - 0.15, r.kbar_asymmetry->pct, 2.0 * r.kbar_asymmetry->se_pct, kLeftFoot);
+    }
+    if (r.cbar_asymmetry) {
+      c.mean_sd(x + 0.15, r.cbar_asymmetry->pct, 2.0 * r.cbar_asymmetry->se_pct, kRightFoot);
+    }
+    c.x_category(x, kShort[i]);
+    fmt::format_to(std::back_inserter(rows), "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
+                   region_name(r.region), cell(r.kbar_asymmetry, r.region),
+                   cell(r.cbar_asymmetry, r.region));
+  }
+  const std::array<std::pair<std::string_view, std::string_view>, 2> legend = {
+      {{kLeftFoot, "kbar"}, {kRightFoot, "cbar"}}};
+  c.legend(legend);
+  out += c.finish();
+  fmt::format_to(
+      std::back_inserter(out),
+      "<p class=\"note\">How much higher each region's kbar and cbar are under the right foot than "
+      "under the left, at the same time of the walk (a drift both feet share is taken out). The "
+      "standard error holds the steps' scatter and what the pair of insoles alone makes of the "
+      "same tissue (<code>[asymmetry]</code> of the config): a difference between the two "
+      "insoles reads as one of the tissue. Bold: 3 standard errors or more, outside the toes, "
+      "whose one to three active cells scatter beyond their standard errors.</p><table><tr>"
+      "<th>region</th><th>kbar, right vs left (%)</th><th>cbar, right vs left (%)</th></tr>{}"
+      "</table></section>",
+      rows);
+  return out;
+}
+
 std::string step_table(std::span<const StepRow> steps) {
   std::string out =
       "<section id=\"steps\"><h2>Steps</h2><table><tr><th>foot</th><th>step</th><th>heel strike "
@@ -644,10 +710,11 @@ std::string render_report_html(const ReportInput& in) {
   for (Region region : kRegions) {
     fmt::format_to(std::back_inserter(out), " <a href=\"#{0}\">{0}</a>", region_name(region));
   }
-  out += " &middot; <a href=\"#steps\">steps</a>";
+  out += " &middot; <a href=\"#feet\">left against right</a> &middot; <a href=\"#steps\">steps</a>";
   if (in.extended != nullptr) out += " &middot; <a href=\"#effects\">effects</a>";
   out += "</p>";
   if (in.extended != nullptr) out += effects_section(*in.extended);
+  out += feet_section(*in.session);
   for (const RegionSessionAnalysis& r : in.session->regions) out += region_section(in, r);
   out += step_table(in.steps);
   out += "</body></html>\n";

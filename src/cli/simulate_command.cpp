@@ -258,6 +258,11 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "0 keeps the tissue")
       ->check(number_in(-20.0, 20.0))
       ->capture_default_str();
+  sub->add_option("--tissue-asymmetry", args->options.tissue_asymmetry_pct,
+                  "How much higher the right foot's kbar and cbar are than the left's, %; 0 "
+                  "keeps the feet alike")
+      ->check(number_in(-50.0, 50.0))
+      ->capture_default_str();
   sub->add_option("--placement-sd", args->options.placement_sd_mm,
                   "Step-to-step SD of where the foot lands on the insole, mm along each axis; 0 "
                   "puts every footprint on its region's centre")

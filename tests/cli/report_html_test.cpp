@@ -279,6 +279,61 @@ TEST(ReportHtml, DrawsTheTrendOverTheSessionWhereThereIsOne) {
   EXPECT_FALSE(has(svgs[8], "stroke=\"#d62728\"")) << "the cbar chart has no trend here";
 }
 
+// The feet are compared in one chart before the regions: each region's kbar and cbar as a marker
+// with a bar of two standard errors either side, above zero where the right foot's is higher, and
+// in a table that bolds what reaches 3 standard errors outside the toes. Without any comparison
+// there is no chart, only why.
+TEST(ReportHtml, ComparesTheFeetRegionByRegion) {
+  Fixture f;
+  const std::string without = render_report_html(f.input());
+  EXPECT_TRUE(has(without,
+                  "<section id=\"feet\"><h2>Left against right</h2><p>Not compared: no "
+                  "region has 3 steps of each foot"))
+      << without;
+  FootAsymmetry stiffer;
+  stiffer.left_steps = 40;
+  stiffer.right_steps = 41;
+  stiffer.ln_ratio = std::log(1.1);
+  stiffer.se_ln_ratio = 0.01;
+  stiffer.pct = 10.0;
+  stiffer.se_pct = 1.1;
+  f.session.regions[index_of(Region::Heel)].kbar_asymmetry = stiffer;
+  FootAsymmetry unclear = stiffer;
+  unclear.ln_ratio = std::log(0.96);
+  unclear.se_ln_ratio = 0.05;
+  unclear.pct = -4.0;
+  unclear.se_pct = 4.8;
+  f.session.regions[index_of(Region::Met3_5)].cbar_asymmetry = unclear;
+  f.session.regions[index_of(Region::Toe1)].kbar_asymmetry = stiffer;
+  const std::string html = render_report_html(f.input());
+  const auto begin = html.find("<section id=\"feet\">");
+  ASSERT_NE(begin, std::string::npos);
+  EXPECT_LT(begin, html.find("<section id=\"heel\">"));
+  const std::string section = html.substr(begin, html.find("</section>", begin) - begin);
+  const std::vector<std::string> svgs = charts(section);
+  ASSERT_EQ(svgs.size(), 1u);
+  EXPECT_TRUE(has(svgs[0], "Right foot against left")) << svgs[0];
+  EXPECT_EQ(count(svgs[0], "width=\"8\" height=\"8\""), 3u)
+      << "a marker for the heel's and toe1's kbar and met3_5's cbar";
+  // The heel's marker (the first drawn) above the zero line, met3_5's (the second) below it.
+  const auto zero = polyline_points(svgs[0], "#222222");
+  ASSERT_EQ(zero.size(), 2u);
+  std::vector<double> marker_ys;
+  for (auto at = svgs[0].find("width=\"8\" height=\"8\""); at != std::string::npos;
+       at = svgs[0].find("width=\"8\" height=\"8\"", at + 1)) {
+    const auto y = svgs[0].rfind(" y=\"", at);
+    marker_ys.push_back(std::stod(svgs[0].substr(y + 4)) + 4.0);
+  }
+  ASSERT_EQ(marker_ys.size(), 3u);
+  EXPECT_LT(marker_ys[0], zero[0].second);
+  EXPECT_GT(marker_ys[1], zero[0].second);
+  EXPECT_TRUE(has(section, "<tr><td>heel</td><td><b>+10.0 &plusmn; 1.1 (z +9.5)</b></td>"))
+      << section;
+  EXPECT_TRUE(has(section, "<tr><td>met3_5</td><td>&ndash;</td><td>-4.0 &plusmn; 4.8 (z -0.8)"))
+      << section;
+  EXPECT_TRUE(has(section, "<tr><td>toe1</td><td>+10.0 &plusmn; 1.1 (z +9.5)</td>")) << section;
+}
+
 /// The x of every legend's box, in the order the charts are drawn.
 std::vector<double> legend_xs(const std::string& html) {
   std::vector<double> xs;
@@ -351,7 +406,7 @@ TEST(ReportHtml, LinksOnlyWithinThePageAndNeverPrintsNanOrInf) {
     EXPECT_TRUE(has(html, "id=\"" + target.substr(1) + "\"")) << target;
     ++links;
   }
-  EXPECT_EQ(links, kRegionCount + 1);
+  EXPECT_EQ(links, kRegionCount + 2);  // the regions, left against right, the steps
   for (std::string_view loads : {"<script", "<link", "<img", "src=", "url(", "@import"}) {
     EXPECT_FALSE(has(html, loads)) << loads;
   }
