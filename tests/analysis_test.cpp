@@ -273,6 +273,29 @@ TEST(AnalyseSession, FitsEachRegionOverAllStepsAndSummarisesTheSteps) {
   EXPECT_EQ(s.nrmse_total_pct.count, static_cast<int>(steps.size()));
 }
 
+struct TissueCourse {
+  double drift_pct_per_min = 0.0;
+  double asymmetry_pct = 0.0;
+};
+
+// A minute's walk of size 41-42 (seed 7) with the tissue's course asked for, analysed in `dir`.
+SessionAnalysis analyse_minutes_walk(const Config& config, const std::filesystem::path& dir,
+                                     TissueCourse course) {
+  SimulationOptions options;
+  options.size = InsoleSize::S41_42;
+  options.duration_s = 60.0;
+  options.seed = 7;
+  options.tissue_drift_pct_per_min = course.drift_pct_per_min;
+  options.tissue_asymmetry_pct = course.asymmetry_pct;
+  simulate_session(config, options, dir / "s.csv", dir / "s.truth.json");
+  const InsoleLayout layout(config.insole(InsoleSize::S41_42), config.sensor);
+  std::vector<StepAnalysis> steps;
+  segment_session(dir / "s.csv", config, [&](Step&& step) {
+    if (step.status == StepStatus::Ok) steps.push_back(analyse_step(step, layout, config, {}));
+  });
+  return analyse_session(steps, config, InsoleSize::S41_42, {});
+}
+
 // A minute's walk whose tissue softens by 10 % a minute (simulate --tissue-drift), and the same
 // walk without: the heel's per-step kbar trend finds the drift within three standard errors of
 // the simulator's and calls it one (|z| >= 3), and finds none without it. Steps that hold a
@@ -280,23 +303,9 @@ TEST(AnalyseSession, FitsEachRegionOverAllStepsAndSummarisesTheSteps) {
 // has fewer steps or none.
 TEST(AnalyseSession, FindsATissueDriftAndNoneWithoutOne) {
   const Config config = load_config(default_config_path());
-  const InsoleLayout layout(config.insole(InsoleSize::S41_42), config.sensor);
   const auto dir = test::scratch_dir("analysis-drift");
-  const auto analyse = [&](double drift_pct_per_min) {
-    SimulationOptions options;
-    options.size = InsoleSize::S41_42;
-    options.duration_s = 60.0;
-    options.seed = 7;
-    options.tissue_drift_pct_per_min = drift_pct_per_min;
-    simulate_session(config, options, dir / "s.csv", dir / "s.truth.json");
-    std::vector<StepAnalysis> steps;
-    segment_session(dir / "s.csv", config, [&](Step&& step) {
-      if (step.status == StepStatus::Ok) steps.push_back(analyse_step(step, layout, config, {}));
-    });
-    return analyse_session(steps, config, InsoleSize::S41_42, {});
-  };
-  const SessionAnalysis drifting = analyse(-10.0);
-  const SessionAnalysis steady = analyse(0.0);
+  const SessionAnalysis drifting = analyse_minutes_walk(config, dir, {.drift_pct_per_min = -10.0});
+  const SessionAnalysis steady = analyse_minutes_walk(config, dir, {});
   const RegionSessionAnalysis& heel = drifting.regions[index_of(Region::Heel)];
   ASSERT_TRUE(heel.kbar_trend && heel.cbar_trend);
   std::printf("heel kbar %+.2f +- %.2f %% per minute (truth -10), cbar %+.2f +- %.2f\n",
@@ -332,24 +341,10 @@ TEST(AnalyseSession, FindsATissueDriftAndNoneWithoutOne) {
 // footprint, so toe2 (on its contact ellipse) has no cbar comparison.
 TEST(AnalyseSession, FindsADifferenceBetweenTheFeetAndNoneWithoutOne) {
   const Config config = load_config(default_config_path());
-  const InsoleLayout layout(config.insole(InsoleSize::S41_42), config.sensor);
   const auto dir = test::scratch_dir("analysis-asymmetry");
-  const auto analyse = [&](double asymmetry_pct, double drift_pct_per_min) {
-    SimulationOptions options;
-    options.size = InsoleSize::S41_42;
-    options.duration_s = 60.0;
-    options.seed = 7;
-    options.tissue_asymmetry_pct = asymmetry_pct;
-    options.tissue_drift_pct_per_min = drift_pct_per_min;
-    simulate_session(config, options, dir / "s.csv", dir / "s.truth.json");
-    std::vector<StepAnalysis> steps;
-    segment_session(dir / "s.csv", config, [&](Step&& step) {
-      if (step.status == StepStatus::Ok) steps.push_back(analyse_step(step, layout, config, {}));
-    });
-    return analyse_session(steps, config, InsoleSize::S41_42, {});
-  };
-  const SessionAnalysis uneven = analyse(10.0, -5.0);
-  const SessionAnalysis even = analyse(0.0, 0.0);
+  const SessionAnalysis uneven =
+      analyse_minutes_walk(config, dir, {.drift_pct_per_min = -5.0, .asymmetry_pct = 10.0});
+  const SessionAnalysis even = analyse_minutes_walk(config, dir, {});
   const double truth = std::log(1.1);
   for (Region region : {Region::Heel, Region::MidfootPosterior, Region::MidfootAnterior,
                         Region::Met1_2, Region::Met3_5}) {
