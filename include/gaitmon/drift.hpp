@@ -1,12 +1,13 @@
 // A tissue parameter's trend over a session: does the heel stiffen or soften as the walk goes on
 // (warming, fatigue, a sensor warming), or do the steps only scatter?
 //
-// Weighted least squares of each step's ln value on its heel-strike time. A step's fit gives the
-// variance of its ln value (material_estimate), but those variances match how the steps scatter
-// only up to a factor (README, "How honest the standard errors are": about right for ln kbar,
-// about twice too large for ln cbar), and the tissue may also vary from step to step. So they are
-// relative weights only: the slope's standard error takes its scale from the residuals about the
-// line, chi^2 / (N - 2), as ordinary weighted regression does. An error shared by every step (the
+// Weighted least squares of each step's ln value on its heel-strike time (and, given the feet, a
+// level for each foot, the model asymmetry.hpp shares). A step's fit gives the variance of its ln
+// value (material_estimate), but those variances match how the steps scatter only up to a factor
+// (README, "How honest the standard errors are": about right for ln kbar, about twice too large for
+// ln cbar), and the tissue may also vary from step to step. So they are relative weights only: the
+// slope's standard error takes its scale from the residuals about the line, chi^2 over the degrees
+// of freedom left, as ordinary weighted regression does. An error shared by every step (the
 // measurement chain's) moves the line, not its slope.
 #pragma once
 

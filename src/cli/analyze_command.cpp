@@ -188,7 +188,8 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
 }
 
 /// How many standard errors a trend or a difference between the feet must reach for the summary
-/// to name it: with ~20 of each per session, 3 keeps a chance one from showing in most sessions.
+/// to name it: with about ten of each per session outside the toes, 3 keeps a chance one from
+/// showing in most sessions.
 constexpr double kNamedZ = 3.0;
 
 /// How many of the region's steps were fitted Ok with the parameter at a bound of its range.
@@ -360,7 +361,8 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
           {"cbar", trend_json(r.cbar_trend)},
           {"note",
            fmt::format("change per minute over the session, compounded, from a weighted "
-                       "regression of each step's ln kbar and ln cbar on its heel strike (null: "
+                       "regression of each step's ln kbar and ln cbar on its heel strike, each "
+                       "foot at its own level (null: "
                        "fewer than {} steps off the bounds, or spanning less than {:.0f} s); z is "
                        "the slope of the log over its standard error, and beyond about 3 a drift "
                        "(include/gaitmon/drift.hpp)",
