@@ -24,12 +24,6 @@
 #include "gaitmon/simulator.hpp"
 #include "test_support.hpp"
 
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-constexpr bool kSanitized = true;
-#else
-constexpr bool kSanitized = false;
-#endif
-
 namespace gaitmon {
 namespace {
 
@@ -88,7 +82,7 @@ DiscrepancyResult run(const SessionCase& c, const std::filesystem::path& dir) {
 }
 
 TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "18 simulated sessions with per-step Ceres fits take too long under the "
                     "sanitizers; the workflow's code runs under them in discrepancy_test";
   }
@@ -397,6 +391,11 @@ TEST(DiscrepancySessions, SameSessionGivesIdenticalDiscrepancyJson) {
 }
 
 TEST(DiscrepancySessions, NamesTheCreepOfAnInsoleFromItsZeros) {
+  if (test::kSanitized) {
+    GTEST_SKIP()
+        << "a simulated session with per-step Ceres fits takes too long under the sanitizers; "
+           "the zero channel runs under them in discrepancy_test";
+  }
   // Creep of gain 0.3 and tau 2 s: the zeroing takes it out of the force, but the zero levels
   // rise by 3.7 % (left) and 6.5 % (right) of the peak when measured, and the zero channel names
   // it.
@@ -444,7 +443,7 @@ TEST(DiscrepancySessions, NamesTheCreepOfAnInsoleFromItsZeros) {
 // 3.0 and 0.6 % since). Crosstalk gains 4.95 % in seed 201 since stop 42 (2.6 % before), under
 // the 5 %, and the readings there show no crosstalk.
 TEST(DiscrepancySessions, NothingIsNamedInTheSmallestSizeWithoutAnEffect) {
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "two simulated sessions with per-step Ceres fits take too long under the "
                     "sanitizers; the workflow's code runs under them in discrepancy_test";
   }
@@ -473,7 +472,7 @@ TEST(DiscrepancySessions, NothingIsNamedInTheSmallestSizeWithoutAnEffect) {
 // contact: hysteresis was named in three of these four sessions (strength 0.10-0.62). At 25-30 kg
 // the heel's frames before its first footprint were taken for an impact.
 TEST(DiscrepancySessions, NothingIsNamedForALightWalkerWithoutAnEffect) {
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "six simulated sessions with per-step Ceres fits take too long under the "
                     "sanitizers; the workflow's code runs under them in discrepancy_test";
   }
@@ -491,6 +490,11 @@ TEST(DiscrepancySessions, NothingIsNamedForALightWalkerWithoutAnEffect) {
 }
 
 TEST(DiscrepancySessions, RelaxationWhoseStrengthAndTauTradeOffIsRefinedToItsMinimum) {
+  if (test::kSanitized) {
+    GTEST_SKIP()
+        << "a simulated session with per-step Ceres fits takes too long under the sanitizers; "
+           "the relaxation candidate's search runs under them in discrepancy_test";
+  }
   // Strength and tau trade off along a valley of the deviance. The coordinate search used
   // before stepped along the axes only, by half the grid's first spacing (15 ms for tau), and
   // stopped off the valley's floor: the curvature there was not positive definite, no standard
@@ -602,7 +606,7 @@ TEST(DiscrepancySessions, RelaxationLowersThePressureAndSoThePrecisionOfTheFootp
 // the matrix's crosstalk session of size 41-42, with its count of such cell-frames taken under
 // the 1000 the share needs, names no crosstalk and says why.
 TEST(DiscrepancySessions, CrosstalkIsNotNamedWhereTooFewCellsCanShowIt) {
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "a simulated session with per-step Ceres fits takes too long under the "
                     "sanitizers; the candidate's code runs under them in discrepancy_effects_test";
   }
@@ -627,7 +631,7 @@ TEST(DiscrepancySessions, CrosstalkIsNotNamedWhereTooFewCellsCanShowIt) {
 // and fits the coupling of the matrix's 41-42 crosstalk session: 0.046 there, against the
 // simulator's 0.06 (the matrix holds every size to a quarter of its coupling).
 TEST(DiscrepancySessions, AnalyzeFitsTheCouplingOfACrosstalkSession) {
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "a simulated session with per-step Ceres fits takes too long under the "
                     "sanitizers; the candidate's code runs under them in discrepancy_effects_test";
   }
@@ -688,7 +692,7 @@ std::string fitted_values(const ExtendedModelFit& fit) {
 // Refitted with the second in place, seeing the contact as crosstalk corrects it, they come out
 // at 0.21 and 85 bits (measured).
 TEST(DiscrepancySessions, TwoEffectsFittedTogetherRecoverBoth) {
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "two simulated sessions with per-step Ceres fits take too long under the "
                     "sanitizers; the candidates' code runs under them in discrepancy_effects_test";
   }
@@ -719,6 +723,11 @@ TEST(DiscrepancySessions, TwoEffectsFittedTogetherRecoverBoth) {
 // the session, ends at its bounds without a standard error. The refit of the others must not
 // wait for it to have one: when it did, the ceiling stayed at 104 bits for 85 (measured).
 TEST(DiscrepancySessions, AnEffectTheDataDoNotShowDoesNotHoldBackTheRefitOfTheOthers) {
+  if (test::kSanitized) {
+    GTEST_SKIP()
+        << "three effects refitted on a simulated session take too long under the sanitizers; "
+           "the refit with a second effect runs under them in discrepancy_test";
+  }
   const auto dir = test::scratch_dir("discrepancy-absent-effect");
   const std::vector<std::string> effects{"sensor_saturation", "crosstalk", "sensor_creep"};
   const ExtendedModelFit fit = fit_extended_model(
@@ -743,7 +752,7 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   // residual was on the corrected force's scale), but the readings show none: the cells around
   // a patch read nothing. What is named is the most likely candidate that passes: creep, from
   // the zeros, as on the project's two other real recordings.
-  if (kSanitized) {
+  if (test::kSanitized) {
     GTEST_SKIP() << "the whole workflow on a real recording takes six minutes under TSan; "
                     "its code runs under the sanitizers in discrepancy_test";
   }

@@ -178,6 +178,10 @@ class CleanSeries : public ::testing::TestWithParam<NamedCleanCase> {};
 
 TEST_P(CleanSeries, NamesTheEffectAndClosesTheHeldOutGap) {
   const auto& [expected, c] = GetParam();
+  if (test::kSanitized && expected == "sensor_saturation") {
+    GTEST_SKIP() << "the saturated series takes up to a minute under the sanitizers; the "
+                    "saturation candidate is fitted in every other series of this suite under them";
+  }
   std::vector<double> progress;
   const DiscrepancyResult r =
       find_discrepancy(clean_session(c, 14, 7), {}, [&](double f) { progress.push_back(f); });

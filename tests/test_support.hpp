@@ -10,6 +10,14 @@
 
 namespace gaitmon::test {
 
+/// Built with ASan or TSan: the longest numerical tests skip there, saying which test runs their
+/// code under the sanitizers.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+inline constexpr bool kSanitized = true;
+#else
+inline constexpr bool kSanitized = false;
+#endif
+
 /// The source tree (for config/ and replay/).
 std::filesystem::path source_dir();
 /// The project's shared/ folder beside the checkout (seed data, real recordings).
