@@ -592,23 +592,33 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
   table.finish();
 }
 
-void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry) {
-  for (const auto& [key, sds] : {std::pair{"kbar_pair_sd_pct", &asymmetry.kbar_pair_sd_pct},
-                                 {"cbar_pair_sd_pct", &asymmetry.cbar_pair_sd_pct}}) {
-    TableReader regions = table.table(key);
-    refuse_unknown_names(
-        regions, [](std::string_view name) { return parse_region(name).has_value(); },
-        joined_region_names());
-    for (Region region : kRegions) {
-      const std::string name(region_name(region));
-      const double sd = regions.number(name);
-      if (!(sd >= 0.0 && sd <= 100.0)) {
-        regions.fail(name, fmt::format("must be in [0, 100], got {}", sd));
-      }
-      (*sds)[index_of(region)] = sd;
+// A table of one number per region, each in [0, max].
+void read_per_region(TableReader regions, std::array<double, kRegionCount>& values, double max) {
+  refuse_unknown_names(
+      regions, [](std::string_view name) { return parse_region(name).has_value(); },
+      joined_region_names());
+  for (Region region : kRegions) {
+    const std::string name(region_name(region));
+    const double value = regions.number(name);
+    if (!(value >= 0.0 && value <= max)) {
+      regions.fail(name, fmt::format("must be in [0, {}], got {}", max, value));
     }
-    regions.finish();
+    values[index_of(region)] = value;
   }
+  regions.finish();
+}
+
+void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry) {
+  read_per_region(table.table("kbar_pair_sd_pct"), asymmetry.kbar_pair_sd_pct, 100.0);
+  read_per_region(table.table("cbar_pair_sd_pct"), asymmetry.cbar_pair_sd_pct, 100.0);
+  table.finish();
+}
+
+void read_pooling(TableReader table, PoolingSettings& pooling) {
+  read_per_region(table.table("kbar_chain_sd_pct"), pooling.kbar_chain_sd_pct, 100.0);
+  read_per_region(table.table("n_chain_sd"), pooling.n_chain_sd, 1.0);
+  read_per_region(table.table("cbar_chain_sd_pct"), pooling.cbar_chain_sd_pct, 100.0);
+  read_per_region(table.table("m_chain_sd"), pooling.m_chain_sd, 1.0);
   table.finish();
 }
 
@@ -767,6 +777,7 @@ Config load_config(const fs::path& main_file) {
   read_fit(root.table("fit"), config.fit_bounds);
   read_model(root.table("model"), file, config.model);
   read_asymmetry(root.table("asymmetry"), config.asymmetry);
+  read_pooling(root.table("pooling"), config.pooling);
   read_wire(root.table("wire"), config.wire);
   read_serial(root.table("serial"), config.serial);
   read_ring(root.table("ring"), config.ring);

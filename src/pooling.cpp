@@ -119,6 +119,7 @@ PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const Materi
   }
   out.pooled = true;
   out.mean = from_eigen(mu);
+  out.mean_covariance = from_eigen(Mat(0.5 * (mu_covariance + mu_covariance.transpose())));
   out.between_step = from_eigen(T);
   return out;
 }
@@ -136,6 +137,17 @@ std::optional<MaterialEstimate> material_estimate(const RegionFit& fit) {
              fit.m.value};
   e.covariance = *fit.material_covariance;
   return e;
+}
+
+MaterialEstimate with_shared_error(MaterialEstimate estimate, const MaterialVector& sd) {
+  for (std::size_t i = 0; i < sd.size(); ++i) {
+    if (!(std::isfinite(sd[i]) && sd[i] >= 0.0)) {
+      throw std::invalid_argument("with_shared_error: SD " + std::to_string(i) +
+                                  " must be finite and not negative, got " + std::to_string(sd[i]));
+    }
+    estimate.covariance[i][i] += sd[i] * sd[i];
+  }
+  return estimate;
 }
 
 MaterialParams material_params(const MaterialEstimate& estimate) {

@@ -840,13 +840,39 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
       {"AsymmetryNotANumber", kMain,
        replace("kbar_pair_sd_pct", "met3_5 = 1.5", "met3_5 = \"1.5\""),
        "asymmetry.kbar_pair_sd_pct.met3_5", "expected a number"},
-      {"AsymmetryMissing", kMain, erase_from_to("[asymmetry]", "[wire]"), "asymmetry", "missing"},
+      {"AsymmetryMissing", kMain, erase_from_to("[asymmetry]", "[pooling]"), "asymmetry",
+       "missing"},
   };
   expect_refusals(cases);
   const fs::path dir = copy_config("AsymmetryTrusted");
   edit_file(dir / kMain,
             replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = 0"));
   EXPECT_EQ(load_config(dir / kMain).asymmetry.kbar_pair_sd_pct[0], 0.0);
+}
+
+// [pooling]: every region's chain SD for kbar, n, cbar and m, as the shipped file documents them;
+// kbar's and cbar's in [0, 100] (per cent), n's and m's in [0, 1].
+TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
+  const PoolingSettings p = load_config(shipped_config()).pooling;
+  EXPECT_EQ(p.kbar_chain_sd_pct,
+            (std::array<double, kRegionCount>{4.0, 6.0, 6.5, 5.5, 4.5, 9.5, 9.5, 10.0}));
+  EXPECT_EQ(p.n_chain_sd,
+            (std::array<double, kRegionCount>{0.02, 0.025, 0.025, 0.04, 0.03, 0.05, 0.05, 0.05}));
+  EXPECT_EQ(p.cbar_chain_sd_pct,
+            (std::array<double, kRegionCount>{13.5, 0.0, 15.0, 12.0, 13.0, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.m_chain_sd,
+            (std::array<double, kRegionCount>{0.06, 0.0, 0.04, 0.07, 0.08, 0.0, 0.0, 0.0}));
+  const std::vector<Refusal> cases = {
+      {"PoolingNAboveOne", kMain, replace("n_chain_sd = { heel = 0.02", "n_chain_sd = { heel = 2"),
+       "pooling.n_chain_sd.heel", "must be in [0, 1], got 2"},
+      {"PoolingKbarNegative", kMain, replace("kbar_chain_sd_pct", "met1_2 = 5.5", "met1_2 = -5"),
+       "pooling.kbar_chain_sd_pct.met1_2", "must be in [0, 100], got -5"},
+      {"PoolingRegionMissing", kMain, replace("m_chain_sd", ", toes3_5 = 0.0", ""),
+       "pooling.m_chain_sd.toes3_5", "missing"},
+      {"PoolingTableMissing", kMain, erase_from_to("cbar_chain_sd_pct", "m_chain_sd"),
+       "pooling.cbar_chain_sd_pct", "missing"},
+  };
+  expect_refusals(cases);
 }
 
 TEST(Config, LogLevelDefaultsToInfoAndIsRead) {

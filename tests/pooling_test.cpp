@@ -45,6 +45,7 @@ MaterialCovariance diagonal(double v0, double v1, double v2, double v3) {
 //   parameter 3: no scatter, T = 0.
 // The mean is the plain average (equal weights). Posterior variance T - T^2/(T+S) plus
 // (1 - shrink)^2 (T + S)/4 for the mean's uncertainty: 0.008 + 0.0005 = 0.0085 for parameter 0.
+// The mean's own covariance is (T + S) / 4: 0.0125, 0.0025, 0.005 and 0.0025.
 TEST(Pooling, MatchesAHandWorkedCase) {
   const double a0 = std::sqrt(0.0375);
   const double a1 = std::sqrt(0.00375);
@@ -65,6 +66,15 @@ TEST(Pooling, MatchesAHandWorkedCase) {
   EXPECT_NEAR(p.between_step[2][2], 0.01, 1e-12);
   EXPECT_NEAR(p.between_step[3][3], 0.0, 1e-12);
   EXPECT_NEAR(p.between_step[0][2], 0.0, 1e-12);
+  const double mean_variance[4] = {0.0125, 0.0025, 0.005, 0.0025};
+  for (std::size_t k = 0; k < 4; ++k) {
+    EXPECT_NEAR(p.mean_covariance[k][k], mean_variance[k], 1e-12) << k;
+    for (std::size_t j = 0; j < 4; ++j) {
+      if (j != k) {
+        EXPECT_NEAR(p.mean_covariance[k][j], 0.0, 1e-12) << k << "," << j;
+      }
+    }
+  }
   for (std::size_t i = 0; i < 4; ++i) {
     const MaterialVector& v = p.steps[i].value;
     EXPECT_NEAR(v[0], centre[0] + 0.8 * a0 * pattern[0][i], 1e-10) << i;
@@ -120,6 +130,26 @@ TEST(Pooling, RecoversTheBetweenStepSpreadAndBeatsTheRawEstimates) {
     }
     EXPECT_LT(pooled, 0.8 * raw) << k;
   }
+}
+
+// The chain's shared error adds its variance to the diagonal and leaves the value and the
+// correlations' covariances alone; kbar's SE on the natural scale follows (delta method).
+TEST(Pooling, ASharedErrorAddsItsVarianceToTheDiagonal) {
+  MaterialEstimate e;
+  e.value = {std::log(0.2), 0.3, std::log(0.01), 1.1};
+  e.covariance = diagonal(0.0009, 0.0004, 0.01, 0.0025);
+  e.covariance[0][1] = e.covariance[1][0] = 0.0003;
+  const MaterialEstimate with = with_shared_error(e, {0.04, 0.03, 0.0, 0.05});
+  EXPECT_EQ(with.value, e.value);
+  EXPECT_NEAR(with.covariance[0][0], 0.0009 + 0.0016, 1e-15);
+  EXPECT_NEAR(with.covariance[1][1], 0.0004 + 0.0009, 1e-15);
+  EXPECT_EQ(with.covariance[2][2], 0.01);
+  EXPECT_NEAR(with.covariance[3][3], 0.0025 + 0.0025, 1e-15);
+  EXPECT_EQ(with.covariance[0][1], 0.0003);
+  EXPECT_NEAR(material_params(with).kbar_n_per_mm3.se, 0.2 * 0.05, 1e-12);  // sqrt(0.0025)
+  EXPECT_THROW(with_shared_error(e, {0.04, -0.01, 0.0, 0.0}), std::invalid_argument);
+  EXPECT_THROW(with_shared_error(e, {std::numeric_limits<double>::infinity(), 0.0, 0.0, 0.0}),
+               std::invalid_argument);
 }
 
 TEST(Pooling, FewStepsOrAMeanOutsideTheBoundsAreNotPooled) {

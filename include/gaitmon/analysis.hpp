@@ -135,6 +135,12 @@ struct RegionSessionAnalysis {
   /// Aligned with analyse_session's `steps`: each step's pooled kbar, n, cbar, m, or nothing
   /// where the step was not pooled (no contact, a failed fit, or too few steps to pool).
   std::vector<std::optional<MaterialParams>> pooled_per_step;
+  /// [pooling]'s SDs of the error every step of this region shares, on the pooled scale (ln kbar,
+  /// n, ln cbar, m).
+  MaterialVector chain_sd{};
+  /// The pooled mean, its covariance mu's (the steps' scatter) with chain_sd added: the region's
+  /// tissue over the session with the chain's shared error. Nothing where not pooled.
+  std::optional<MaterialEstimate> pooled_mean;
   /// The per-step kbar's and cbar's trends over the session (drift.hpp), over the steps whose
   /// four parameters the data determine and which left that parameter off its bounds, and for cbar
   /// were fitted on a footprint (the contact ellipse's area does not determine the damping);

@@ -104,6 +104,17 @@ struct AsymmetrySettings {
   std::array<double, kRegionCount> cbar_pair_sd_pct{};
 };
 
+/// [pooling]: the error the measurement chain gives every step of a region alike, per region
+/// (indexed by index_of(Region)), as the SD of the pooled mean's error on the scale the fit
+/// pools on: 100 ln for kbar and cbar, as it is for n and m. analyse_session adds it to the
+/// pooled mean's standard error, which otherwise holds only how the steps scatter.
+struct PoolingSettings {
+  std::array<double, kRegionCount> kbar_chain_sd_pct{};
+  std::array<double, kRegionCount> n_chain_sd{};
+  std::array<double, kRegionCount> cbar_chain_sd_pct{};
+  std::array<double, kRegionCount> m_chain_sd{};
+};
+
 /// [ring]: the lock-free ring between the driver thread and the detector thread.
 struct RingSettings {
   std::size_t capacity_frames = 4096;  ///< 20 s of two feet at 100 Hz
@@ -153,6 +164,7 @@ struct Config {
   FitBounds fit_bounds;         ///< [fit] of the main file: the tissue fit's parameter bounds
   ModelSettings model;          ///< [model] of the main file
   AsymmetrySettings asymmetry;  ///< [asymmetry] of the main file
+  PoolingSettings pooling;      ///< [pooling] of the main file
   WireSettings wire;            ///< [wire]: the insole frame layout
   SerialSettings serial;        ///< [serial]: the serial driver
   RingSettings ring;

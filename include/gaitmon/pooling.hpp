@@ -53,6 +53,10 @@ struct PooledEstimates {
   MaterialCovariance between_step{};    ///< T
   int iterations = 0;                   ///< of the mu-T fixed point
   std::vector<MaterialEstimate> steps;  ///< the posterior per input, in input order
+  /// mu's covariance: the steps' own errors and T together, so the region's tissue over the
+  /// session, not any one step's. It does not hold the error every step shares (README, "How
+  /// honest the standard errors are"): analyse_session adds [pooling]'s chain SDs to it.
+  MaterialCovariance mean_covariance{};
 };
 
 /// The pooled posteriors of `steps`. Steps with a parameter at a fit bound take part with the
@@ -66,6 +70,12 @@ PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const Materi
 /// A fit's free material parameters and their covariance, if it has them: an Ok fit in the
 /// default (Identifiable, declared scale) mode whose four parameters the data determine.
 std::optional<MaterialEstimate> material_estimate(const RegionFit& fit);
+
+/// `estimate` with sd[i]^2 added to its covariance's diagonal: an error of SD sd[i] in each
+/// parameter that every step shares (the measurement chain's, config [pooling]). The errors are
+/// taken as independent of each other, which the standard errors do not depend on. Throws
+/// std::invalid_argument for a negative or non-finite SD.
+MaterialEstimate with_shared_error(MaterialEstimate estimate, const MaterialVector& sd);
 
 /// kbar, n, cbar, m and their standard errors (delta method for kbar and cbar) of an estimate.
 struct MaterialParams {

@@ -222,24 +222,40 @@ nlohmann::json fit_json(const RegionFit& f) {
           {"undetermined", f.undetermined}};
 }
 
-nlohmann::json pooling_json(const PooledEstimates& p) {
-  if (!p.pooled) {
+// kbar, n, cbar and m's values or standard errors.
+nlohmann::json material_json(const MaterialParams& p, double Estimate::*field) {
+  return {{"kbar_n_per_mm3", p.kbar_n_per_mm3.*field},
+          {"n", p.n.*field},
+          {"cbar_ns_per_mm3", p.cbar_ns_per_mm3.*field},
+          {"m", p.m.*field}};
+}
+
+nlohmann::json pooling_json(const RegionSessionAnalysis& r) {
+  const PooledEstimates& p = r.pooling;
+  if (!p.pooled || !r.pooled_mean) {
     return {{"pooled", false}, {"steps", p.steps.size()}, {"note", p.not_pooled}};
   }
-  const MaterialParams mean = material_params({p.mean, {}});
+  const MaterialParams steps = material_params({p.mean, p.mean_covariance});
+  const MaterialParams mean = material_params(*r.pooled_mean);
   const auto sd = [&](std::size_t i) { return std::sqrt(p.between_step[i][i]); };
   return {{"pooled", p.pooled},
           {"steps", p.steps.size()},
           {"iterations", p.iterations},
-          {"mean",
-           {{"kbar_n_per_mm3", mean.kbar_n_per_mm3.value},
-            {"n", mean.n.value},
-            {"cbar_ns_per_mm3", mean.cbar_ns_per_mm3.value},
-            {"m", mean.m.value}}},
+          {"mean", material_json(mean, &Estimate::value)},
+          {"se", material_json(mean, &Estimate::se)},
+          {"se_steps", material_json(steps, &Estimate::se)},
+          {"chain_sd",
+           {{"ln_kbar", r.chain_sd[0]},
+            {"n", r.chain_sd[1]},
+            {"ln_cbar", r.chain_sd[2]},
+            {"m", r.chain_sd[3]}}},
           {"between_step_sd", {{"ln_kbar", sd(0)}, {"n", sd(1)}, {"ln_cbar", sd(2)}, {"m", sd(3)}}},
           {"note",
            "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
-           "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp)"}};
+           "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp). se is the "
+           "mean's standard error with the measurement chain's shared error, chain_sd from "
+           "[pooling] of the config (ln kbar and ln cbar: relative); se_steps is the steps' "
+           "scatter alone"}};
 }
 
 nlohmann::json trend_json(const std::optional<LogTrend>& t) {
@@ -340,7 +356,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
         {"aspect_a_over_b", r.aspect},
         {"declared", nlohmann::json(r.declared)},
         {"session_fit", fit_json(r.session_fit)},
-        {"pooling", pooling_json(r.pooling)},
+        {"pooling", pooling_json(r)},
         {"across_steps",
          {{"A_mm", spread_json(r.A_mm)},
           {"B_mm", spread_json(r.B_mm)},
@@ -423,6 +439,27 @@ void print_named(const SessionAnalysis& session,
   }
 }
 
+// The pooled means with the standard errors that hold the chain's shared error: what a region's
+// tissue was over the session, where the medians above are what one step gives.
+void print_pooled(const SessionAnalysis& session) {
+  fmt::print(
+      "pooled over the session, +- one standard error with the measurement chain's error "
+      "([pooling] of the config):\n{:<19}{:>18}{:>17}{:>21}{:>17}\n",
+      "region", "kbar N/mm3", "n", "cbar Ns/mm3", "m");
+  for (const RegionSessionAnalysis& r : session.regions) {
+    if (!r.pooled_mean) {
+      fmt::print("{:<19}not pooled: {}\n", region_name(r.region), r.pooling.not_pooled);
+      continue;
+    }
+    const MaterialParams p = material_params(*r.pooled_mean);
+    fmt::print("{:<19}{:>18}{:>17}{:>21}{:>17}\n", region_name(r.region),
+               fmt::format("{:.4f} +- {:.4f}", p.kbar_n_per_mm3.value, p.kbar_n_per_mm3.se),
+               fmt::format("{:.3f} +- {:.3f}", p.n.value, p.n.se),
+               fmt::format("{:.5f} +- {:.5f}", p.cbar_ns_per_mm3.value, p.cbar_ns_per_mm3.se),
+               fmt::format("{:.3f} +- {:.3f}", p.m.value, p.m.se));
+  }
+}
+
 void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
                    const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                    const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
@@ -463,6 +500,7 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
         "* at a bound of its fit range in at least half of the region's steps: the data do not "
         "determine it there (regions.csv: at_bound)\n");
   }
+  print_pooled(session);
   print_named(
       session, &RegionSessionAnalysis::kbar_trend, &RegionSessionAnalysis::cbar_trend,
       [](const LogTrend& t) {

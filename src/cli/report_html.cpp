@@ -432,21 +432,24 @@ std::string num(double v) {
   return fmt::format("{:.4g}", v);
 }
 
-// The pooled mean of one fitted parameter and the between-step SD the pooling found: relative
-// for kbar and cbar, which are pooled as logarithms.
-std::string pooled_cell(const PooledEstimates& pool, int index) {
-  if (index < 0 || !pool.pooled) return "&ndash;";
-  const auto k = static_cast<std::size_t>(index);
-  const double sd = std::sqrt(pool.between_step[k][k]);
+// The pooled mean of one fitted parameter with its standard error (the chain's shared error
+// included) and the between-step SD the pooling found: SD relative for kbar and cbar, which are
+// pooled as logarithms.
+std::string pooled_cell(const RegionSessionAnalysis& r, const ParamView& p) {
+  if (p.pooled < 0 || !r.pooled_mean) return "&ndash;";
+  const auto k = static_cast<std::size_t>(p.pooled);
+  const double sd = std::sqrt(r.pooling.between_step[k][k]);
+  const Estimate e = material_params(*r.pooled_mean).*p.pooled_estimate;
   const bool log_scale = k == 0 || k == 2;
-  return log_scale ? fmt::format("{} ({:.0f} %)", num(std::exp(pool.mean[k])), 100.0 * sd)
-                   : fmt::format("{} ({})", num(pool.mean[k]), num(sd));
+  return fmt::format("{} &plusmn; {} ({})", num(e.value), num(e.se),
+                     log_scale ? fmt::format("{:.0f} %", 100.0 * sd) : num(sd));
 }
 
 std::string param_table(const RegionSessionAnalysis& r, const SeedTissueStats& seed) {
   std::string out = fmt::format(
       "<table><tr><th>parameter</th><th>session fit (SE)</th><th>median across steps "
-      "(IQR)</th><th>pooled mean (between-step SD){}</th><th>Appendix I mean (SD)</th></tr>",
+      "(IQR)</th><th>pooled mean &plusmn; SE with the chain&apos;s error (between-step "
+      "SD){}</th><th>Appendix I mean (SD)</th></tr>",
       r.pooling.pooled ? "" : "<br>not pooled: " + escape(r.pooling.not_pooled));
   for (const ParamView& p : kAll) {
     const Estimate& e = r.session_fit.*p.estimate;
@@ -459,11 +462,11 @@ std::string param_table(const RegionSessionAnalysis& r, const SeedTissueStats& s
       if (e.at_bound) session += " <b>at bound</b>";
     }
     const std::string unit = *p.unit ? fmt::format(" ({})", p.unit) : "";
-    fmt::format_to(
-        std::back_inserter(out),
-        "<tr><td>{}{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} ({})</td></tr>", p.label, unit,
-        session, s.count > 0 ? fmt::format("{} ({})", num(s.median), num(s.iqr())) : "&ndash;",
-        pooled_cell(r.pooling, p.pooled), num(seed.mean.*p.field), num(seed.sd.*p.field));
+    fmt::format_to(std::back_inserter(out),
+                   "<tr><td>{}{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} ({})</td></tr>",
+                   p.label, unit, session,
+                   s.count > 0 ? fmt::format("{} ({})", num(s.median), num(s.iqr())) : "&ndash;",
+                   pooled_cell(r, p), num(seed.mean.*p.field), num(seed.sd.*p.field));
   }
   fmt::format_to(
       std::back_inserter(out),

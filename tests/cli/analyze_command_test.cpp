@@ -175,7 +175,8 @@ TEST(AnalyzeCommand, WritesTheSessionLevelFitsAsJson) {
 
 // The heel's steps are pooled (pooling.hpp): every heel row fitted Ok carries its pooled kbar, n,
 // cbar, m, session.json counts the same steps, and the pooled standard errors are smaller than
-// the steps' own because each step borrows from the others.
+// the steps' own because each step borrows from the others. The pool's mean has a standard error
+// with the measurement chain's shared error, printed in the summary.
 TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
@@ -209,6 +210,24 @@ TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
   EXPECT_GE(heel_pooled, 6);
   EXPECT_TRUE(pooling.at("mean").at("cbar_ns_per_mm3").is_number());
   EXPECT_GE(pooling.at("between_step_sd").at("ln_kbar").get<double>(), 0.0);
+  // The mean's SE holds the chain's shared error ([pooling] of the shipped config: heel kbar
+  // 4 %, n 0.02) beside the steps' scatter: sqrt(se_steps^2 + (mean x 0.04)^2) for kbar.
+  const auto part = [&](const char* field, const char* parameter) {
+    return pooling.at(field).at(parameter).get<double>();
+  };
+  EXPECT_DOUBLE_EQ(part("chain_sd", "ln_kbar"), 0.04);
+  EXPECT_DOUBLE_EQ(part("chain_sd", "n"), 0.02);
+  const double kbar = part("mean", "kbar_n_per_mm3");
+  EXPECT_NEAR(part("se", "kbar_n_per_mm3"),
+              std::hypot(part("se_steps", "kbar_n_per_mm3"), 0.04 * kbar), 1e-12 * kbar);
+  EXPECT_NEAR(part("se", "n"), std::hypot(part("se_steps", "n"), 0.02), 1e-12);
+  EXPECT_GT(part("se_steps", "kbar_n_per_mm3"), 0.0);
+  // The summary prints the heel's pooled kbar with that SE.
+  EXPECT_NE(a.output.find("pooled over the session, +- one standard error"), std::string::npos)
+      << a.output;
+  EXPECT_NE(a.output.find(fmt::format("{:.4f} +- {:.4f}", kbar, part("se", "kbar_n_per_mm3"))),
+            std::string::npos)
+      << a.output;
   std::sort(own_se.begin(), own_se.end());
   std::sort(pooled_se.begin(), pooled_se.end());
   EXPECT_LT(pooled_se[pooled_se.size() / 2], own_se[own_se.size() / 2]);
@@ -224,7 +243,7 @@ TEST(AnalyzeCommand, ReportIsSelfContained) {
   EXPECT_EQ(html.find("<script"), std::string::npos);
   EXPECT_NE(html.find("force (N)"), std::string::npos) << "axes carry units";
   EXPECT_NE(html.find("Appendix I"), std::string::npos);
-  EXPECT_NE(html.find("pooled mean (between-step SD)"), std::string::npos);
+  EXPECT_NE(html.find("pooled mean &plusmn; SE with the chain"), std::string::npos);
   EXPECT_NE(html.find("</html>"), std::string::npos);
 }
 
@@ -269,7 +288,8 @@ TEST(AnalyzeCommand, MarksTheMediansThatMostStepsLeftAtABound) {
   }
   std::map<std::string, std::array<bool, 4>> marks;
   std::istringstream summary(a.output);
-  for (std::string line; std::getline(summary, line);) {
+  // The medians' table ends at its note; the pooled table below it names the regions too.
+  for (std::string line; std::getline(summary, line) && !line.starts_with("medians across");) {
     std::istringstream words(line);
     std::string region, fitted, contact;
     std::array<std::string, 4> values;

@@ -75,6 +75,12 @@ struct Fixture {
     heel.pooling.between_step[0][0] = 0.01;    // 10 % on kbar, pooled as a logarithm
     heel.pooling.between_step[1][1] = 0.0004;  // 0.02 on n
     heel.pooling.between_step[2][2] = 0.04;    // 20 % on cbar, a logarithm too
+    // The mean's SEs with the chain's error: 5 % on kbar, 0.01 on n, 10 % on cbar, 0.02 on m.
+    heel.pooled_mean = MaterialEstimate{heel.pooling.mean, {}};
+    heel.pooled_mean->covariance[0][0] = 0.0025;
+    heel.pooled_mean->covariance[1][1] = 0.0001;
+    heel.pooled_mean->covariance[2][2] = 0.01;
+    heel.pooled_mean->covariance[3][3] = 0.0004;
     heel.kbar_n_per_mm3 = {.count = 3, .median = 0.12, .q1 = 0.11, .q3 = 0.13};
     heel.nrmse_pct = {.count = 3, .median = 3.0, .q1 = 2.0, .q3 = 4.0};
 
@@ -149,16 +155,16 @@ TEST(ReportHtml, TablesEachParameterBesideAppendixI) {
   // cbar 0.011 (0.001), NRMSE 25.5 (4.2).
   EXPECT_TRUE(has(html,
                   "<tr><td>kbar (N/mm\u00b3)</td><td>0.12 (0.01)</td><td>0.12 (0.02)</td>"
-                  "<td>0.12 (10 %)</td><td>0.117 (0.027)</td></tr>"));
+                  "<td>0.12 &plusmn; 0.006 (10 %)</td><td>0.117 (0.027)</td></tr>"));
   EXPECT_TRUE(has(html,
                   "<tr><td>n</td><td>0.3 (undetermined)</td><td>&ndash;</td>"
-                  "<td>0.3 (0.02)</td><td>0.294 (0.116)</td></tr>"));
+                  "<td>0.3 &plusmn; 0.01 (0.02)</td><td>0.294 (0.116)</td></tr>"));
   EXPECT_TRUE(has(html,
                   "<tr><td>C (mm)</td><td>69.9 <i>declared</i></td><td>&ndash;</td>"
                   "<td>&ndash;</td><td>69.9 (8.5)</td></tr>"));
   EXPECT_TRUE(has(html,
                   "<td>0.011 (0.002) <b>at bound</b></td><td>&ndash;</td>"
-                  "<td>0.011 (20 %)</td><td>0.011 (0.001)</td></tr>"));
+                  "<td>0.011 &plusmn; 0.0011 (20 %)</td><td>0.011 (0.001)</td></tr>"));
   EXPECT_TRUE(has(html,
                   "<tr><td>NRMSE (%)</td><td>4.3</td><td>3.0 (2.0)</td><td>&ndash;</td>"
                   "<td>25.5 (4.2)</td></tr>"));
