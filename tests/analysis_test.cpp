@@ -283,6 +283,12 @@ struct Walk {
   double asymmetry_pct = 0.0;
 };
 
+double root_mean_square(const std::vector<double>& z) {
+  double sum = 0.0;
+  for (const double v : z) sum += v * v;
+  return std::sqrt(sum / static_cast<double>(z.size()));
+}
+
 // A simulated walk (by default a minute's at size 41-42, seed 7), analysed in `dir`.
 SessionAnalysis analyse_walk(const Config& config, const std::filesystem::path& dir,
                              const Walk& walk) {
@@ -409,11 +415,6 @@ TEST(AnalyseSession, ThePooledMeansStandardErrorHoldsTheChainsSharedError) {
       }
     }
   }
-  const auto rms = [](const std::vector<double>& z) {
-    double sum = 0.0;
-    for (const double v : z) sum += v * v;
-    return std::sqrt(sum / static_cast<double>(z.size()));
-  };
   const char* names[] = {"ln kbar", "n", "ln cbar", "m"};
   for (std::size_t k = 0; k < 4; ++k) {
     const double largest =
@@ -422,13 +423,51 @@ TEST(AnalyseSession, ThePooledMeansStandardErrorHoldsTheChainsSharedError) {
     std::printf(
         "%-7s pooled mean z over %zu pools: RMS %.2f (the steps' scatter alone %.2f), "
         "largest |z| %.2f\n",
-        names[k], z_total[k].size(), rms(z_total[k]), rms(z_steps[k]), largest);
-    EXPECT_GT(rms(z_total[k]), 0.4) << names[k];
-    EXPECT_LT(rms(z_total[k]), 1.4) << names[k];
+        names[k], z_total[k].size(), root_mean_square(z_total[k]), root_mean_square(z_steps[k]),
+        largest);
+    EXPECT_GT(root_mean_square(z_total[k]), 0.4) << names[k];
+    EXPECT_LT(root_mean_square(z_total[k]), 1.4) << names[k];
     EXPECT_LT(largest, 3.5) << names[k];
   }
-  EXPECT_GT(rms(z_steps[0]), 2.0);
-  EXPECT_GT(rms(z_steps[1]), 2.0);
+  EXPECT_GT(root_mean_square(z_steps[0]), 2.0);
+  EXPECT_GT(root_mean_square(z_steps[1]), 2.0);
+}
+
+// The toes, whose one to three cells give no footprint, err more from one walker to the next
+// than the calibration's 120 sessions of 50-90 kg showed: at 60 kg the pooled kbar of toes3_5 is
+// 11-17 % low in every 30-s session of sizes 41-42 and 45-46. Their chain SDs are the larger of
+// the two walker sets' (stop 54); with stop 53's (10 %, 0.05) the RMS of z was 1.45-1.5 on 60
+// sessions. Measured here: ln kbar 0.91, n 0.92 over four pools (the steps' scatter alone 5.3 and
+// 4.9; with stop 53's SDs 1.34 and 1.34).
+TEST(AnalyseSession, TheToesPooledStandardErrorHoldsTheirLargerChainError) {
+  const Config config = load_config(default_config_path());
+  const auto dir = test::scratch_dir("analysis-pooled-toes");
+  std::array<std::vector<double>, 2> z_total, z_steps;
+  for (const InsoleSize size : {InsoleSize::S41_42, InsoleSize::S45_46}) {
+    for (const std::uint64_t seed : {303u, 305u}) {
+      const SessionAnalysis session =
+          analyse_walk(config, dir, {.size = size, .seed = seed, .duration_s = 30.0});
+      const RegionSessionAnalysis& r = session.regions[index_of(Region::Toes3_5)];
+      ASSERT_TRUE(r.pooled_mean) << insole_size_name(size) << ", seed " << seed << ": "
+                                 << r.pooling.not_pooled;
+      const EllipsoidParams& t = config.tissue(size, Region::Toes3_5).mean;
+      const double truth[] = {std::log(t.kbar_n_per_mm3), t.n};
+      for (std::size_t k = 0; k < 2; ++k) {
+        const double error = r.pooled_mean->value[k] - truth[k];
+        z_total[k].push_back(error / std::sqrt(r.pooled_mean->covariance[k][k]));
+        z_steps[k].push_back(error / std::sqrt(r.pooling.mean_covariance[k][k]));
+      }
+    }
+  }
+  const char* names[] = {"ln kbar", "n"};
+  for (std::size_t k = 0; k < 2; ++k) {
+    std::printf(
+        "toes3_5 %-7s pooled mean z over %zu pools: RMS %.2f (the steps' scatter alone %.2f)\n",
+        names[k], z_total[k].size(), root_mean_square(z_total[k]), root_mean_square(z_steps[k]));
+    EXPECT_GT(root_mean_square(z_total[k]), 0.4) << names[k];
+    EXPECT_LT(root_mean_square(z_total[k]), 1.3) << names[k];
+    EXPECT_GT(root_mean_square(z_steps[k]), 2.0) << names[k];
+  }
 }
 
 TEST(AnalyseSession, CountsTheStepsFittedOnTheContactEllipseForWantOfAFootprint) {

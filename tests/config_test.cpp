@@ -855,9 +855,9 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
   EXPECT_EQ(p.kbar_chain_sd_pct,
-            (std::array<double, kRegionCount>{4.0, 6.0, 6.5, 5.5, 4.5, 9.5, 9.5, 10.0}));
+            (std::array<double, kRegionCount>{4.0, 6.0, 6.5, 5.5, 4.5, 12.0, 12.0, 15.0}));
   EXPECT_EQ(p.n_chain_sd,
-            (std::array<double, kRegionCount>{0.02, 0.025, 0.025, 0.04, 0.03, 0.05, 0.05, 0.05}));
+            (std::array<double, kRegionCount>{0.02, 0.025, 0.025, 0.04, 0.03, 0.06, 0.06, 0.075}));
   EXPECT_EQ(p.cbar_chain_sd_pct,
             (std::array<double, kRegionCount>{13.5, 0.0, 15.0, 12.0, 13.0, 0.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_chain_sd,
