@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <ostream>
 
 #include "gaitmon/error.hpp"
 #include "gaitmon/session.hpp"
@@ -20,6 +21,11 @@ struct Case {
   std::uint64_t seed;
   double body_mass_kg;
 };
+
+// gtest prints a case it cannot print as its bytes, padding included.
+void PrintTo(const Case& c, std::ostream* os) {
+  *os << insole_size_name(c.size) << ", seed " << c.seed << ", " << c.body_mass_kg << " kg";
+}
 
 class SimulatedSegmentation : public ::testing::TestWithParam<Case> {};
 

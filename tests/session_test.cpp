@@ -11,6 +11,7 @@
 #include <iterator>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <ostream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -465,6 +466,11 @@ struct BadLine {
   std::string line;
   std::string reason;
 };
+
+// gtest prints a case it cannot print as its bytes, padding included.
+void PrintTo(const BadLine& b, std::ostream* os) {
+  *os << b.name;
+}
 
 std::string with_value(std::size_t sensor, const std::string& value) {
   auto values = zeros();
