@@ -131,6 +131,36 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
   return out;
 }
 
+std::array<std::optional<SharedExponent>, kRegionCount> fit_damping_exponent_per_session(
+    std::span<StepAnalysis> steps, const Config& config, const AnalysisSettings& settings) {
+  std::array<std::optional<SharedExponent>, kRegionCount> out;
+  detail::parallel_for(kRegionCount, [&](std::size_t ri) {
+    std::vector<RegionSeries> series;
+    std::vector<EllipsoidParams> declared;
+    std::vector<RegionAnalysis*> fitted;
+    for (StepAnalysis& step : steps) {
+      RegionAnalysis& r = step.regions[ri];
+      if (r.fit.status != FitStatus::Ok) continue;
+      series.push_back(r.series);
+      declared.push_back(r.declared);
+      fitted.push_back(&r);
+    }
+    out[ri] = fit_shared_damping_exponent(series, declared, config.fit_bounds, settings.fit);
+    if (!out[ri]) return;
+    FitSettings at = settings.fit;
+    at.declared_m = out[ri]->m;
+    for (RegionAnalysis* r : fitted) {
+      RegionFit fit = fit_region(r->series, r->declared, config.fit_bounds, at);
+      if (fit.status != FitStatus::Ok) continue;
+      fit.m.se = out[ri]->se;
+      fit.m.at_bound = out[ri]->at_bound;
+      r->fit = std::move(fit);
+    }
+  });
+  for (StepAnalysis& step : steps) set_model_totals(step);
+  return out;
+}
+
 void set_model_totals(StepAnalysis& step) {
   const std::size_t frames = step.t_s.size();
   step.model_total_force_n.assign(frames, 0.0);

@@ -136,6 +136,13 @@ std::optional<MaterialEstimate> material_estimate(const RegionFit& fit) {
   e.value = {std::log(fit.kbar_n_per_mm3.value), fit.n.value, std::log(fit.cbar_ns_per_mm3.value),
              fit.m.value};
   e.covariance = *fit.material_covariance;
+  if (e.covariance[3][3] == 0.0) {
+    // m declared (its row and column zero), the same for every step
+    // (fit_damping_exponent_per_session): its variance is that of the shared value, which the pool
+    // then gives back as its mean.
+    if (!(fit.m.se > 0.0) || !std::isfinite(fit.m.se)) return std::nullopt;
+    e.covariance[3][3] = fit.m.se * fit.m.se;
+  }
   return e;
 }
 

@@ -411,6 +411,11 @@ Layout make_layout(const EllipsoidParams& declared, const FitBounds& bounds,
   // The material parameters come first: the rank check names the later of two parameters that
   // trade off, and the geometry is what the data cannot see (model-notes section 2).
   for (int p : {kKbar, kN, kCbar, kM}) add(p);
+  if (settings.declared_m) {
+    // Kept in theta, so the separable fit's four-vector stays, with its bounds closed on it.
+    const auto m = static_cast<std::size_t>(layout.index[kM]);
+    layout.lower[m] = layout.upper[m] = *settings.declared_m;
+  }
   if (settings.mode == FitMode::Seed8) {
     for (int p : {kA, kB, kC, kD0}) add(p);
     return layout;
@@ -705,17 +710,19 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
   const std::size_t count = frames.size();
 
   // The profile over the (n, m) grid: the elastic and damping bases per grid value, once.
-  std::vector<double> e_grid(kGridN * count), v_grid(kGridM * count);
+  const bool m_declared = settings.declared_m.has_value();
+  const int grid_m = m_declared ? 1 : kGridM;
+  std::vector<double> e_grid(kGridN * count), v_grid(grid_m * count);
   const auto grid_value = [](int i, int size, double lo, double hi) {
-    return lo + (hi - lo) * static_cast<double>(i) / static_cast<double>(size - 1);
+    return size == 1 ? lo : lo + (hi - lo) * static_cast<double>(i) / static_cast<double>(size - 1);
   };
   for (int a = 0; a < kGridN; ++a) {
     const double n = grid_value(a, kGridN, lower(1), upper(1));
     for (std::size_t i = 0; i < count; ++i)
       e_grid[a * count + i] = s.e_base[i] * std::exp(n * s.log_g[i]);
   }
-  for (int b = 0; b < kGridM; ++b) {
-    const double m = grid_value(b, kGridM, lower(3), upper(3));
+  for (int b = 0; b < grid_m; ++b) {
+    const double m = grid_value(b, grid_m, lower(3), upper(3));
     for (std::size_t i = 0; i < count; ++i)
       v_grid[b * count + i] = s.v_base[i] * std::exp(m * s.log_g[i]);
   }
@@ -725,11 +732,11 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
     te_grid = e_grid;
     tv_grid = v_grid;
     for (int a = 0; a < kGridN; ++a) reported.linear(&te_grid[a * count]);
-    for (int b = 0; b < kGridM; ++b) reported.linear(&tv_grid[b * count]);
+    for (int b = 0; b < grid_m; ++b) reported.linear(&tv_grid[b * count]);
   }
   const std::vector<double>& te_all = reported.identity() ? e_grid : te_grid;
   const std::vector<double>& tv_all = reported.identity() ? v_grid : tv_grid;
-  std::vector<double> ee(kGridN), eF(kGridN), vv(kGridM), vF(kGridM);
+  std::vector<double> ee(kGridN), eF(kGridN), vv(grid_m), vF(grid_m);
   double FF = 0.0;
   std::vector<std::size_t> unloading;
   for (std::size_t i = 0; i < count; ++i) {
@@ -743,7 +750,7 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
       eF[a] += e * s.force[i];
     }
   }
-  for (int b = 0; b < kGridM; ++b) {
+  for (int b = 0; b < grid_m; ++b) {
     for (std::size_t i = 0; i < count; ++i) {
       const double v = tv_all[b * count + i];
       vv[b] += v * v;
@@ -757,8 +764,8 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
     const double n = grid_value(a, kGridN, lower(1), upper(1));
     const double k_scale = std::exp(s.log_c + n * s.log_ratio);
     const std::span<const double> e(&e_grid[a * count], count);
-    for (int b = 0; b < kGridM; ++b) {
-      const double m = grid_value(b, kGridM, lower(3), upper(3));
+    for (int b = 0; b < grid_m; ++b) {
+      const double m = grid_value(b, grid_m, lower(3), upper(3));
       const double d_scale = std::exp(s.log_c + m * s.log_ratio);
       const std::span<const double> v(&v_grid[b * count], count);
       Moments mo{ee[a], eF[a], vv[b], vF[b], 0.0, FF};
@@ -793,7 +800,8 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
     std::array<bool, 4> held{};
     Eigen::Vector4d pg = g;
     for (int k = 0; k < 4; ++k) {
-      held[k] = (theta(k) <= lower(k) && g(k) > 0.0) || (theta(k) >= upper(k) && g(k) < 0.0);
+      held[k] = (theta(k) <= lower(k) && g(k) > 0.0) || (theta(k) >= upper(k) && g(k) < 0.0) ||
+                (k == 3 && m_declared);
       if (held[k]) pg(k) = 0.0;
     }
     if (pg.lpNorm<Eigen::Infinity>() <= kGradientTolerance * std::max(1.0, cost)) {
@@ -953,6 +961,15 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     check_bounds(b, name);
   }
   if (settings.max_iterations < 1) throw std::invalid_argument("max_iterations must be >= 1");
+  if (settings.declared_m) {
+    if (settings.mode != FitMode::Identifiable || settings.free_scale) {
+      throw std::invalid_argument("a declared m needs the default fit (identifiable, P declared)");
+    }
+    if (!(*settings.declared_m >= bounds.m.lower && *settings.declared_m <= bounds.m.upper)) {
+      throw std::invalid_argument("declared m " + std::to_string(*settings.declared_m) +
+                                  " is outside the bounds of m");
+    }
+  }
   if (settings.mode == FitMode::Identifiable) {
     for (double v : {declared.A_mm, declared.B_mm, declared.C_mm, declared.d0_mm}) {
       if (!(v > 0.0) || !std::isfinite(v)) {
@@ -1031,7 +1048,9 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
   std::vector<int> kept;
   Eigen::MatrixXd basis(J.rows(), 0);
   std::vector<bool> dependent(static_cast<std::size_t>(np), false);
+  const int declared_column = settings.declared_m ? layout.index[kM] : -1;
   for (int c = 0; c < np; ++c) {
+    if (c == declared_column) continue;
     const double norm = J.col(c).norm();
     if (!(norm > 0.0)) {
       dependent[static_cast<std::size_t>(c)] = true;
@@ -1059,10 +1078,12 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     const Eigen::MatrixXd cov =
         sigma2 *
         (Jk.transpose() * Jk).ldlt().solve(Eigen::MatrixXd::Identity(Jk.cols(), Jk.cols()));
-    if (settings.mode == FitMode::Identifiable && layout.log_p < 0 && kept.size() == 4) {
+    // With m declared its row and column stay zero: the covariance of the others at that m.
+    const std::size_t material = settings.declared_m ? 3 : 4;
+    if (settings.mode == FitMode::Identifiable && layout.log_p < 0 && kept.size() == material) {
       MaterialCovariance c{};
-      for (std::size_t a = 0; a < 4; ++a) {
-        for (std::size_t b = 0; b < 4; ++b) {
+      for (std::size_t a = 0; a < material; ++a) {
+        for (std::size_t b = 0; b < material; ++b) {
           c[a][b] = cov(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
         }
       }
@@ -1075,6 +1096,7 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     }
   }
   for (int c = 0; c < np; ++c) {
+    if (c == declared_column) continue;
     if (dependent[static_cast<std::size_t>(c)] ||
         !std::isfinite(se_theta[static_cast<std::size_t>(c)])) {
       fit.undetermined.push_back(layout.names[static_cast<std::size_t>(c)]);
@@ -1094,7 +1116,8 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     e.value = is_log(p) ? std::exp(t) : t;
     e.se = is_log(p) ? e.value * se_theta[static_cast<std::size_t>(i)]
                      : se_theta[static_cast<std::size_t>(i)];
-    e.free = true;
+    e.free = i != declared_column;
+    if (!e.free) e.se = 0.0;
     e.at_bound = at_bound(e.value, pb[static_cast<std::size_t>(p)].lower,
                           pb[static_cast<std::size_t>(p)].upper);
   }
@@ -1179,6 +1202,107 @@ RegionFit fit_region_session(std::span<const RegionSeries> stances, const Ellips
   }
   const ReportedForce reported(frames, stance_begin, transforms, measured.size());
   return fit_frames(frames, measured.size(), measured, declared, bounds, settings, reported);
+}
+
+std::optional<SharedExponent> fit_shared_damping_exponent(std::span<const RegionSeries> stances,
+                                                          std::span<const EllipsoidParams> declared,
+                                                          const FitBounds& bounds,
+                                                          const FitSettings& settings) {
+  if (stances.size() != declared.size()) {
+    throw std::invalid_argument("fit_shared_damping_exponent: one declared set per stance");
+  }
+  if (settings.mode != FitMode::Identifiable || settings.free_scale) {
+    throw std::invalid_argument("a shared m needs the default fit (identifiable, P declared)");
+  }
+  check_bounds(bounds.m, "m");
+  // One stance's cost at m, nothing where its fit failed.
+  FitSettings at = settings;
+  const auto cost_at = [&](std::size_t i, double m) -> std::optional<double> {
+    at.declared_m = m;
+    const RegionFit f = fit_region(stances[i], declared[i], bounds, at);
+    if (f.status != FitStatus::Ok) return std::nullopt;
+    return f.final_cost;
+  };
+  const double lo = bounds.m.lower, hi = bounds.m.upper;
+  std::vector<double> grid(kGridM);
+  for (std::size_t j = 0; j < grid.size(); ++j) {
+    grid[j] = lo + (hi - lo) * static_cast<double>(j) / static_cast<double>(grid.size() - 1);
+  }
+  // The stances fitted at every grid point, and their summed cost there.
+  std::vector<std::size_t> kept;
+  std::vector<double> grid_total(grid.size(), 0.0);
+  for (std::size_t i = 0; i < stances.size(); ++i) {
+    std::vector<double> costs;
+    for (double m : grid) {
+      const auto c = cost_at(i, m);
+      if (!c) break;
+      costs.push_back(*c);
+    }
+    if (costs.size() < grid.size()) continue;
+    kept.push_back(i);
+    for (std::size_t j = 0; j < grid.size(); ++j) grid_total[j] += costs[j];
+  }
+  if (kept.empty()) return std::nullopt;
+  // Off the grid, a stance that fails makes that m unusable.
+  const auto summed = [&](double m) {
+    double total = 0.0;
+    for (std::size_t i : kept) {
+      const auto c = cost_at(i, m);
+      if (!c) return std::numeric_limits<double>::infinity();
+      total += *c;
+    }
+    return total;
+  };
+  const auto best = static_cast<std::size_t>(
+      std::min_element(grid_total.begin(), grid_total.end()) - grid_total.begin());
+  double a = grid[best == 0 ? 0 : best - 1];
+  double b = grid[std::min(best + 1, grid.size() - 1)];
+  const double ratio = (std::sqrt(5.0) - 1.0) / 2.0;
+  double x1 = b - ratio * (b - a), x2 = a + ratio * (b - a);
+  double f1 = summed(x1), f2 = summed(x2);
+  while (b - a > 1e-3) {
+    if (f1 <= f2) {
+      b = x2;
+      x2 = x1;
+      f2 = f1;
+      x1 = b - ratio * (b - a);
+      f1 = summed(x1);
+    } else {
+      a = x1;
+      x1 = x2;
+      f1 = f2;
+      x2 = a + ratio * (b - a);
+      f2 = summed(x2);
+    }
+  }
+  SharedExponent out;
+  out.stances = static_cast<int>(kept.size());
+  // The grid point itself can be lower than where the search ends (a minimum at a bound).
+  const double searched = f1 <= f2 ? x1 : x2;
+  out.m = std::min(f1, f2) <= grid_total[best] ? searched : grid[best];
+  out.at_bound = std::abs(out.m - lo) <= kBoundTolerance * std::abs(lo) ||
+                 std::abs(out.m - hi) <= kBoundTolerance * std::abs(hi);
+  // The summed cost is half the squared residuals, so its second derivative along m, the others
+  // fitted again, is J^T J there: over steps of h, inward at a bound.
+  const double h = 0.01;
+  const double f0 = summed(out.m);
+  double curvature = 0.0;
+  if (out.m - h >= lo && out.m + h <= hi) {
+    curvature = (summed(out.m + h) - 2.0 * f0 + summed(out.m - h)) / (h * h);
+  } else {
+    const double inward = out.m - h < lo ? h : -h;
+    curvature = (f0 - 2.0 * summed(out.m + inward) + summed(out.m + 2.0 * inward)) / (h * h);
+  }
+  // The residuals' variance: each stance's frames less its three parameters, and m.
+  std::vector<FitFrame> frames;
+  for (std::size_t i : kept) {
+    append_frames(stances[i], settings.smoothing, settings.end_rate, 0, frames);
+  }
+  const int dof = static_cast<int>(frames.size()) - 3 * static_cast<int>(kept.size()) - 1;
+  const double sigma2 = dof > 0 ? 2.0 * f0 / dof : 0.0;
+  out.se = curvature > 0.0 && sigma2 > 0.0 ? std::sqrt(sigma2 / curvature)
+                                           : std::numeric_limits<double>::infinity();
+  return out;
 }
 
 }  // namespace gaitmon

@@ -105,6 +105,17 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
 /// them: for a caller that fits regions again.
 void set_model_totals(StepAnalysis& step);
 
+/// Fits every region's steps again at one damping exponent m per region over them
+/// (fit_shared_damping_exponent over the steps whose fit is Ok): one step mostly leaves m at a
+/// bound of its range (README, "What one step can determine"). Each refitted step's m carries the
+/// shared m's standard error and bound flag, and its model totals follow. Returns the shared m per
+/// region, nothing where no step was fitted at every m tried. The steps' fits keep their own
+/// wherever they were not fitted again. The default fit only (throws std::invalid_argument
+/// otherwise). The regions are fitted in parallel on every core; the result does not depend on
+/// it.
+std::array<std::optional<SharedExponent>, kRegionCount> fit_damping_exponent_per_session(
+    std::span<StepAnalysis> steps, const Config& config, const AnalysisSettings& settings);
+
 /// Median and interquartile range of one parameter across steps (linear interpolation between
 /// order statistics, as numpy's default). All zero when there are no values.
 struct Spread {
@@ -149,6 +160,9 @@ struct RegionSessionAnalysis {
   /// The right foot's kbar and cbar against the left's (asymmetry.hpp), over the same steps as
   /// the trends; nothing with fewer than kMinAsymmetryStepsPerFoot such steps of either foot.
   std::optional<FootAsymmetry> kbar_asymmetry, cbar_asymmetry;
+  /// One m for the region's steps where the caller fitted them so
+  /// (fit_damping_exponent_per_session); nothing otherwise.
+  std::optional<SharedExponent> m_per_session;
   /// Across the steps fitted Ok.
   Spread A_mm, B_mm, C_mm, d0_mm, kbar_n_per_mm3, n, cbar_ns_per_mm3, m, nrmse_pct;
 };

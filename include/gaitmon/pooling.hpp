@@ -68,7 +68,9 @@ struct PooledEstimates {
 PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const MaterialBounds& bounds);
 
 /// A fit's free material parameters and their covariance, if it has them: an Ok fit in the
-/// default (Identifiable, declared scale) mode whose four parameters the data determine.
+/// default (Identifiable, declared scale) mode whose four parameters the data determine, or
+/// whose kbar, n and cbar they determine at a declared m with a standard error of its own (one m
+/// per session, fit_damping_exponent_per_session), which stands in for m's variance.
 std::optional<MaterialEstimate> material_estimate(const RegionFit& fit);
 
 /// `estimate` with sd[i]^2 added to its covariance's diagonal: an error of SD sd[i] in each

@@ -66,6 +66,10 @@ struct FitSettings {
   /// default fit needs none: it searches the whole (n, m) box with K and D solved exactly.
   int starts = 4;
   int max_iterations = 100;
+  /// m declared instead of fitted (the default fit only: Identifiable, P declared): kbar, n and
+  /// cbar are fitted at this m. One step mostly leaves m at a bound of its range, and a region's
+  /// m is better taken over all a session's steps (fit_shared_damping_exponent).
+  std::optional<double> declared_m;
 };
 
 /// One region over one stance (or several stances for a session-level fit): the measured
@@ -148,6 +152,27 @@ RegionFit fit_region(const RegionSeries& series, const EllipsoidParams& declared
 RegionFit fit_region_session(std::span<const RegionSeries> stances, const EllipsoidParams& declared,
                              const FitBounds& bounds, const FitSettings& settings,
                              std::span<const ForceTransform* const> transforms = {});
+
+/// One damping exponent m for a region over several stances, each with its own kbar, n and cbar.
+struct SharedExponent {
+  double m = 0.0;
+  /// From the curvature of the summed cost over m (the others fitted again at each m), scaled by
+  /// the residuals' variance; like every standard error from the fit's residuals, it does not
+  /// hold the error the measurement chain gives every stance alike.
+  double se = 0.0;
+  bool at_bound = false;
+  int stances = 0;  ///< stances in the sum: those fitted Ok at every m tried
+};
+
+/// The m at which the stances' fits at a declared m (FitSettings::declared_m) have the least
+/// summed cost: a grid over the bounds of m, then a golden-section search between the best grid
+/// point's neighbours. A stance whose fit fails at a grid point is left out of the sum. Returns
+/// nothing if no stance is fitted at every grid point. Throws std::invalid_argument if the spans
+/// differ in length, or as fit_region does (the default fit only).
+std::optional<SharedExponent> fit_shared_damping_exponent(std::span<const RegionSeries> stances,
+                                                          std::span<const EllipsoidParams> declared,
+                                                          const FitBounds& bounds,
+                                                          const FitSettings& settings);
 
 /// eq 58 for one series: RMS(measured - model) / max(measured) x 100.
 double nrmse_pct(std::span<const double> measured, std::span<const double> model);

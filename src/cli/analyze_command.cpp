@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -43,6 +44,7 @@ struct AnalyzeArgs {
   std::string area;
   std::string end_rate = "two-frame";
   bool free_scale = false;
+  bool m_per_session = false;
   std::vector<std::string> effects;
   bool effects_given = false;
 };
@@ -90,6 +92,10 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
   s.fit.free_scale = args.free_scale;
   if (s.fit.free_scale && s.fit.mode != FitMode::Identifiable) {
     throw CLI::ValidationError("--free-scale", "applies to --fit identifiable only");
+  }
+  if (args.m_per_session && (s.fit.mode != FitMode::Identifiable || s.fit.free_scale)) {
+    throw CLI::ValidationError("--m-per-session",
+                               "applies to the default fit only (not --fit seed8 or --free-scale)");
   }
   return s;
 }
@@ -326,6 +332,26 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
           {"regions", regions}};
 }
 
+// With --m-per-session, the one m every step of the region was fitted at; null otherwise.
+nlohmann::json m_per_session_json(const RegionSessionAnalysis& r, bool asked) {
+  if (!asked) return nullptr;
+  if (!r.m_per_session) {
+    return {
+        {"m", nullptr},
+        {"note", "no step of the region was fitted at every m tried; its steps keep their own"}};
+  }
+  const SharedExponent& m = *r.m_per_session;
+  return {{"m", m.m},
+          {"se", std::isfinite(m.se) ? nlohmann::json(m.se) : nlohmann::json(nullptr)},
+          {"at_bound", m.at_bound},
+          {"steps", m.stances},
+          {"note",
+           "the m at which the region's steps, each with its own kbar, n and cbar, fit best "
+           "together; every step is fitted at it (regions.csv's m and se_m). Its standard error "
+           "is that of the steps' residuals and does not hold the measurement chain's shared "
+           "error"}};
+}
+
 std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, const Config& config,
                          const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                          const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
@@ -341,6 +367,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                    {"area", area_source_name(settings.area)},
                    {"end_rate", end_rate_name(settings.fit.end_rate)},
                    {"free_scale", settings.fit.free_scale},
+                   {"m_per_session", args.m_per_session},
                    {"starts", settings.fit.starts},
                    {"max_iterations", settings.fit.max_iterations},
                    {"bounds", bounds_json(config.fit_bounds)}};
@@ -357,6 +384,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
         {"declared", nlohmann::json(r.declared)},
         {"session_fit", fit_json(r.session_fit)},
         {"pooling", pooling_json(r)},
+        {"m_per_session", m_per_session_json(r, args.m_per_session)},
         {"across_steps",
          {{"A_mm", spread_json(r.A_mm)},
           {"B_mm", spread_json(r.B_mm)},
@@ -464,13 +492,13 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
                    const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                    const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
                    const std::vector<std::filesystem::path>& written) {
-  fmt::print("{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{}{})\n",
-             args.session.string(), insole_size_name(header.insole_size), steps.size(),
-             analyses.size(), model_variant_name(settings.fit.model),
-             fit_mode_name(settings.fit.mode), smoothing_name(settings.fit.smoothing),
-             area_source_name(settings.area),
-             settings.fit.end_rate == EndRate::TwoFrame ? "" : ", end rate second-order",
-             settings.fit.free_scale ? ", free scale" : "");
+  fmt::print(
+      "{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{}{}{})\n",
+      args.session.string(), insole_size_name(header.insole_size), steps.size(), analyses.size(),
+      model_variant_name(settings.fit.model), fit_mode_name(settings.fit.mode),
+      smoothing_name(settings.fit.smoothing), area_source_name(settings.area),
+      settings.fit.end_rate == EndRate::TwoFrame ? "" : ", end rate second-order",
+      settings.fit.free_scale ? ", free scale" : "", args.m_per_session ? ", m per session" : "");
   fmt::print("{:<19}{:>8}{:>10}{:>12}{:>10}{:>13}{:>10}{:>12}{:>12}\n", "region", "fitted",
              "contact", "kbar N/mm3", "n", "cbar Ns/mm3", "m", "NRMSE %", "session %");
   bool marked = false;
@@ -499,6 +527,18 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
     fmt::print(
         "* at a bound of its fit range in at least half of the region's steps: the data do not "
         "determine it there (regions.csv: at_bound)\n");
+  }
+  if (args.m_per_session) {
+    std::vector<std::string> shared;
+    for (const RegionSessionAnalysis& r : session.regions) {
+      shared.push_back(
+          r.m_per_session
+              ? fmt::format("{} {}{}", region_name(r.region),
+                            estimate_text(r.m_per_session->m, r.m_per_session->se, " +- "),
+                            r.m_per_session->at_bound ? " (at a bound)" : "")
+              : fmt::format("{} none", region_name(r.region)));
+    }
+    fmt::print("m per session, every step fitted at it: {}\n", fmt::join(shared, ", "));
   }
   print_pooled(session);
   print_named(
@@ -585,6 +625,12 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
       }
     }
   }
+  if (args.m_per_session && !names.empty()) {
+    throw std::invalid_argument(
+        fmt::format("--m-per-session with effects in the model ({}) is not supported: each step's "
+                    "tissue is then fitted again with them inside; give --effects none",
+                    fmt::join(names, ", ")));
+  }
   check_output_dir(args.out_dir, "--out");
   OutputSet outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"},
                     args.session);
@@ -595,6 +641,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   std::vector<Step> ok_steps;
   std::vector<StepAnalysis> analyses;
   std::optional<ExtendedModelFit> extended;
+  std::array<std::optional<SharedExponent>, kRegionCount> m_per_session;
   SessionAnalysis session;
   {
     ProgressBar progress("analyze");
@@ -620,6 +667,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     analyses = analyse_steps(ok_steps, layout, config, settings, [&](double fraction) {
       progress.update(0.1 + (steps_end - 0.1) * fraction);
     });
+    if (args.m_per_session)
+      m_per_session = fit_damping_exponent_per_session(analyses, config, settings);
     spdlog::debug("analysed {} steps in {:.2f} s", analyses.size(),
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     if (!names.empty()) {
@@ -650,6 +699,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
     });
     const auto session_start = std::chrono::steady_clock::now();
     session = analyse_session(analyses, config, header.insole_size, settings);
+    for (std::size_t i = 0; i < kRegionCount; ++i)
+      session.regions[i].m_per_session = m_per_session[i];
     spdlog::debug(
         "session-level fits in {:.2f} s",
         std::chrono::duration<double>(std::chrono::steady_clock::now() - session_start).count());
@@ -763,6 +814,11 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_flag("--free-scale", args->free_scale,
                 "Also fit P = pi A B (keeping A/B); identifiable mode only. The steps are then "
                 "not pooled (pooling needs P declared): the *_pooled columns stay empty");
+  sub->add_flag("--m-per-session", args->m_per_session,
+                "Fit one damping exponent m per region over the whole session, each step's kbar, n "
+                "and cbar at it: one step mostly leaves m at a bound of its range (README, \"What "
+                "one step can determine\"). Default fit only, without effects; regions.csv's m "
+                "and se_m are then the session's, and session.json's m_per_session says so");
   sub->add_option("--effects", args->effects,
                   fmt::format("Effects added to the model, comma-separated ({}), or none; "
                               "default: [model] effects of the config",

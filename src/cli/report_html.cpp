@@ -679,15 +679,19 @@ std::string render_report_html(const ReportInput& in) {
   fmt::format_to(
       std::back_inserter(out),
       "<h1>gaitmon analyze: {}</h1><p>Insole {}, {} Hz; {} steps, {} complete and "
-      "analysed. Model {}, fit {}, smoothing {}, contact area {}{}{}. Median total-force "
+      "analysed. Model {}, fit {}, smoothing {}, contact area {}{}{}{}. Median total-force "
       "NRMSE {:.1f} % "
       "(IQR {:.1f} %).</p>",
       escape(in.session_name), insole_size_name(in.size), in.sample_rate_hz, in.steps.size(), ok,
       model_variant_name(fit.model), fit_mode_name(fit.mode), smoothing_name(fit.smoothing),
       area_source_name(in.settings->area),
       fit.end_rate == EndRate::TwoFrame ? "" : ", second-order area rate at contact ends",
-      fit.free_scale ? ", P free" : "", in.session->nrmse_total_pct.median,
-      in.session->nrmse_total_pct.iqr());
+      fit.free_scale ? ", P free" : "",
+      std::any_of(in.session->regions.begin(), in.session->regions.end(),
+                  [](const RegionSessionAnalysis& r) { return r.m_per_session.has_value(); })
+          ? ", one m per region over the session"
+          : "",
+      in.session->nrmse_total_pct.median, in.session->nrmse_total_pct.iqr());
   if (fit.mode == FitMode::Seed8) {
     out +=
         "<p class=\"note\"><b>--fit seed8</b>: all eight parameters are free, as in the seed. "

@@ -14,6 +14,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <regex>
+#include <set>
 #include <sstream>
 #include <vector>
 
@@ -635,6 +636,59 @@ TEST(AnalyzeCommand, FreeScaleFitsTheScaleAndIsRefusedWithSeed8) {
   EXPECT_NE(refused.find("--free-scale: applies to --fit identifiable only"), std::string::npos)
       << refused;
   EXPECT_FALSE(fs::exists(a.dir / "free-scale-seed8"));
+}
+
+// --m-per-session fits one m per region over the session and every step at it: regions.csv's m
+// is then the same in every heel row, session.json says which m with its standard error, the
+// summary names it, and the other fits and effects in the model refuse it.
+TEST(AnalyzeCommand, MPerSessionFitsEveryStepAtOneMPerRegion) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  int status = -1;
+  const std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                  (a.dir / "m-per-session").string() + " --m-per-session",
+                              &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("area footprint, m per session)"), std::string::npos) << out;
+  EXPECT_NE(out.find("m per session, every step fitted at it: heel "), std::string::npos) << out;
+  EXPECT_FALSE(settings_of(a.dir / "out").at("m_per_session").get<bool>());
+  EXPECT_TRUE(settings_of(a.dir / "m-per-session").at("m_per_session").get<bool>());
+  const auto j = nlohmann::json::parse(read_all(a.dir / "m-per-session" / "session.json"));
+  const auto& heel = j.at("regions").at("heel");
+  const double m = heel.at("m_per_session").at("m").get<double>();
+  EXPECT_GT(heel.at("m_per_session").at("se").get<double>(), 0.0);
+  EXPECT_GT(heel.at("m_per_session").at("steps").get<int>(), 3);
+  const auto own = heel_column(a.dir / "out" / "regions.csv", 14);  // m
+  const auto shared = heel_column(a.dir / "m-per-session" / "regions.csv", 14);
+  ASSERT_GT(own.size(), 3u);
+  ASSERT_EQ(own.size(), shared.size());
+  std::set<std::string> distinct(own.begin(), own.end());
+  EXPECT_GT(distinct.size(), 1u) << "each step's own m";
+  for (const std::string& v : shared) EXPECT_NEAR(std::stod(v), m, 1e-5);
+  // Pooled as before, with the shared m as the pool's.
+  EXPECT_TRUE(heel.at("pooling").at("pooled").get<bool>());
+  EXPECT_TRUE(nlohmann::json::parse(read_all(a.dir / "out" / "session.json"))
+                  .at("regions")
+                  .at("heel")
+                  .at("m_per_session")
+                  .is_null());
+
+  const std::string seed8 = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                                    (a.dir / "m-seed8").string() + " --m-per-session --fit seed8",
+                                &status);
+  EXPECT_EQ(status, 2) << seed8;
+  EXPECT_NE(seed8.find("--m-per-session: applies to the default fit only"), std::string::npos)
+      << seed8;
+  const std::string effects =
+      run("analyze " + (a.dir / "s.csv").string() + " --out " + (a.dir / "m-effects").string() +
+              " --m-per-session --effects impact_transient",
+          &status);
+  EXPECT_NE(status, 0) << effects;
+  EXPECT_NE(effects.find("--m-per-session with effects in the model (impact_transient)"),
+            std::string::npos)
+      << effects;
+  EXPECT_FALSE(fs::exists(a.dir / "m-seed8"));
+  EXPECT_FALSE(fs::exists(a.dir / "m-effects" / "regions.csv"));
 }
 
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
