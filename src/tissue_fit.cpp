@@ -15,6 +15,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
+#include <boost/math/tools/minima.hpp>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -539,6 +540,11 @@ struct Solution {
 
 constexpr int kGridN = 33;
 constexpr int kGridM = 15;
+// The shared m's search (fit_shared_damping_exponent): Brent's relative tolerance 2^(1 - bits) =
+// 0.00024 ends it with m within about 0.001; it takes 5-11 evaluations, far under the cap.
+constexpr int kBrentBits = 13;
+constexpr std::uintmax_t kMaxBrentEvaluations = 50;
+constexpr double kUnusableCost = 1e300;
 constexpr int kMaxActiveSetRounds = 8;
 constexpr double kFunctionTolerance = 1e-8;
 constexpr double kParameterTolerance = 1e-8;
@@ -698,58 +704,85 @@ void evaluate(const SeparableData& s, const ReportedForce& reported, const Eigen
   for (std::size_t i = 0; i < n; ++i) out.r(static_cast<Eigen::Index>(i)) -= s.force[i];
 }
 
-Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layout,
+double grid_value(int i, int size, double lo, double hi) {
+  return size == 1 ? lo : lo + (hi - lo) * static_cast<double>(i) / static_cast<double>(size - 1);
+}
+
+// The part of the separable fit that does not depend on m: the frames' data and the elastic
+// bases over the grid of n with their moments. A profile over m (fit_shared_damping_exponent)
+// prepares it once per stance and solves it at every m it tries.
+struct SeparableProblem {
+  SeparableData s;
+  std::vector<double> e_grid;   ///< kGridN bases of all frames each
+  std::vector<double> te_grid;  ///< what the cells report of them; empty where that is e_grid
+  std::vector<double> ee, eF;
+  double FF = 0.0;
+  std::vector<std::size_t> unloading;  ///< frames where the damping basis is negative
+};
+
+SeparableProblem prepare_separable(const std::vector<FitFrame>& frames, const Layout& layout,
+                                   ModelVariant variant, const ReportedForce& reported) {
+  SeparableProblem p;
+  p.s = separable_data(frames, layout, variant, reported.offset());
+  const SeparableData& s = p.s;
+  const auto in = static_cast<std::size_t>(layout.index[kN]);
+  const std::size_t count = frames.size();
+  p.e_grid.resize(kGridN * count);
+  for (int a = 0; a < kGridN; ++a) {
+    const double n = grid_value(a, kGridN, layout.lower[in], layout.upper[in]);
+    for (std::size_t i = 0; i < count; ++i)
+      p.e_grid[a * count + i] = s.e_base[i] * std::exp(n * s.log_g[i]);
+  }
+  if (!reported.identity()) {
+    p.te_grid = p.e_grid;
+    for (int a = 0; a < kGridN; ++a) reported.linear(&p.te_grid[a * count]);
+  }
+  const std::vector<double>& te_all = reported.identity() ? p.e_grid : p.te_grid;
+  p.ee.assign(kGridN, 0.0);
+  p.eF.assign(kGridN, 0.0);
+  for (std::size_t i = 0; i < count; ++i) {
+    p.FF += s.force[i] * s.force[i];
+    if (s.v_base[i] < 0.0) p.unloading.push_back(i);
+  }
+  for (int a = 0; a < kGridN; ++a) {
+    for (std::size_t i = 0; i < count; ++i) {
+      const double e = te_all[a * count + i];
+      p.ee[a] += e * e;
+      p.eF[a] += e * s.force[i];
+    }
+  }
+  return p;
+}
+
+Solution solve_separable(const SeparableProblem& p, const Layout& layout,
                          const FitSettings& settings, const ReportedForce& reported) {
-  const SeparableData s = separable_data(frames, layout, settings.model, reported.offset());
+  const SeparableData& s = p.s;
   const int iK = layout.index[kKbar], iN = layout.index[kN], iC = layout.index[kCbar],
             iM = layout.index[kM];
   const Eigen::Vector4d lower(layout.lower[iK], layout.lower[iN], layout.lower[iC],
                               layout.lower[iM]);
   const Eigen::Vector4d upper(layout.upper[iK], layout.upper[iN], layout.upper[iC],
                               layout.upper[iM]);
-  const std::size_t count = frames.size();
+  const std::size_t count = s.force.size();
 
-  // The profile over the (n, m) grid: the elastic and damping bases per grid value, once.
+  // The profile over the (n, m) grid: the damping bases per grid value of m, once.
   const bool m_declared = settings.declared_m.has_value();
   const int grid_m = m_declared ? 1 : kGridM;
-  std::vector<double> e_grid(kGridN * count), v_grid(grid_m * count);
-  const auto grid_value = [](int i, int size, double lo, double hi) {
-    return size == 1 ? lo : lo + (hi - lo) * static_cast<double>(i) / static_cast<double>(size - 1);
-  };
-  for (int a = 0; a < kGridN; ++a) {
-    const double n = grid_value(a, kGridN, lower(1), upper(1));
-    for (std::size_t i = 0; i < count; ++i)
-      e_grid[a * count + i] = s.e_base[i] * std::exp(n * s.log_g[i]);
-  }
+  std::vector<double> v_grid(grid_m * count);
   for (int b = 0; b < grid_m; ++b) {
     const double m = grid_value(b, grid_m, lower(3), upper(3));
     for (std::size_t i = 0; i < count; ++i)
       v_grid[b * count + i] = s.v_base[i] * std::exp(m * s.log_g[i]);
   }
   // What the cells report of each basis: the data's moments use these, the penalty the bases.
-  std::vector<double> te_grid, tv_grid;
+  std::vector<double> tv_grid;
   if (!reported.identity()) {
-    te_grid = e_grid;
     tv_grid = v_grid;
-    for (int a = 0; a < kGridN; ++a) reported.linear(&te_grid[a * count]);
     for (int b = 0; b < grid_m; ++b) reported.linear(&tv_grid[b * count]);
   }
-  const std::vector<double>& te_all = reported.identity() ? e_grid : te_grid;
+  const std::vector<double>& te_all = reported.identity() ? p.e_grid : p.te_grid;
   const std::vector<double>& tv_all = reported.identity() ? v_grid : tv_grid;
-  std::vector<double> ee(kGridN), eF(kGridN), vv(grid_m), vF(grid_m);
-  double FF = 0.0;
-  std::vector<std::size_t> unloading;
-  for (std::size_t i = 0; i < count; ++i) {
-    FF += s.force[i] * s.force[i];
-    if (s.v_base[i] < 0.0) unloading.push_back(i);
-  }
-  for (int a = 0; a < kGridN; ++a) {
-    for (std::size_t i = 0; i < count; ++i) {
-      const double e = te_all[a * count + i];
-      ee[a] += e * e;
-      eF[a] += e * s.force[i];
-    }
-  }
+  std::vector<double> vv(grid_m), vF(grid_m);
   for (int b = 0; b < grid_m; ++b) {
     for (std::size_t i = 0; i < count; ++i) {
       const double v = tv_all[b * count + i];
@@ -757,18 +790,19 @@ Solution solve_separable(const std::vector<FitFrame>& frames, const Layout& layo
       vF[b] += v * s.force[i];
     }
   }
+  const std::vector<std::size_t>& unloading = p.unloading;
   std::vector<char> negative(unloading.size());
   Eigen::Vector4d theta = 0.5 * (lower + upper);
   double best_cost = std::numeric_limits<double>::infinity();
   for (int a = 0; a < kGridN; ++a) {
     const double n = grid_value(a, kGridN, lower(1), upper(1));
     const double k_scale = std::exp(s.log_c + n * s.log_ratio);
-    const std::span<const double> e(&e_grid[a * count], count);
+    const std::span<const double> e(&p.e_grid[a * count], count);
     for (int b = 0; b < grid_m; ++b) {
       const double m = grid_value(b, grid_m, lower(3), upper(3));
       const double d_scale = std::exp(s.log_c + m * s.log_ratio);
       const std::span<const double> v(&v_grid[b * count], count);
-      Moments mo{ee[a], eF[a], vv[b], vF[b], 0.0, FF};
+      Moments mo{p.ee[a], p.eF[a], vv[b], vF[b], 0.0, p.FF};
       const double* te = &te_all[a * count];
       const double* tv = &tv_all[b * count];
       for (std::size_t i = 0; i < count; ++i) mo.ev += te[i] * tv[i];
@@ -946,10 +980,9 @@ Solution solve_ceres(const std::vector<FitFrame>& frames, const Layout& layout,
   return out;
 }
 
-RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size,
-                     std::span<const double> measured, const EllipsoidParams& declared,
-                     const FitBounds& bounds, const FitSettings& settings,
-                     const ReportedForce& reported) {
+// Misuse of the fit's inputs, whatever the data.
+void check_fit_inputs(const EllipsoidParams& declared, const FitBounds& bounds,
+                      const FitSettings& settings) {
   for (const auto& [b, name] : {std::pair{bounds.kbar_n_per_mm3, "kbar_n_per_mm3"},
                                 {bounds.n, "n"},
                                 {bounds.cbar_ns_per_mm3, "cbar_ns_per_mm3"},
@@ -977,7 +1010,13 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
       }
     }
   }
+}
 
+RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size,
+                     std::span<const double> measured, const EllipsoidParams& declared,
+                     const FitBounds& bounds, const FitSettings& settings,
+                     const ReportedForce& reported) {
+  check_fit_inputs(declared, bounds, settings);
   RegionFit fit;
   fit.frames = static_cast<int>(frames.size());
   fit.model_force_n.assign(input_size, 0.0);
@@ -1012,8 +1051,10 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
     throw std::invalid_argument(
         "a ForceTransform needs the default fit (identifiable parameters, P declared)");
   }
-  const Solution solution = separable ? solve_separable(frames, layout, settings, reported)
-                                      : solve_ceres(frames, layout, settings);
+  const Solution solution =
+      separable ? solve_separable(prepare_separable(frames, layout, settings.model, reported),
+                                  layout, settings, reported)
+                : solve_ceres(frames, layout, settings);
   if (solution.theta.empty()) {
     fit.status = FitStatus::Failed;
     fit.reason = solution.failure;
@@ -1215,13 +1256,35 @@ std::optional<SharedExponent> fit_shared_damping_exponent(std::span<const Region
     throw std::invalid_argument("a shared m needs the default fit (identifiable, P declared)");
   }
   check_bounds(bounds.m, "m");
-  // One stance's cost at m, nothing where its fit failed.
+  // Each stance prepared once (its frames and the elastic bases over n), then solved at every m
+  // tried: its cost there, nothing where its fit fails as fit_region's would.
+  struct Prepared {
+    std::vector<FitFrame> frames;
+    Layout layout;
+    SeparableProblem problem;
+  };
+  std::vector<Prepared> prepared(stances.size());
   FitSettings at = settings;
+  at.declared_m = bounds.m.lower;
+  for (std::size_t i = 0; i < stances.size(); ++i) {
+    check_series(stances[i]);
+    check_fit_inputs(declared[i], bounds, at);
+    Prepared& p = prepared[i];
+    append_frames(stances[i], settings.smoothing, settings.end_rate, 0, p.frames);
+    p.layout = make_layout(declared[i], bounds, at);
+    const ReportedForce none(p.frames, {}, {}, stances[i].t_s.size());
+    p.problem = prepare_separable(p.frames, p.layout, settings.model, none);
+  }
   const auto cost_at = [&](std::size_t i, double m) -> std::optional<double> {
+    Prepared& p = prepared[i];
+    if (p.frames.size() <= static_cast<std::size_t>(p.layout.size())) return std::nullopt;
+    const auto im = static_cast<std::size_t>(p.layout.index[kM]);
+    p.layout.lower[im] = p.layout.upper[im] = m;
     at.declared_m = m;
-    const RegionFit f = fit_region(stances[i], declared[i], bounds, at);
-    if (f.status != FitStatus::Ok) return std::nullopt;
-    return f.final_cost;
+    const ReportedForce none(p.frames, {}, {}, stances[i].t_s.size());
+    const Solution solution = solve_separable(p.problem, p.layout, at, none);
+    if (solution.theta.empty() || !solution.converged) return std::nullopt;
+    return solution.cost;
   };
   const double lo = bounds.m.lower, hi = bounds.m.upper;
   std::vector<double> grid(kGridM);
@@ -1243,49 +1306,36 @@ std::optional<SharedExponent> fit_shared_damping_exponent(std::span<const Region
     for (std::size_t j = 0; j < grid.size(); ++j) grid_total[j] += costs[j];
   }
   if (kept.empty()) return std::nullopt;
-  // Off the grid, a stance that fails makes that m unusable.
+  // Off the grid, a stance that fails makes that m unusable: a cost beyond any real one, finite
+  // so that Brent's parabolas through it stay numbers.
   const auto summed = [&](double m) {
     double total = 0.0;
     for (std::size_t i : kept) {
       const auto c = cost_at(i, m);
-      if (!c) return std::numeric_limits<double>::infinity();
+      if (!c) return kUnusableCost;
       total += *c;
     }
     return total;
   };
   const auto best = static_cast<std::size_t>(
       std::min_element(grid_total.begin(), grid_total.end()) - grid_total.begin());
-  double a = grid[best == 0 ? 0 : best - 1];
-  double b = grid[std::min(best + 1, grid.size() - 1)];
-  const double ratio = (std::sqrt(5.0) - 1.0) / 2.0;
-  double x1 = b - ratio * (b - a), x2 = a + ratio * (b - a);
-  double f1 = summed(x1), f2 = summed(x2);
-  while (b - a > 1e-3) {
-    if (f1 <= f2) {
-      b = x2;
-      x2 = x1;
-      f2 = f1;
-      x1 = b - ratio * (b - a);
-      f1 = summed(x1);
-    } else {
-      a = x1;
-      x1 = x2;
-      f1 = f2;
-      x2 = a + ratio * (b - a);
-      f2 = summed(x2);
-    }
-  }
+  // Brent's method (parabolic steps, golden sections where they fail) between the best grid
+  // point's neighbours, to about 0.001 in m.
+  std::uintmax_t max_evaluations = kMaxBrentEvaluations;
+  const auto [searched, searched_cost] = boost::math::tools::brent_find_minima(
+      summed, grid[best == 0 ? 0 : best - 1], grid[std::min(best + 1, grid.size() - 1)], kBrentBits,
+      max_evaluations);
   SharedExponent out;
   out.stances = static_cast<int>(kept.size());
   // The grid point itself can be lower than where the search ends (a minimum at a bound).
-  const double searched = f1 <= f2 ? x1 : x2;
-  out.m = std::min(f1, f2) <= grid_total[best] ? searched : grid[best];
+  const bool search_lower = searched_cost <= grid_total[best];
+  out.m = search_lower ? searched : grid[best];
+  const double f0 = search_lower ? searched_cost : grid_total[best];
   out.at_bound = std::abs(out.m - lo) <= kBoundTolerance * std::abs(lo) ||
                  std::abs(out.m - hi) <= kBoundTolerance * std::abs(hi);
   // The summed cost is half the squared residuals, so its second derivative along m, the others
   // fitted again, is J^T J there: over steps of h, inward at a bound.
   const double h = 0.01;
-  const double f0 = summed(out.m);
   double curvature = 0.0;
   if (out.m - h >= lo && out.m + h <= hi) {
     curvature = (summed(out.m + h) - 2.0 * f0 + summed(out.m - h)) / (h * h);
@@ -1294,11 +1344,9 @@ std::optional<SharedExponent> fit_shared_damping_exponent(std::span<const Region
     curvature = (f0 - 2.0 * summed(out.m + inward) + summed(out.m + 2.0 * inward)) / (h * h);
   }
   // The residuals' variance: each stance's frames less its three parameters, and m.
-  std::vector<FitFrame> frames;
-  for (std::size_t i : kept) {
-    append_frames(stances[i], settings.smoothing, settings.end_rate, 0, frames);
-  }
-  const int dof = static_cast<int>(frames.size()) - 3 * static_cast<int>(kept.size()) - 1;
+  std::size_t frames = 0;
+  for (std::size_t i : kept) frames += prepared[i].frames.size();
+  const int dof = static_cast<int>(frames) - 3 * static_cast<int>(kept.size()) - 1;
   const double sigma2 = dof > 0 ? 2.0 * f0 / dof : 0.0;
   out.se = curvature > 0.0 && sigma2 > 0.0 ? std::sqrt(sigma2 / curvature)
                                            : std::numeric_limits<double>::infinity();

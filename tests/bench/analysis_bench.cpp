@@ -63,14 +63,15 @@ fs::path gaitmon_executable() {
   return fs::read_symlink("/proc/self/exe").parent_path().parent_path() / "gaitmon";
 }
 
-void BM_AnalyzeCommandTenMinutes(benchmark::State& state) {
+// `flags`: an option of `analyze` to compare with the default (none), after a space.
+void BM_AnalyzeCommandTenMinutes(benchmark::State& state, const char* flags) {
   const fs::path exe = gaitmon_executable();
   if (!fs::exists(exe)) {
     state.SkipWithError("the gaitmon executable is not built beside tests/");
     return;
   }
   const std::string command = exe.string() + " analyze " + simulated(600.0).string() + " --out " +
-                              (bench_dir() / "out").string() + " > /dev/null";
+                              (bench_dir() / "out").string() + flags + " > /dev/null";
   for (auto _ : state) {
     if (std::system(command.c_str()) != 0) {
       state.SkipWithError("gaitmon analyze failed");
@@ -78,7 +79,12 @@ void BM_AnalyzeCommandTenMinutes(benchmark::State& state) {
     }
   }
 }
-BENCHMARK(BM_AnalyzeCommandTenMinutes)
+BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, default, "")
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1)
+    ->Repetitions(3)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, m_per_session, " --m-per-session")
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->Repetitions(3)
