@@ -19,6 +19,7 @@
 #include <mutex>
 #include <regex>
 #include <stdexcept>
+#include <string>
 #include <thread>
 #include <tuple>
 #include <utility>
@@ -439,7 +440,7 @@ TEST(Monitor, OffersAfterCloseAreRefusedAndCounted) {
 // fit_extended_model over the same analyses), now and then and once more at shutdown. Crosstalk
 // also needs the steps measured again at its couplings, which the monitor must do too. The whole
 // session fits in a window of 100; a window of 20 keeps the latest 20 finalised.
-class MonitorEffects : public ::testing::TestWithParam<std::tuple<const char*, int>> {};
+class MonitorEffects : public ::testing::TestWithParam<std::tuple<std::string, int>> {};
 
 TEST_P(MonitorEffects, OfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
   const auto [effect, window] = GetParam();
@@ -513,7 +514,8 @@ TEST_P(MonitorEffects, OfTheConfigAreFittedToTheLatestStepsAsAnalyzeFitsThem) {
 }
 
 INSTANTIATE_TEST_SUITE_P(ImpactAndCrosstalk, MonitorEffects,
-                         ::testing::Combine(::testing::Values("impact_transient", "crosstalk"),
+                         ::testing::Combine(::testing::Values(std::string("impact_transient"),
+                                                              std::string("crosstalk")),
                                             ::testing::Values(100, 20)),
                          [](const auto& info) {
                            return fmt::format("{}_window{}", std::get<0>(info.param),
@@ -525,7 +527,7 @@ INSTANTIATE_TEST_SUITE_P(ImpactAndCrosstalk, MonitorEffects,
 // window that still carry into it (stress_relaxation's lag: those ending within 20 tau of its
 // heel strike). One worker: each step is then fitted after every earlier one is in the window,
 // and which estimate it was fitted with is what its report names.
-class MonitorEffectsInside : public ::testing::TestWithParam<const char*> {};
+class MonitorEffectsInside : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
   Config config = shipped_config();
@@ -622,7 +624,8 @@ TEST_P(MonitorEffectsInside, FitEachStepAfterAnEstimateWithThem) {
 }
 
 INSTANTIATE_TEST_SUITE_P(ImpactAndRelaxation, MonitorEffectsInside,
-                         ::testing::Values("impact_transient", "stress_relaxation"));
+                         ::testing::Values("impact_transient", "stress_relaxation"),
+                         [](const auto& info) { return info.param; });
 
 // As `analyze --effects` refuses them: seed8's and the free-scale fit cannot take a map.
 TEST(Monitor, RefusesATissueEffectInsideAFitThatCannotTakeIt) {
