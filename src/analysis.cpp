@@ -131,34 +131,47 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
   return out;
 }
 
-std::array<std::optional<SharedExponent>, kRegionCount> fit_damping_exponent_per_session(
-    std::span<StepAnalysis> steps, const Config& config, const AnalysisSettings& settings) {
-  std::array<std::optional<SharedExponent>, kRegionCount> out;
+SharedExponents shared_damping_exponents(std::span<const StepAnalysis> steps, const Config& config,
+                                         const AnalysisSettings& settings) {
+  SharedExponents out;
   detail::parallel_for(kRegionCount, [&](std::size_t ri) {
     std::vector<RegionSeries> series;
     std::vector<EllipsoidParams> declared;
-    std::vector<RegionAnalysis*> fitted;
-    for (StepAnalysis& step : steps) {
-      RegionAnalysis& r = step.regions[ri];
+    for (const StepAnalysis& step : steps) {
+      const RegionAnalysis& r = step.regions[ri];
       if (r.fit.status != FitStatus::Ok) continue;
       series.push_back(r.series);
       declared.push_back(r.declared);
-      fitted.push_back(&r);
     }
     out[ri] = fit_shared_damping_exponent(series, declared, config.fit_bounds, settings.fit);
-    if (!out[ri]) return;
-    FitSettings at = settings.fit;
-    at.declared_m = out[ri]->m;
-    for (RegionAnalysis* r : fitted) {
-      RegionFit fit = fit_region(r->series, r->declared, config.fit_bounds, at);
-      if (fit.status != FitStatus::Ok) continue;
-      fit.m.se = out[ri]->se;
-      fit.m.at_bound = out[ri]->at_bound;
-      r->fit = std::move(fit);
-    }
   });
-  for (StepAnalysis& step : steps) set_model_totals(step);
   return out;
+}
+
+void fit_at_shared_exponents(StepAnalysis& step, const SharedExponents& shared,
+                             const Config& config, const AnalysisSettings& settings) {
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    RegionAnalysis& r = step.regions[ri];
+    if (!shared[ri] || r.fit.status != FitStatus::Ok) continue;
+    FitSettings at = settings.fit;
+    at.declared_m = shared[ri]->m;
+    RegionFit fit = fit_region(r.series, r.declared, config.fit_bounds, at);
+    if (fit.status != FitStatus::Ok) continue;
+    fit.m.se = shared[ri]->se;
+    fit.m.at_bound = shared[ri]->at_bound;
+    r.fit = std::move(fit);
+  }
+  set_model_totals(step);
+}
+
+SharedExponents fit_damping_exponent_per_session(std::span<StepAnalysis> steps,
+                                                 const Config& config,
+                                                 const AnalysisSettings& settings) {
+  const SharedExponents shared = shared_damping_exponents(steps, config, settings);
+  detail::parallel_for(steps.size(), [&](std::size_t k) {
+    fit_at_shared_exponents(steps[k], shared, config, settings);
+  });
+  return shared;
 }
 
 void set_model_totals(StepAnalysis& step) {

@@ -589,6 +589,14 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
   // The extended model's k-fold needs at least one step per fold.
   model.effects_window_steps =
       integer_in(table, "effects_window_steps", DiscrepancySettings{}.folds, 100000);
+  model.m_per_session = read_boolean(table, "m_per_session");
+  // The first running m needs this many steps; a window holds at least as many.
+  model.m_window_steps = integer_in(table, "m_window_steps", kFirstSharedMSteps, 100000);
+  if (model.m_per_session && !model.effects.empty()) {
+    table.fail("m_per_session",
+               "cannot be true with [model] effects: each step's tissue is fitted again with the "
+               "effects inside, at its own m (as analyze refuses --m-per-session with effects)");
+  }
   table.finish();
 }
 
@@ -635,13 +643,6 @@ T choice(TableReader& table, std::string_view key,
   table.fail(key, fmt::format("must be one of {}, got \"{}\"", names, text));
 }
 
-bool boolean(TableReader& table, std::string_view key) {
-  const toml::node& n = table.node(key);
-  const auto* b = n.as_boolean();
-  if (b == nullptr) table.fail(key, expected("a boolean", n));
-  return b->get();
-}
-
 void read_wire(TableReader table, WireSettings& wire) {
   const toml::array& sync = table.array("sync");
   // One to four bytes: enough for any framing seen in practice, and a fixed bound lets the
@@ -669,7 +670,7 @@ void read_wire(TableReader table, WireSettings& wire) {
   wire.crc_big_endian = choice(table, "crc_byte_order",
                                std::array{std::pair{std::string_view("little"), false},
                                           std::pair{std::string_view("big"), true}});
-  wire.require_size_sensor_count = boolean(table, "require_size_sensor_count");
+  wire.require_size_sensor_count = read_boolean(table, "require_size_sensor_count");
   table.finish();
 }
 
@@ -716,7 +717,7 @@ void read_monitor(TableReader table, MonitorSettings& monitor) {
     table.fail("status_period_s",
                fmt::format("must be in [0.01, 3600], got {}", monitor.status_period_s));
   }
-  monitor.publish_frames = boolean(table, "publish_frames");
+  monitor.publish_frames = read_boolean(table, "publish_frames");
   table.finish();
 }
 

@@ -215,6 +215,14 @@ struct Monitor::Impl {
     std::shared_ptr<const InsideEffects> inside;
     bool last_is_current = false;  ///< `last` is of the window as it is now
   };
+  /// [model] m_per_session: the latest analysed Ok steps' own fits, keyed as the EffectWindow's,
+  /// and the running m per region over them.
+  struct ExponentWindow {
+    std::map<std::uint64_t, StepAnalysis> steps;
+    std::size_t fresh = 0;  ///< steps added since the last estimate took its copy
+    bool fitting = false;   ///< an estimate is queued or running
+    std::shared_ptr<const SharedExponents> current;  ///< the latest, for the steps after it
+  };
   /// Detector-thread state of one foot.
   struct FootState {
     bool started = false;
@@ -240,6 +248,7 @@ struct Monitor::Impl {
         pool(static_cast<std::size_t>(config.monitor.workers)) {
     latencies.reserve(kLatencyWindow);
     if (!config.model.effects.empty()) effects_thread.emplace(1);
+    if (config.model.m_per_session) exponent_thread.emplace(1);
     detector = std::thread([this] { detector_main(); });
   }
 
@@ -580,11 +589,17 @@ struct Monitor::Impl {
           analysis = analyse_step(job->step, *job->layout, config, options.analysis, &cache);
           std::shared_ptr<const InsideEffects> inside;
           const std::optional<StepAnalysis> extended = fit_with_effects(*job, *analysis, inside);
-          ready->report = fit_report(extended ? *extended : *analysis, ready->failed);
+          std::shared_ptr<const SharedExponents> running;
+          const std::optional<StepAnalysis> at_running = fit_at_running_m(*job, *analysis, running);
+          ready->report = fit_report(extended     ? *extended
+                                     : at_running ? *at_running
+                                                  : *analysis,
+                                     ready->failed);
           if (extended) {
             ready->report.effects_inside = inside->joined;
             ready->report.effects_utime = inside->utime;
           }
+          if (at_running) set_m_steps(*at_running, *running, ready->report);
         } catch (const std::exception& e) {
           // Logged before its report is built, which may fail too.
           if (auto held = fit_log.allow()) {
@@ -605,8 +620,117 @@ struct Monitor::Impl {
       complete(job->foot, std::move(job->slot), std::move(ready));
       if (analysis && !config.model.effects.empty()) {
         remember_for_effects(job->arrival, std::move(job->step), std::move(*analysis), job->layout);
+      } else if (analysis && config.model.m_per_session) {
+        remember_for_running_m(job->arrival, std::move(*analysis));
       }
     }
+  }
+
+  // ---- the running m ([model] m_per_session) ----
+
+  /// The step fitted again at the latest running m per region (fit_at_shared_exponents);
+  /// nullopt, and the step's own fit published, before the first estimate, without the setting
+  /// and where this fit failed (logged). `used` is the estimate.
+  std::optional<StepAnalysis> fit_at_running_m(const Job& job, const StepAnalysis& own,
+                                               std::shared_ptr<const SharedExponents>& used) {
+    if (!config.model.m_per_session) return std::nullopt;
+    {
+      const std::lock_guard lock(exponent_mutex);
+      used = exponent_window.current;
+    }
+    if (!used) return std::nullopt;
+    try {
+      StepAnalysis at = own;
+      fit_at_shared_exponents(at, *used, config, options.analysis);
+      return at;
+    } catch (const std::exception& e) {
+      if (auto held = exponent_log.allow()) {
+        spdlog::warn(
+            "monitor: foot {} step {}: the fit at the running m failed, the step's own fit is "
+            "published: {} ({} similar suppressed)",
+            foot_name(job.foot), job.step.index, e.what(), *held);
+      }
+      used.reset();
+      return std::nullopt;
+    }
+  }
+
+  /// Each region fitted at the running m says over how many steps that m was taken.
+  static void set_m_steps(const StepAnalysis& at, const SharedExponents& running,
+                          FitReport& report) {
+    for (const RegionAnalysis& r : at.regions) {
+      const auto& shared = running[index_of(r.region)];
+      if (shared && r.fit.status == FitStatus::Ok && !r.fit.m.free) {
+        report.regions[index_of(r.region)].m_steps = shared->stances;
+      }
+    }
+  }
+
+  /// Adds a step's own fit to the window. An estimate starts once there are kFirstSharedMSteps
+  /// steps, then whenever the new steps are as many as the old ones (10, 20, 40, ...; every half
+  /// window once full), as the extended model's do. Never throws: the step's fit is out.
+  void remember_for_running_m(std::uint64_t arrival, StepAnalysis analysis) noexcept {
+    try {
+      const std::lock_guard lock(exponent_mutex);
+      ExponentWindow& w = exponent_window;
+      w.steps.insert_or_assign(arrival, std::move(analysis));
+      while (w.steps.size() > static_cast<std::size_t>(config.model.m_window_steps)) {
+        w.steps.erase(w.steps.begin());
+      }
+      w.fresh = std::min(w.fresh + 1, w.steps.size());
+      const auto first = static_cast<std::size_t>(kFirstSharedMSteps);
+      if (w.fitting || w.steps.size() < first ||
+          w.fresh < std::max(first, w.steps.size() - w.fresh)) {
+        return;
+      }
+      boost::asio::post(*exponent_thread, [this] { estimate_running_m(); });
+      w.fitting = true;
+    } catch (const std::exception& e) {
+      if (auto held = exponent_log.allow()) {
+        spdlog::warn(
+            "monitor: a step was left out of the running m, or its estimate could not "
+            "be started: {} ({} similar suppressed)",
+            e.what(), *held);
+      }
+    }
+  }
+
+  /// The running m over a copy of the window, for the steps fitted after it. Skipped once the
+  /// run is interrupted. Never throws: it runs on a pool thread.
+  void estimate_running_m() noexcept {
+    std::size_t count = 0;
+    std::shared_ptr<const SharedExponents> estimate;
+    try {
+      std::vector<StepAnalysis> steps;
+      {
+        const std::lock_guard lock(exponent_mutex);
+        if (!interrupted.load()) {
+          for (const auto& [arrival, analysis] : exponent_window.steps) steps.push_back(analysis);
+          exponent_window.fresh = 0;
+        }
+      }
+      count = steps.size();
+      if (count > 0) {
+        const auto start = Clock::now();
+        estimate = std::make_shared<const SharedExponents>(
+            shared_damping_exponents(steps, config, options.analysis));
+        spdlog::debug("monitor: the running m over {} steps took {:.0f} ms", count,
+                      ms_between(start, Clock::now()));
+      }
+    } catch (const std::exception& e) {
+      if (auto held = exponent_log.allow()) {
+        spdlog::warn(
+            "monitor: the running m could not be estimated over {} steps: {} ({} similar "
+            "suppressed)",
+            count, e.what(), *held);
+      }
+    }
+    const std::lock_guard lock(exponent_mutex);
+    if (estimate) {
+      exponent_window.current = std::move(estimate);
+      m_estimates.fetch_add(1, std::memory_order_relaxed);
+    }
+    exponent_window.fitting = false;
   }
 
   /// The step fitted again with the latest estimate's effects inside its tissue fit, given the
@@ -901,6 +1025,7 @@ struct Monitor::Impl {
     c.fits_failed = fits_failed.load(std::memory_order_relaxed);
     c.segmentation_gaps = segmentation_gaps.load(std::memory_order_relaxed);
     c.publish_failures = publish_failures.load(std::memory_order_relaxed);
+    c.m_estimates = m_estimates.load(std::memory_order_relaxed);
     return c;
   }
 
@@ -946,6 +1071,7 @@ struct Monitor::Impl {
     pool.join();
     run_leftover_jobs();
     if (effects_thread) effects_thread->join();
+    if (exponent_thread) exponent_thread->join();
     finish_effects();
     publish_status(true);
     stopped = true;
@@ -977,7 +1103,7 @@ struct Monitor::Impl {
 
   std::atomic<std::uint64_t> processed{0}, rejected{0}, steps_detected{0}, steps_queued{0},
       backlog{0}, step_drops{0}, fits_published{0}, fits_failed{0}, segmentation_gaps{0},
-      publish_failures{0};
+      publish_failures{0}, m_estimates{0};
 
   // The backlog, shared by the detector and the workers.
   std::mutex jobs_mutex;
@@ -991,7 +1117,7 @@ struct Monitor::Impl {
   std::vector<double> latencies;
   std::size_t latency_next = 0;
 
-  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log, gap_log;
+  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log, gap_log, exponent_log;
 
   // The extended model's window: the workers fill it, the effects thread copies it.
   std::mutex effects_mutex;
@@ -1001,6 +1127,12 @@ struct Monitor::Impl {
   /// With [model] effects: one thread for the extended model's fits, which take tenths of a
   /// second, so that a step finalised meanwhile waits for no fit but its own.
   std::optional<boost::asio::thread_pool> effects_thread;
+
+  // The running m's window: the workers fill it, the exponent thread copies it.
+  std::mutex exponent_mutex;
+  ExponentWindow exponent_window;
+  /// With [model] m_per_session: one thread for the running m's estimates.
+  std::optional<boost::asio::thread_pool> exponent_thread;
   std::thread detector;
 };
 
@@ -1021,6 +1153,13 @@ Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publis
     throw std::invalid_argument(
         "Monitor: [model] effects inside the tissue fit need the default fit (identifiable "
         "parameters, P declared)");
+  }
+  if (config.model.m_per_session &&
+      (!config.model.effects.empty() || options.analysis.fit.mode != FitMode::Identifiable ||
+       options.analysis.fit.free_scale)) {
+    throw std::invalid_argument(
+        "Monitor: [model] m_per_session needs the default fit (identifiable parameters, P "
+        "declared) and no [model] effects");
   }
   // Checked once here: a segmenter that cannot be built would reject every frame.
   (void)StepSegmenter(Foot::Left, 1, config.segmentation, 0.0,

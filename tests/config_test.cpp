@@ -820,6 +820,39 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
   EXPECT_EQ(load_config(dir / kMain).model.effects_window_steps, 40);
 }
 
+// [model] m_per_session: off by default; on, analyze and the live monitor take one m per region
+// over the steps (the monitor over its window), which the effects' fits cannot share.
+TEST(Config, ModelRunningMIsOffByDefaultAndValidated) {
+  const ModelSettings shipped = load_config(shipped_config()).model;
+  EXPECT_FALSE(shipped.m_per_session);
+  EXPECT_EQ(shipped.m_window_steps, 200);
+  EXPECT_FALSE(ModelSettings{}.m_per_session);
+  EXPECT_EQ(ModelSettings{}.m_window_steps, 200);
+  const std::vector<Refusal> cases = {
+      {"ModelRunningMNotBoolean", kMain, replace("m_per_session = false", "m_per_session = 1"),
+       "model.m_per_session", "expected a boolean"},
+      {"ModelRunningMMissing", kMain, replace("m_per_session = false\n", ""), "model.m_per_session",
+       "missing"},
+      {"ModelRunningMWithEffects", kMain,
+       [](std::string& text) {
+         replace("m_per_session = false", "m_per_session = true")(text);
+         replace("effects = []", R"(effects = ["hysteresis"])")(text);
+       },
+       "model.m_per_session", "cannot be true with [model] effects"},
+      {"ModelRunningMWindowBelowTheFirstEstimate", kMain,
+       replace("m_window_steps = 200", "m_window_steps = 9"), "model.m_window_steps",
+       "must be in [10, 100000], got 9"},
+      {"ModelRunningMWindowMissing", kMain, replace("m_window_steps = 200\n", ""),
+       "model.m_window_steps", "missing"},
+  };
+  expect_refusals(cases);
+  const fs::path dir = copy_config("ModelRunningM");
+  edit_file(dir / kMain, replace("m_per_session = false", "m_per_session = true"));
+  edit_file(dir / kMain, replace("m_window_steps = 200", "m_window_steps = 50"));
+  EXPECT_TRUE(load_config(dir / kMain).model.m_per_session);
+  EXPECT_EQ(load_config(dir / kMain).model.m_window_steps, 50);
+}
+
 // [asymmetry]: every region's SD for kbar and cbar, as the shipped file documents them; each
 // must be there, known and in [0, 100].
 TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {

@@ -627,6 +627,112 @@ INSTANTIATE_TEST_SUITE_P(ImpactAndRelaxation, MonitorEffectsInside,
                          ::testing::Values("impact_transient", "stress_relaxation"),
                          [](const auto& info) { return info.param; });
 
+// [model] m_per_session: once the first running m is out, each step is fitted at it, region by
+// region, as `analyze --m-per-session` fits a session's steps at its m (fit_at_shared_exponents),
+// with the m taken over the complete steps the detector had finalised (both feet, in order); the
+// steps before it keep their own m and say so (m_steps 0). One worker: each step is remembered
+// before the next is fitted.
+TEST(Monitor, RunningMFitsEachStepAfterTheFirstEstimateAtIt) {
+  Config config = shipped_config();
+  config.model.m_per_session = true;
+  config.monitor.workers = 1;
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  const std::vector<Step> ok = complete_steps(demo_30s(), config);
+  const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  std::uint64_t estimates = 0;
+  {
+    // The rest only once the first estimate is out, so that later steps are fitted at it.
+    const auto later = std::find_if(frames.begin(), frames.end(), [](const SensorFrame& f) {
+      return f.device_time_us > 12'000'000;
+    });
+    Monitor monitor(config, options, publisher);
+    offer_all(monitor, std::vector<SensorFrame>(frames.begin(), later));
+    ASSERT_TRUE(wait_until([&] { return monitor.counters().m_estimates >= 1; }));
+    offer_all(monitor, std::vector<SensorFrame>(later, frames.end()));
+    monitor.stop();
+    estimates = monitor.counters().m_estimates;
+  }
+  const std::vector<FitReport> fits = publisher.fits();
+  ASSERT_EQ(fits.size(), ok.size());
+  std::vector<StepAnalysis> own;
+  for (const Step& step : ok) own.push_back(analyse_step(step, layout, config, quick_fits()));
+  // The running m over the first `count` steps, once per count.
+  std::map<std::size_t, SharedExponents> over;
+  const auto running_m = [&](std::size_t count) -> const SharedExponents& {
+    auto it = over.find(count);
+    if (it == over.end()) {
+      const std::span<const StepAnalysis> first(own.data(), count);
+      it = over.emplace(count, shared_damping_exponents(first, config, quick_fits())).first;
+    }
+    return it->second;
+  };
+  const auto heel = index_of(Region::Heel);
+  std::size_t before = 0, at_running = 0;
+  for (const FitReport& fit : fits) {
+    SCOPED_TRACE(fmt::format("foot {} step {}", foot_name(fit.foot), fit.step));
+    const int heel_steps = fit.regions[heel].m_steps;
+    if (heel_steps == 0) {
+      EXPECT_EQ(at_running, 0u) << "a step after the first estimate is fitted at it";
+      for (const RegionFitReport& g : fit.regions) EXPECT_EQ(g.m_steps, 0);
+      ++before;
+      continue;
+    }
+    // Every step of the demo fits its heel: the heel's m_steps is the estimate's step count.
+    const auto count = static_cast<std::size_t>(heel_steps);
+    ASSERT_GE(count, static_cast<std::size_t>(kFirstSharedMSteps));
+    ASSERT_LE(count, ok.size());
+    for (std::size_t k = 0; k < count; ++k)
+      ASSERT_EQ(own[k].at(Region::Heel).fit.status, FitStatus::Ok);
+    if (at_running++ >= 12) continue;  // enough, and short enough for the sanitizer builds
+    const SharedExponents& shared = running_m(count);
+    const auto self = std::find_if(ok.begin(), ok.end(), [&](const Step& s) {
+      return s.foot == fit.foot && s.index == fit.step;
+    });
+    ASSERT_NE(self, ok.end());
+    StepAnalysis expected = own[static_cast<std::size_t>(self - ok.begin())];
+    fit_at_shared_exponents(expected, shared, config, quick_fits());
+    expect_close(fit.nrmse_total_pct, expected.nrmse_total_pct, "total NRMSE");
+    for (const RegionAnalysis& r : expected.regions) {
+      const RegionFitReport& got = fit.regions[index_of(r.region)];
+      const std::string where(region_name(r.region));
+      EXPECT_EQ(got.status, expected_status(r.fit)) << where;
+      if (r.fit.status != FitStatus::Ok) continue;
+      const auto& m = shared[index_of(r.region)];
+      EXPECT_EQ(got.m_steps, m && !r.fit.m.free ? m->stances : 0) << where;
+      expect_close(got.kbar_n_per_mm3, r.fit.kbar_n_per_mm3.value, where + " kbar");
+      expect_close(got.n, r.fit.n.value, where + " n");
+      expect_close(got.cbar_ns_per_mm3, r.fit.cbar_ns_per_mm3.value, where + " cbar");
+      expect_close(got.m, r.fit.m.value, where + " m");
+      expect_close(got.se_m, r.fit.m.se, where + " se_m");
+    }
+    EXPECT_TRUE(shared[heel].has_value());
+    EXPECT_EQ(fit.regions[heel].m, shared[heel]->m);
+  }
+  EXPECT_GE(before, static_cast<std::size_t>(kFirstSharedMSteps));
+  EXPECT_GE(at_running, 10u);
+  EXPECT_GE(estimates, 2u) << "again as the steps double";
+}
+
+// As analyze refuses --m-per-session there: the fit at a declared m is the default fit's, and
+// each step's tissue fitted with effects inside has its own m.
+TEST(Monitor, RefusesARunningMOutsideTheDefaultFitOrWithEffects) {
+  Config config = shipped_config();
+  config.model.m_per_session = true;
+  RecordingPublisher publisher;
+  MonitorOptions seed8 = quick_replay();
+  seed8.analysis.fit.mode = FitMode::Seed8;
+  EXPECT_THROW(Monitor(config, seed8, publisher), std::invalid_argument);
+  MonitorOptions free_scale = quick_replay();
+  free_scale.analysis.fit.free_scale = true;
+  EXPECT_THROW(Monitor(config, free_scale, publisher), std::invalid_argument);
+  config.model.effects = {"impact_transient"};
+  EXPECT_THROW(Monitor(config, quick_replay(), publisher), std::invalid_argument);
+}
+
 // As `analyze --effects` refuses them: seed8's and the free-scale fit cannot take a map.
 TEST(Monitor, RefusesATissueEffectInsideAFitThatCannotTakeIt) {
   Config config = shipped_config();

@@ -105,16 +105,29 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
 /// them: for a caller that fits regions again.
 void set_model_totals(StepAnalysis& step);
 
-/// Fits every region's steps again at one damping exponent m per region over them
-/// (fit_shared_damping_exponent over the steps whose fit is Ok): one step mostly leaves m at a
-/// bound of its range (README, "What one step can determine"). Each refitted step's m carries the
-/// shared m's standard error and bound flag, and its model totals follow. Returns the shared m per
-/// region, nothing where no step was fitted at every m tried. The steps' fits keep their own
-/// wherever they were not fitted again. The default fit only (throws std::invalid_argument
-/// otherwise). The regions are fitted in parallel on every core; the result does not depend on
-/// it.
-std::array<std::optional<SharedExponent>, kRegionCount> fit_damping_exponent_per_session(
-    std::span<StepAnalysis> steps, const Config& config, const AnalysisSettings& settings);
+/// One damping exponent m per region, nothing where there is none.
+using SharedExponents = std::array<std::optional<SharedExponent>, kRegionCount>;
+
+/// The m per region at which the steps whose fit of that region is Ok fit best together, each
+/// with its own kbar, n and cbar (fit_shared_damping_exponent): one step mostly leaves m at a
+/// bound of its range (README, "What one step can determine"). Nothing for a region where no step
+/// was fitted at every m tried. The default fit only (throws std::invalid_argument otherwise).
+/// The regions run in parallel on every core; the result does not depend on it.
+SharedExponents shared_damping_exponents(std::span<const StepAnalysis> steps, const Config& config,
+                                         const AnalysisSettings& settings);
+
+/// Fits each region of the step whose fit is Ok again at its shared m, where it has one
+/// (FitSettings::declared_m); its m then carries the shared m's standard error and bound flag
+/// (m.free is false). A region whose fit at the shared m fails keeps its own. The model totals
+/// follow.
+void fit_at_shared_exponents(StepAnalysis& step, const SharedExponents& shared,
+                             const Config& config, const AnalysisSettings& settings);
+
+/// `analyze --m-per-session`: shared_damping_exponents over the steps, then each step fitted at
+/// them (fit_at_shared_exponents). Returns the shared m per region.
+SharedExponents fit_damping_exponent_per_session(std::span<StepAnalysis> steps,
+                                                 const Config& config,
+                                                 const AnalysisSettings& settings);
 
 /// Median and interquartile range of one parameter across steps (linear interpolation between
 /// order statistics, as numpy's default). All zero when there are no values.

@@ -94,7 +94,15 @@ struct ModelSettings {
   /// The live monitor fits them to this many of the latest complete steps (both feet); analyze
   /// fits them to the whole session.
   int effects_window_steps = 100;
+  /// One damping exponent m per region over the steps, each step's kbar, n and cbar fitted at it
+  /// (`analyze --m-per-session`); the live monitor takes it over the latest m_window_steps
+  /// complete steps (both feet), from kFirstSharedMSteps of them on. Not with effects.
+  bool m_per_session = false;
+  int m_window_steps = 200;
 };
+
+/// The live monitor's first running m ([model] m_per_session) waits for this many complete steps.
+inline constexpr int kFirstSharedMSteps = 10;
 
 /// [asymmetry]: how differently the pair of insoles alone makes the same tissue read under the two
 /// feet, per region (indexed by index_of(Region)), as the SD of 100 ln(right / left) of kbar and

@@ -31,6 +31,14 @@
 //    estimate's effects inside its tissue fit (fit_step_with_effects, given the earlier steps of
 //    its foot in the window that carry into it), and its FitReport names them (effects_inside,
 //    effects_utime); a step whose such fit fails is published with its baseline fit.
+//  - With [model] m_per_session, the workers keep each analysed Ok step's own fit in a window of
+//    the latest config.model.m_window_steps (both feet, in the detector's order), and a thread of
+//    its own takes one damping exponent m per region over them (shared_damping_exponents), once
+//    there are kFirstSharedMSteps and again whenever the new steps are as many as the old. Each
+//    step the workers fit after an estimate is fitted again at it (fit_at_shared_exponents); its
+//    FitReport's regions say over how many steps (m_steps); a step whose such fit fails is
+//    published with its own. At shutdown a running estimate is waited for; one not yet started is
+//    skipped once close() was called.
 //
 // Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
 // wrap, divided by 1e6 (for replays that is the session's t_s, which the drivers encode as
@@ -126,6 +134,8 @@ struct MonitorCounters {
   /// Steps whose analysis threw or a region failed (published with fit_failed), and steps lost
   /// to an error after their analysis (nothing published for them).
   std::uint64_t fits_failed = 0;
+  /// Estimates of the running m made ([model] m_per_session).
+  std::uint64_t m_estimates = 0;
   /// Frames of a foot more than [segmentation] max_gap_s after its previous one (lost frames, a
   /// link drop-out, a device restart seen as a jump forward): each restarted its segmentation.
   std::uint64_t segmentation_gaps = 0;
@@ -138,7 +148,8 @@ class Monitor {
   /// Starts the detector thread and the workers. Throws std::invalid_argument if the sample
   /// rate is not positive, a setting is out of its range (load_config has checked those), or
   /// an effect of [model] effects sits inside the tissue fit and options.analysis is not the
-  /// default fit (fit_steps_with_effects).
+  /// default fit (fit_steps_with_effects), or [model] m_per_session is set with effects or
+  /// outside the default fit.
   /// The publisher must outlive the monitor.
   Monitor(const Config& config, MonitorOptions options, Publisher& publisher);
   /// Calls stop().

@@ -55,6 +55,8 @@ struct RegionFitReport {
   double se_kbar = 0.0, se_n = 0.0, se_cbar = 0.0, se_m = 0.0;
   double A_mm = 0.0, B_mm = 0.0, C_mm = 0.0, d0_mm = 0.0;
   double nrmse_pct = 0.0;
+  /// Steps of the running m ([model] m_per_session) the region was fitted at; 0: its own m.
+  int m_steps = 0;
 };
 
 /// Per foot-step fit results (GAITMON_FIT).

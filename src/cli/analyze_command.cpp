@@ -45,6 +45,7 @@ struct AnalyzeArgs {
   std::string end_rate = "two-frame";
   bool free_scale = false;
   bool m_per_session = false;
+  bool m_per_session_given = false;  ///< else [model] m_per_session of the config
   std::vector<std::string> effects;
   bool effects_given = false;
 };
@@ -94,8 +95,10 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
     throw CLI::ValidationError("--free-scale", "applies to --fit identifiable only");
   }
   if (args.m_per_session && (s.fit.mode != FitMode::Identifiable || s.fit.free_scale)) {
-    throw CLI::ValidationError("--m-per-session",
-                               "applies to the default fit only (not --fit seed8 or --free-scale)");
+    throw CLI::ValidationError(
+        "--m-per-session",
+        "applies to the default fit only (not --fit seed8 or --free-scale); with [model] "
+        "m_per_session in the config, give --m-per-session=false");
   }
   return s;
 }
@@ -611,8 +614,9 @@ std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const In
   return out;
 }
 
-void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
+void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   const Config config = load_global_config(global);
+  if (!args.m_per_session_given) args.m_per_session = config.model.m_per_session;
   const AnalysisSettings settings = settings_from(args);
   const std::vector<std::string>& names = args.effects_given ? args.effects : config.model.effects;
   if (settings.fit.mode == FitMode::Seed8 || settings.fit.free_scale) {
@@ -628,7 +632,8 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   if (args.m_per_session && !names.empty()) {
     throw std::invalid_argument(
         fmt::format("--m-per-session with effects in the model ({}) is not supported: each step's "
-                    "tissue is then fitted again with them inside; give --effects none",
+                    "tissue is then fitted again with them inside; give --effects none or "
+                    "--m-per-session=false",
                     fmt::join(names, ", ")));
   }
   check_output_dir(args.out_dir, "--out");
@@ -641,7 +646,7 @@ void run_analyze(const GlobalOptions& global, const AnalyzeArgs& args) {
   std::vector<Step> ok_steps;
   std::vector<StepAnalysis> analyses;
   std::optional<ExtendedModelFit> extended;
-  std::array<std::optional<SharedExponent>, kRegionCount> m_per_session;
+  SharedExponents m_per_session;
   SessionAnalysis session;
   {
     ProgressBar progress("analyze");
@@ -818,7 +823,9 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                 "Fit one damping exponent m per region over the whole session, each step's kbar, n "
                 "and cbar at it: one step mostly leaves m at a bound of its range (README, \"What "
                 "one step can determine\"). Default fit only, without effects; regions.csv's m "
-                "and se_m are then the session's, and session.json's m_per_session says so");
+                "and se_m are then the session's, and session.json's m_per_session says so. "
+                "Default: [model] m_per_session of the config; --m-per-session=false turns it "
+                "off");
   sub->add_option("--effects", args->effects,
                   fmt::format("Effects added to the model, comma-separated ({}), or none; "
                               "default: [model] effects of the config",
@@ -833,6 +840,7 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember(effect_names_or_none()));
   sub->callback([&global, args, sub] {
     args->effects_given = sub->count("--effects") > 0;
+    args->m_per_session_given = sub->count("--m-per-session") > 0;
     if (std::find(args->effects.begin(), args->effects.end(), "none") != args->effects.end()) {
       if (args->effects.size() > 1) {
         throw CLI::ValidationError("--effects", "none cannot be combined with an effect");

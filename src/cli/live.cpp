@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -131,6 +132,14 @@ void StepPrinter::publish(const FitReport& report) {
   // Without it a refitted step's kbar could be read as the baseline's.
   if (!report.effects_inside.empty()) {
     fmt::format_to(std::back_inserter(line), "  ({} inside)", report.effects_inside);
+  }
+  // Nor a cbar fitted at the running m ([model] m_per_session) as one at the step's own m.
+  const auto most = std::max_element(
+      report.regions.begin(), report.regions.end(),
+      [](const RegionFitReport& a, const RegionFitReport& b) { return a.m_steps < b.m_steps; });
+  if (most->m_steps > 0) {
+    fmt::format_to(std::back_inserter(line), "  (at the running m of up to {} steps)",
+                   most->m_steps);
   }
   print(line);
 }

@@ -77,7 +77,8 @@ json to_json(const FitReport& r) {
                        {"B_mm", g.B_mm},
                        {"C_mm", g.C_mm},
                        {"d0_mm", g.d0_mm},
-                       {"nrmse_pct", g.nrmse_pct}});
+                       {"nrmse_pct", g.nrmse_pct},
+                       {"m_steps", g.m_steps}});
   }
   return {{"type", "fit_t"},
           {"utime", r.utime},

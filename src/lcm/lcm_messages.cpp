@@ -71,6 +71,7 @@ void copy_region_fit_fields(const From& in, To& out) {
   out.C_mm = in.C_mm;
   out.d0_mm = in.d0_mm;
   out.nrmse_pct = in.nrmse_pct;
+  out.m_steps = in.m_steps;
 }
 
 template <typename From, typename To>

@@ -691,6 +691,38 @@ TEST(AnalyzeCommand, MPerSessionFitsEveryStepAtOneMPerRegion) {
   EXPECT_FALSE(fs::exists(a.dir / "m-effects" / "regions.csv"));
 }
 
+// [model] m_per_session = true in the config does what --m-per-session does, and
+// --m-per-session=false turns it off again.
+TEST(AnalyzeCommand, MPerSessionComesFromTheConfigUnlessGivenOnTheCommandLine) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto dir = test::scratch_dir("analyze-m-config");
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / name, dir / name);
+  }
+  std::string config = read_all(dir / "gaitmon.toml");
+  const auto at = config.find("m_per_session = false");
+  ASSERT_NE(at, std::string::npos);
+  config.replace(at, std::string("m_per_session = false").size(), "m_per_session = true");
+  test::write_text(dir / "gaitmon.toml", config);
+  const std::string analyze = "--config " + (dir / "gaitmon.toml").string() + " analyze " +
+                              (a.dir / "s.csv").string() + " --out ";
+  int status = -1;
+  std::string out = run(analyze + (dir / "on").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_TRUE(settings_of(dir / "on").at("m_per_session").get<bool>());
+  const auto shared = heel_column(dir / "on" / "regions.csv", 14);  // m
+  ASSERT_GT(shared.size(), 3u);
+  EXPECT_EQ(std::set<std::string>(shared.begin(), shared.end()).size(), 1u) << "one m";
+  out = run(analyze + (dir / "off").string() + " --m-per-session=false", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_FALSE(settings_of(dir / "off").at("m_per_session").get<bool>());
+  EXPECT_EQ(read_all(dir / "off" / "regions.csv"), read_all(a.dir / "out" / "regions.csv"));
+  out = run(analyze + (dir / "seed8").string() + " --fit seed8", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("give --m-per-session=false"), std::string::npos) << out;
+}
+
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-bad");
   test::write_text(dir / "bad.csv", test::session_head() + test::session_row("0.0,L") +

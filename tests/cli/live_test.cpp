@@ -253,6 +253,10 @@ TEST(Live, PrintsOneLinePerFittedStepAndForwardsEveryMessage) {
   FitReport inside = sample_fit();
   inside.effects_inside = "stress_relaxation,hysteresis";
   printer.publish(inside);
+  FitReport running = sample_fit();
+  running.regions[0].m_steps = 40;
+  running.regions[4].m_steps = 38;
+  printer.publish(running);
   printer.publish(StatusReport{});
   printer.publish(RawFrameReport{});
   printer.publish(effects);
@@ -262,8 +266,8 @@ TEST(Live, PrintsOneLinePerFittedStepAndForwardsEveryMessage) {
 
   using Kind = test::RecordingPublisher::Kind;
   EXPECT_EQ(next.order(),
-            (std::vector<Kind>{Kind::Frame, Kind::Step, Kind::Fit, Kind::Fit, Kind::Status,
-                               Kind::Raw, Kind::Effects, Kind::Effects}));
+            (std::vector<Kind>{Kind::Frame, Kind::Step, Kind::Fit, Kind::Fit, Kind::Fit,
+                               Kind::Status, Kind::Raw, Kind::Effects, Kind::Effects}));
   EXPECT_EQ(out,
             "R step   12  stance 0.620 s  kbar N/mm3 | cbar Ns/mm3:  heel 0.1170|0.01100  "
             "midfoot_posterior no_contact  midfoot_anterior no_contact  met1_2 "
@@ -273,6 +277,10 @@ TEST(Live, PrintsOneLinePerFittedStepAndForwardsEveryMessage) {
             "midfoot_posterior no_contact  midfoot_anterior no_contact  met1_2 "
             "fit_failed:too_few_frames  met3_5 no_contact  toe1 no_contact  toe2 no_contact  "
             "toes3_5 no_contact  (stress_relaxation,hysteresis inside)\n"
+            "R step   12  stance 0.620 s  kbar N/mm3 | cbar Ns/mm3:  heel 0.1170|0.01100  "
+            "midfoot_posterior no_contact  midfoot_anterior no_contact  met1_2 "
+            "fit_failed:too_few_frames  met3_5 no_contact  toe1 no_contact  toe2 no_contact  "
+            "toes3_5 no_contact  (at the running m of up to 40 steps)\n"
             "effects over 24 steps (1.0-14.5 s): impact_transient.amplitude_n = 80 +- 2.5; "
             "impact_transient.duration_s = 0.04 (no SE); pooled NRMSE 2.00 % -> 1.00 % (held-out "
             "2.25 % -> 1.50 %)\n"

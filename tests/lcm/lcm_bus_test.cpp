@@ -136,7 +136,8 @@ json lua_expected_fit() {
                        {"B_mm", g.B_mm},
                        {"C_mm", g.C_mm},
                        {"d0_mm", g.d0_mm},
-                       {"nrmse_pct", g.nrmse_pct}});
+                       {"nrmse_pct", g.nrmse_pct},
+                       {"m_steps", g.m_steps}});
   }
   return {{"utime", r.utime},
           {"foot", 1},
@@ -355,6 +356,7 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
     EXPECT_EQ(g["C_mm"], e.C_mm);
     EXPECT_EQ(g["d0_mm"], e.d0_mm);
     EXPECT_EQ(g["nrmse_pct"], e.nrmse_pct);
+    EXPECT_EQ(g["m_steps"], e.m_steps);
   }
 
   json expected_status = lua_expected_status();

@@ -161,6 +161,7 @@ TEST_F(LcmPublisherMemq, FitReportArrivesAsFitT) {
     EXPECT_EQ(g.C_mm, 60.125 + i);
     EXPECT_EQ(g.d0_mm, 10.5 + i);
     EXPECT_EQ(g.nrmse_pct, 3.25 + i);
+    EXPECT_EQ(g.m_steps, i < 3 ? 40 + i : 0);
   }
 }
 

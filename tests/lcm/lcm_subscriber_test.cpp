@@ -111,6 +111,7 @@ void expect_same(const FitReport& a, const FitReport& b) {
     EXPECT_EQ(x.C_mm, y.C_mm);
     EXPECT_EQ(x.d0_mm, y.d0_mm);
     EXPECT_EQ(x.nrmse_pct, y.nrmse_pct);
+    EXPECT_EQ(x.m_steps, y.m_steps);
   }
 }
 

@@ -73,6 +73,7 @@ inline FitReport sample_fit() {
     g.C_mm = 60.125 + k;
     g.d0_mm = 10.5 + k;
     g.nrmse_pct = 3.25 + k;
+    g.m_steps = i < 3 ? static_cast<int>(40 + i) : 0;
   }
   return r;
 }
