@@ -506,8 +506,6 @@ void read_tissue(const fs::path& path, const std::string& main_file, Config& con
   root.finish();
 }
 
-// [lcm]. The URL's provider is checked here so that a typo fails at load with the key; whether
-// LCM accepts the rest of it is known only when the publisher opens it.
 bool read_boolean(TableReader& table, std::string_view key) {
   const toml::node& n = table.node(key);
   const auto* b = n.as_boolean();
@@ -515,6 +513,8 @@ bool read_boolean(TableReader& table, std::string_view key) {
   return b->get();
 }
 
+// [lcm]. The URL's provider is checked here so that a typo fails at load with the key; whether
+// LCM accepts the rest of it is known only when the publisher opens it.
 std::string read_channel(TableReader& table, std::string_view key) {
   // LCM_MAX_CHANNEL_NAME_LENGTH in lcm/lcm.h; LCM would refuse longer names on every publish.
   constexpr std::size_t kMaxChannelLength = 63;
