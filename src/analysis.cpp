@@ -267,13 +267,15 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   std::tie(r.cbar_trend, r.cbar_asymmetry) =
       step_course(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region,
                   true, config.asymmetry.cbar_pair_sd_pct[index_of(region)]);
-  const PoolingSettings& chain = config.pooling;
+  const bool shared_m = !estimates.empty() && estimates.front().slope_on_shared_m;
+  const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
   const std::size_t ri = index_of(region);
   r.chain_sd = {chain.kbar_chain_sd_pct[ri] / 100.0, chain.n_chain_sd[ri],
                 chain.cbar_chain_sd_pct[ri] / 100.0, chain.m_chain_sd[ri]};
   r.pooled_per_step.resize(steps.size());
   if (r.pooling.pooled) {
-    r.pooled_mean = with_shared_error({r.pooling.mean, r.pooling.mean_covariance}, r.chain_sd);
+    r.pooled_mean = with_shared_error(
+        {r.pooling.mean, r.pooling.mean_covariance, r.pooling.mean_slope_on_shared_m}, r.chain_sd);
     for (std::size_t k = 0; k < estimated_steps.size(); ++k) {
       r.pooled_per_step[estimated_steps[k]] = material_params(r.pooling.steps[k]);
     }

@@ -622,11 +622,19 @@ void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry) {
   table.finish();
 }
 
+// The chain SDs' own keys of `table`; the caller finishes it.
+void read_chain_sds(TableReader& table, ChainSds& sds) {
+  read_per_region(table.table("kbar_chain_sd_pct"), sds.kbar_chain_sd_pct, 1000.0);
+  read_per_region(table.table("n_chain_sd"), sds.n_chain_sd, 1.0);
+  read_per_region(table.table("cbar_chain_sd_pct"), sds.cbar_chain_sd_pct, 1000.0);
+  read_per_region(table.table("m_chain_sd"), sds.m_chain_sd, 1.0);
+}
+
 void read_pooling(TableReader table, PoolingSettings& pooling) {
-  read_per_region(table.table("kbar_chain_sd_pct"), pooling.kbar_chain_sd_pct, 100.0);
-  read_per_region(table.table("n_chain_sd"), pooling.n_chain_sd, 1.0);
-  read_per_region(table.table("cbar_chain_sd_pct"), pooling.cbar_chain_sd_pct, 100.0);
-  read_per_region(table.table("m_chain_sd"), pooling.m_chain_sd, 1.0);
+  read_chain_sds(table, pooling.per_step);
+  TableReader shared = table.table("m_per_session");
+  read_chain_sds(shared, pooling.m_per_session);
+  shared.finish();
   table.finish();
 }
 

@@ -2,6 +2,7 @@
 #include "gaitmon/pooling.hpp"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -59,10 +60,38 @@ Mat psd_part(const Mat& m) {
   return eig.eigenvectors() * values.asDiagonal() * eig.eigenvectors().transpose();
 }
 
+// Whether the steps share one declared m (MaterialEstimate::slope_on_shared_m), checked alike.
+bool at_shared_m(std::span<const MaterialEstimate> steps) {
+  const auto shared = [](const MaterialEstimate& e) { return e.slope_on_shared_m.has_value(); };
+  if (std::none_of(steps.begin(), steps.end(), shared)) return false;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const MaterialEstimate& e = steps[i];
+    const std::string where = "pool_steps: step " + std::to_string(i);
+    if (!shared(e)) throw std::invalid_argument(where + " has no shared m where others have");
+    if (e.value[3] != steps[0].value[3] || e.covariance[3][3] != steps[0].covariance[3][3]) {
+      throw std::invalid_argument(where + " has another shared m or variance of it than step 0");
+    }
+    const MaterialVector& slope = *e.slope_on_shared_m;
+    if (!std::all_of(slope.begin(), slope.end(), [](double v) { return std::isfinite(v); }) ||
+        slope[3] != 1.0) {
+      throw std::invalid_argument(where +
+                                  " has a slope on the shared m that is not finite or "
+                                  "whose m entry is not 1");
+    }
+    for (std::size_t k = 0; k < 3; ++k) {
+      if (e.covariance[3][k] != 0.0) {
+        throw std::invalid_argument(where + " has a shared m that covaries with the others");
+      }
+    }
+  }
+  return true;
+}
+
 }  // namespace
 
 PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const MaterialBounds& bounds) {
   for (std::size_t i = 0; i < steps.size(); ++i) check(steps[i], i);
+  const bool shared_m = at_shared_m(steps);
   PooledEstimates out;
   out.steps.assign(steps.begin(), steps.end());
   if (steps.size() < kMinPoolingSteps) {
@@ -94,7 +123,12 @@ PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const Materi
     mu = mu_covariance * weighted;
     Mat scatter = Mat::Zero();
     for (const Vec& t : theta) scatter += (t - mu) * (t - mu).transpose();
-    const Mat next = psd_part(scatter / (count - 1.0) - mean_S);
+    Mat next = psd_part(scatter / (count - 1.0) - mean_S);
+    // The steps' m do not scatter at a shared m: T has no m part.
+    if (shared_m) {
+      next.row(3).setZero();
+      next.col(3).setZero();
+    }
     const double change = (next - T).norm();
     T = next;
     if (change <= kTolerance * (1.0 + T.norm())) break;
@@ -108,14 +142,39 @@ PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const Materi
     }
   }
 
-  for (MaterialEstimate& step : out.steps) {
+  // At a shared m, with variance s2: every step's estimate moves by its slope g_i times the m's
+  // error, so mu by h = (sum W_i)^-1 sum W_i g_i. mu_covariance holds that variance divided by
+  // the steps' count, as if each step's m erred on its own; it is replaced by h h^T s2, and each
+  // posterior's own slope is h + B (g_i - h).
+  Vec h = Vec::Zero();
+  double s2 = 0.0;
+  if (shared_m) {
+    s2 = S.front()(3, 3);
+    Vec weighted_slope = Vec::Zero();
+    for (std::size_t i = 0; i < theta.size(); ++i) {
+      weighted_slope += (S[i] + T).ldlt().solve(to_eigen(*steps[i].slope_on_shared_m));
+    }
+    h = mu_covariance * weighted_slope;
+    mu_covariance.row(3).setZero();
+    mu_covariance.col(3).setZero();
+  }
+  for (std::size_t i = 0; i < out.steps.size(); ++i) {
+    MaterialEstimate& step = out.steps[i];
     // B = T (T + S)^-1, computed as ((T + S)^-1 T)^T because T and S are symmetric.
-    const Mat Si = to_eigen(step.covariance);
-    const Mat B = (T + Si).ldlt().solve(T).transpose();
+    const Mat B = (T + S[i]).ldlt().solve(T).transpose();
     const Mat shrink = Mat::Identity() - B;
-    const Mat covariance = T - B * T + shrink * mu_covariance * shrink.transpose();
-    step.value = from_eigen(Vec(mu + B * (to_eigen(step.value) - mu)));
+    Mat covariance = T - B * T + shrink * mu_covariance * shrink.transpose();
+    if (shared_m) {
+      const Vec slope = h + B * (to_eigen(*steps[i].slope_on_shared_m) - h);
+      covariance += slope * slope.transpose() * s2;
+      step.slope_on_shared_m = from_eigen(slope);
+    }
+    step.value = from_eigen(Vec(mu + B * (theta[i] - mu)));
     step.covariance = from_eigen(Mat(0.5 * (covariance + covariance.transpose())));
+  }
+  if (shared_m) {
+    mu_covariance += h * h.transpose() * s2;
+    out.mean_slope_on_shared_m = from_eigen(h);
   }
   out.pooled = true;
   out.mean = from_eigen(mu);
@@ -138,10 +197,13 @@ std::optional<MaterialEstimate> material_estimate(const RegionFit& fit) {
   e.covariance = *fit.material_covariance;
   if (e.covariance[3][3] == 0.0) {
     // m declared (its row and column zero), the same for every step
-    // (fit_damping_exponent_per_session): its variance is that of the shared value, which the pool
-    // then gives back as its mean.
-    if (!(fit.m.se > 0.0) || !std::isfinite(fit.m.se)) return std::nullopt;
+    // (fit_damping_exponent_per_session): its variance is that of the shared value.
+    if (!(fit.m.se > 0.0) || !std::isfinite(fit.m.se) || !fit.material_slope_on_m) {
+      return std::nullopt;
+    }
     e.covariance[3][3] = fit.m.se * fit.m.se;
+    const auto& slope = *fit.material_slope_on_m;
+    e.slope_on_shared_m = MaterialVector{slope[0], slope[1], slope[2], 1.0};
   }
   return e;
 }
@@ -152,7 +214,13 @@ MaterialEstimate with_shared_error(MaterialEstimate estimate, const MaterialVect
       throw std::invalid_argument("with_shared_error: SD " + std::to_string(i) +
                                   " must be finite and not negative, got " + std::to_string(sd[i]));
     }
-    estimate.covariance[i][i] += sd[i] * sd[i];
+  }
+  const std::size_t own = estimate.slope_on_shared_m ? 3 : 4;
+  for (std::size_t i = 0; i < own; ++i) estimate.covariance[i][i] += sd[i] * sd[i];
+  if (estimate.slope_on_shared_m) {
+    const MaterialVector& g = *estimate.slope_on_shared_m;
+    for (std::size_t a = 0; a < 4; ++a)
+      for (std::size_t b = 0; b < 4; ++b) estimate.covariance[a][b] += g[a] * g[b] * sd[3] * sd[3];
   }
   return estimate;
 }

@@ -1129,6 +1129,11 @@ RegionFit fit_frames(const std::vector<FitFrame>& frames, std::size_t input_size
         }
       }
       fit.material_covariance = c;
+      if (settings.declared_m) {
+        const Eigen::Vector3d slope =
+            -(Jk.transpose() * Jk).ldlt().solve(Jk.transpose() * J.col(declared_column));
+        fit.material_slope_on_m = std::array<double, 3>{slope(0), slope(1), slope(2)};
+      }
     }
     for (std::size_t k = 0; k < kept.size(); ++k) {
       const double var = cov(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k));

@@ -883,23 +883,33 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   EXPECT_EQ(load_config(dir / kMain).asymmetry.kbar_pair_sd_pct[0], 0.0);
 }
 
-// [pooling]: every region's chain SD for kbar, n, cbar and m, as the shipped file documents them;
-// kbar's and cbar's in [0, 100] (per cent), n's and m's in [0, 1].
+// [pooling] and [pooling.m_per_session]: every region's chain SD for kbar, n, cbar and m, as the
+// shipped file documents them; kbar's and cbar's in [0, 1000] (per cent), n's and m's in [0, 1].
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
-  EXPECT_EQ(p.kbar_chain_sd_pct,
-            (std::array<double, kRegionCount>{4.0, 6.0, 6.5, 5.5, 4.5, 12.0, 12.0, 15.0}));
-  EXPECT_EQ(p.n_chain_sd,
-            (std::array<double, kRegionCount>{0.02, 0.025, 0.025, 0.04, 0.03, 0.06, 0.06, 0.075}));
-  EXPECT_EQ(p.cbar_chain_sd_pct,
-            (std::array<double, kRegionCount>{13.5, 0.0, 15.0, 12.0, 13.0, 0.0, 0.0, 0.0}));
-  EXPECT_EQ(p.m_chain_sd,
-            (std::array<double, kRegionCount>{0.06, 0.0, 0.04, 0.07, 0.08, 0.0, 0.0, 0.0}));
+  using PerRegion = std::array<double, kRegionCount>;
+  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.0, 6.5, 5.5, 4.5, 12.0, 12.0, 15.0}));
+  EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.06, 0.06, 0.075}));
+  EXPECT_EQ(p.per_step.cbar_chain_sd_pct, (PerRegion{13.5, 0.0, 15.0, 12.0, 13.0, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.m_chain_sd, (PerRegion{0.06, 0.0, 0.04, 0.07, 0.08, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.m_per_session.kbar_chain_sd_pct,
+            (PerRegion{4.0, 6.5, 6.5, 5.0, 5.0, 16.5, 93.5, 17.5}));
+  EXPECT_EQ(p.m_per_session.n_chain_sd,
+            (PerRegion{0.02, 0.025, 0.025, 0.035, 0.03, 0.045, 0.0, 0.075}));
+  EXPECT_EQ(p.m_per_session.cbar_chain_sd_pct,
+            (PerRegion{0.0, 7.5, 16.0, 0.0, 0.0, 33.5, 227.5, 17.5}));
+  EXPECT_EQ(p.m_per_session.m_chain_sd,
+            (PerRegion{0.055, 0.1, 0.145, 0.145, 0.16, 0.0, 0.215, 0.08}));
   const std::vector<Refusal> cases = {
       {"PoolingNAboveOne", kMain, replace("n_chain_sd = { heel = 0.02", "n_chain_sd = { heel = 2"),
        "pooling.n_chain_sd.heel", "must be in [0, 1], got 2"},
       {"PoolingKbarNegative", kMain, replace("kbar_chain_sd_pct", "met1_2 = 5.5", "met1_2 = -5"),
-       "pooling.kbar_chain_sd_pct.met1_2", "must be in [0, 100], got -5"},
+       "pooling.kbar_chain_sd_pct.met1_2", "must be in [0, 1000], got -5"},
+      {"PoolingSharedMCbarTooLarge", kMain,
+       replace("[pooling.m_per_session]", "toe2 = 227.5", "toe2 = 1227.5"),
+       "pooling.m_per_session.cbar_chain_sd_pct.toe2", "must be in [0, 1000], got 1227.5"},
+      {"PoolingSharedMMissing", kMain, erase_from_to("[pooling.m_per_session]", "[wire]"),
+       "pooling.m_per_session", "missing"},
       {"PoolingRegionMissing", kMain, replace("m_chain_sd", ", toes3_5 = 0.0", ""),
        "pooling.m_chain_sd.toes3_5", "missing"},
       {"PoolingTableMissing", kMain, erase_from_to("cbar_chain_sd_pct", "m_chain_sd"),

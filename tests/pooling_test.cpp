@@ -152,6 +152,106 @@ TEST(Pooling, ASharedErrorAddsItsVarianceToTheDiagonal) {
                std::invalid_argument);
 }
 
+// At a shared m its SD enters through the slope: the others were fitted at that m.
+TEST(Pooling, ASharedErrorInASharedMMovesTheOthersThroughTheSlope) {
+  MaterialEstimate e;
+  e.value = {std::log(0.2), 0.3, std::log(0.01), 1.1};
+  e.covariance = diagonal(0.0009, 0.0004, 0.01, 0.0025);
+  e.slope_on_shared_m = MaterialVector{0.1, -0.2, 2.0, 1.0};
+  const MaterialEstimate with = with_shared_error(e, {0.04, 0.0, 0.1, 0.05});
+  const double m2 = 0.05 * 0.05;
+  EXPECT_NEAR(with.covariance[0][0], 0.0009 + 0.0016 + 0.01 * m2, 1e-15);
+  EXPECT_NEAR(with.covariance[1][1], 0.0004 + 0.04 * m2, 1e-15);
+  EXPECT_NEAR(with.covariance[2][2], 0.01 + 0.01 + 4.0 * m2, 1e-15);
+  EXPECT_NEAR(with.covariance[3][3], 0.0025 + m2, 1e-15);
+  EXPECT_NEAR(with.covariance[2][3], 2.0 * m2, 1e-15);
+  EXPECT_NEAR(with.covariance[0][2], 0.2 * m2, 1e-15);
+}
+
+// Steps fitted at one shared m, of variance s2, that agree (T = 0) with unequal diagonal
+// covariances S_i: the pooled mean is the precision-weighted one at that m, and the m's error
+// moves it by h_k = sum(g_ik / S_ik) / sum(1 / S_ik), once for all the steps. So the mean's
+// covariance is 1 / sum(1 / S_ik) + h_k^2 s2 on the diagonal, h_a h_b s2 off it, and s2 for m,
+// not s2 over the steps' count as if each step's m erred on its own (before stop 57: the shared
+// m's standard error was 7 times too small in a pool of 50 steps). With T = 0 every posterior is
+// the mean.
+TEST(Pooling, ASharedMsVarianceEntersTheMeanOnceThroughTheStepsSlopes) {
+  const double s2 = 0.03 * 0.03;
+  std::vector<MaterialEstimate> steps(5);
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const double k = 1.0 + static_cast<double>(i);
+    steps[i].value = {-1.6, 0.3, -4.5, 1.2};
+    steps[i].covariance = diagonal(0.001 * k, 0.0004 * (6.0 - k), 0.02 * k * k, s2);
+    steps[i].slope_on_shared_m = MaterialVector{0.05 * k, -0.1, 1.5 + 0.2 * k, 1.0};
+  }
+  const PooledEstimates p = pool_steps(steps, kWide);
+  ASSERT_TRUE(p.pooled) << p.not_pooled;
+  ASSERT_TRUE(p.mean_slope_on_shared_m.has_value());
+  MaterialVector h{}, own{};
+  for (std::size_t k = 0; k < 3; ++k) {
+    double precision = 0.0, weighted = 0.0;
+    for (const MaterialEstimate& e : steps) {
+      precision += 1.0 / e.covariance[k][k];
+      weighted += (*e.slope_on_shared_m)[k] / e.covariance[k][k];
+    }
+    h[k] = weighted / precision;
+    own[k] = 1.0 / precision;
+  }
+  h[3] = 1.0;
+  for (std::size_t a = 0; a < 4; ++a) {
+    EXPECT_NEAR(p.mean[a], steps[0].value[a], 1e-12) << a;
+    EXPECT_NEAR((*p.mean_slope_on_shared_m)[a], h[a], 1e-12) << a;
+    for (std::size_t b = 0; b < 4; ++b) {
+      const double expected = (a == b ? own[a] : 0.0) + h[a] * h[b] * s2;
+      EXPECT_NEAR(p.mean_covariance[a][b], expected, 1e-12) << a << ", " << b;
+      EXPECT_NEAR(p.steps[2].covariance[a][b], expected, 1e-12) << a << ", " << b;
+      EXPECT_EQ(p.between_step[a][b], 0.0) << a << ", " << b;
+    }
+  }
+  EXPECT_NEAR(p.mean_covariance[3][3], s2, 1e-15);
+}
+
+// Where the steps scatter (T > 0), the pooled mean at a shared m moves with that m as its slope
+// says: pooling the same steps, each moved by its own slope times dm, moves the mean by h dm (by
+// central differences; T's own change with the m is second order here). Steps that disagree on
+// the shared m, or only some of which have one, are refused.
+TEST(Pooling, TheMeanAtASharedMMovesWithItAsItsSlopeSays) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  std::vector<MaterialEstimate> steps(40);
+  for (MaterialEstimate& e : steps) {
+    e.value = {-1.6 + 0.1 * unit(rng), 0.3 + 0.02 * unit(rng), -4.5 + 0.3 * unit(rng), 1.1};
+    e.covariance = diagonal(0.0004, 0.0001, 0.04 * (1.5 + unit(rng) * 0.3), 0.0016);
+    e.covariance[0][2] = e.covariance[2][0] = 0.001;
+    e.slope_on_shared_m =
+        MaterialVector{0.05 + 0.01 * unit(rng), -0.05, 1.8 + 0.1 * unit(rng), 1.0};
+  }
+  const PooledEstimates at = pool_steps(steps, kWide);
+  ASSERT_TRUE(at.pooled) << at.not_pooled;
+  EXPECT_GT(at.between_step[0][0], 0.0);
+  const double dm = 1e-4;
+  const auto moved = [&](double by) {
+    std::vector<MaterialEstimate> out = steps;
+    for (MaterialEstimate& e : out)
+      for (std::size_t k = 0; k < 4; ++k) e.value[k] += (*e.slope_on_shared_m)[k] * by;
+    return pool_steps(out, kWide).mean;
+  };
+  const MaterialVector up = moved(dm), down = moved(-dm);
+  for (std::size_t k = 0; k < 4; ++k) {
+    const double numeric = (up[k] - down[k]) / (2.0 * dm);
+    EXPECT_NEAR((*at.mean_slope_on_shared_m)[k], numeric, 0.02 * std::abs(numeric) + 1e-9) << k;
+  }
+  auto mixed = steps;
+  mixed[3].slope_on_shared_m.reset();
+  EXPECT_THROW(pool_steps(mixed, kWide), std::invalid_argument);
+  auto other_m = steps;
+  other_m[7].value[3] = 1.2;
+  EXPECT_THROW(pool_steps(other_m, kWide), std::invalid_argument);
+  auto other_variance = steps;
+  other_variance[7].covariance[3][3] = 0.0025;
+  EXPECT_THROW(pool_steps(other_variance, kWide), std::invalid_argument);
+}
+
 TEST(Pooling, FewStepsOrAMeanOutsideTheBoundsAreNotPooled) {
   std::vector<MaterialEstimate> steps(2);
   steps[0].value = {-2.0, 0.3, -4.0, 1.1};

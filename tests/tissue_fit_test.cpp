@@ -1022,7 +1022,48 @@ TEST(TissueFit, DeclaredMFitsTheOthersAtThatM) {
   const auto e = material_estimate(shared);
   ASSERT_TRUE(e.has_value());
   EXPECT_DOUBLE_EQ(e->covariance[3][3], 0.02 * 0.02);
+  ASSERT_TRUE(e->slope_on_shared_m.has_value() && fit.material_slope_on_m.has_value());
+  EXPECT_EQ((*e->slope_on_shared_m)[2], (*fit.material_slope_on_m)[2]);
+  EXPECT_EQ((*e->slope_on_shared_m)[3], 1.0);
   EXPECT_FALSE(material_estimate(fit).has_value()) << "a declared m without a standard error";
+}
+
+// With m declared, how the fitted (ln kbar, n, ln cbar) move with it, -(J^T J)^-1 J^T dr/dm,
+// against central differences of fits at m +- 0.01, on the model's own series with 2 N of noise.
+// The slope is what carries a shared m's error into a pool's mean (pool_steps).
+TEST(TissueFit, DeclaredMsSlopeFollowsTheFitsAtNeighbouringM) {
+  RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  for (double& f : s.force_n) f += noise(rng);
+  const auto fitted_at = [&](double m) {
+    FitSettings settings = raw();
+    settings.declared_m = m;
+    return fit_region(s, kHeel, config().fit_bounds, settings);
+  };
+  const auto theta = [](const RegionFit& f) {
+    return std::array<double, 3>{std::log(f.kbar_n_per_mm3.value), f.n.value,
+                                 std::log(f.cbar_ns_per_mm3.value)};
+  };
+  const double dm = 0.01;
+  const RegionFit fit = fitted_at(kHeel.m);
+  const RegionFit up = fitted_at(kHeel.m + dm);
+  const RegionFit down = fitted_at(kHeel.m - dm);
+  for (const RegionFit* f : {&fit, &up, &down}) {
+    ASSERT_EQ(f->status, FitStatus::Ok) << f->reason;
+    for (const Estimate* e : {&f->kbar_n_per_mm3, &f->n, &f->cbar_ns_per_mm3})
+      ASSERT_FALSE(e->at_bound);
+  }
+  ASSERT_TRUE(fit.material_slope_on_m.has_value());
+  const auto& slope = *fit.material_slope_on_m;
+  for (std::size_t k = 0; k < 3; ++k) {
+    const double numeric = (theta(up)[k] - theta(down)[k]) / (2.0 * dm);
+    std::printf("d theta_%zu / dm: %+.3e from the Jacobian, %+.3e by central differences\n", k,
+                slope[k], numeric);
+    EXPECT_NEAR(slope[k], numeric, 0.03 * std::abs(numeric) + 1e-4) << k;
+  }
+  EXPECT_FALSE(fit_region(s, kHeel, config().fit_bounds, raw()).material_slope_on_m.has_value())
+      << "m fitted: no slope on it";
 }
 
 TEST(TissueFit, DeclaredMIsRefusedOutsideTheDefaultFitAndTheBoundsOfM) {

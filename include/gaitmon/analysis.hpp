@@ -160,7 +160,7 @@ struct RegionSessionAnalysis {
   /// where the step was not pooled (no contact, a failed fit, or too few steps to pool).
   std::vector<std::optional<MaterialParams>> pooled_per_step;
   /// [pooling]'s SDs of the error every step of this region shares, on the pooled scale (ln kbar,
-  /// n, ln cbar, m).
+  /// n, ln cbar, m); [pooling.m_per_session]'s where the steps were fitted at one m.
   MaterialVector chain_sd{};
   /// The pooled mean, its covariance mu's (the steps' scatter) with chain_sd added: the region's
   /// tissue over the session with the chain's shared error. Nothing where not pooled.

@@ -112,15 +112,24 @@ struct AsymmetrySettings {
   std::array<double, kRegionCount> cbar_pair_sd_pct{};
 };
 
-/// [pooling]: the error the measurement chain gives every step of a region alike, per region
-/// (indexed by index_of(Region)), as the SD of the pooled mean's error on the scale the fit
-/// pools on: 100 ln for kbar and cbar, as it is for n and m. analyse_session adds it to the
-/// pooled mean's standard error, which otherwise holds only how the steps scatter.
-struct PoolingSettings {
+/// The error the measurement chain gives every step of a region alike, per region (indexed by
+/// index_of(Region)), as the SD of the pooled mean's error on the scale the fit pools on: 100 ln
+/// for kbar and cbar, as it is for n and m. analyse_session adds it to the pooled mean's standard
+/// error, which otherwise holds only how the steps scatter.
+struct ChainSds {
   std::array<double, kRegionCount> kbar_chain_sd_pct{};
   std::array<double, kRegionCount> n_chain_sd{};
   std::array<double, kRegionCount> cbar_chain_sd_pct{};
   std::array<double, kRegionCount> m_chain_sd{};
+};
+
+/// [pooling] for steps fitted each at its own m, [pooling.m_per_session] for steps fitted at one
+/// m per region over the session (fit_damping_exponent_per_session): that m errs by more than the
+/// pool of the steps' own, which its range's bounds hold toward the Appendix I means (README, "How
+/// honest the standard errors are").
+struct PoolingSettings {
+  ChainSds per_step;
+  ChainSds m_per_session;
 };
 
 /// [ring]: the lock-free ring between the driver thread and the detector thread.

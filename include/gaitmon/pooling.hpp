@@ -35,6 +35,11 @@ using MaterialVector = std::array<double, 4>;
 struct MaterialEstimate {
   MaterialVector value{};
   MaterialCovariance covariance{};
+  /// Set where m was declared to every step alike (one m per region over the session,
+  /// fit_damping_exponent_per_session), covariance[3][3] then being that m's variance:
+  /// d value / d m, its last entry 1 (RegionFit::material_slope_on_m). The m's error is one for
+  /// all the steps, so the pool carries it into the mean once instead of averaging it down.
+  std::optional<MaterialVector> slope_on_shared_m;
 };
 
 /// The fit's bounds on the same scale.
@@ -53,30 +58,39 @@ struct PooledEstimates {
   MaterialCovariance between_step{};    ///< T
   int iterations = 0;                   ///< of the mu-T fixed point
   std::vector<MaterialEstimate> steps;  ///< the posterior per input, in input order
-  /// mu's covariance: the steps' own errors and T together, so the region's tissue over the
-  /// session, not any one step's. It does not hold the error every step shares (README, "How
-  /// honest the standard errors are"): analyse_session adds [pooling]'s chain SDs to it.
+  /// mu's covariance: the steps' own errors and T together (and a shared m's error through
+  /// mean_slope_on_shared_m), so the region's tissue over the session, not any one step's. It
+  /// does not hold the chain's error, which every step shares (README, "How honest the standard
+  /// errors are"): analyse_session adds [pooling]'s chain SDs to it.
   MaterialCovariance mean_covariance{};
+  /// At a shared m: how mu moves with it (its last entry 1).
+  std::optional<MaterialVector> mean_slope_on_shared_m;
 };
 
 /// The pooled posteriors of `steps`. Steps with a parameter at a fit bound take part with the
 /// covariance their Jacobian gives: leaving them out would bias mu away from the bound. If mu
 /// falls outside `bounds` the normal approximation has failed (steps whose covariances are
 /// degenerate in different directions, as on the toes' one to three cells) and the steps are
-/// returned unpooled. Deterministic. Throws std::invalid_argument if a value is not finite or a
-/// covariance is not symmetric positive definite.
+/// returned unpooled. Steps at one shared m (MaterialEstimate::slope_on_shared_m) are pooled at
+/// that m, and its variance then enters the mean's covariance and each posterior's through their
+/// slopes on it, as it would through every step's estimate alike. Deterministic. Throws
+/// std::invalid_argument if a value is not finite, a covariance is not symmetric positive
+/// definite, or only some steps, or steps at different m or with different variances of it,
+/// declare a shared m.
 PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const MaterialBounds& bounds);
 
 /// A fit's free material parameters and their covariance, if it has them: an Ok fit in the
 /// default (Identifiable, declared scale) mode whose four parameters the data determine, or
 /// whose kbar, n and cbar they determine at a declared m with a standard error of its own (one m
-/// per session, fit_damping_exponent_per_session), which stands in for m's variance.
+/// per session, fit_damping_exponent_per_session): that is m's variance, and the estimate's
+/// slope_on_shared_m is set.
 std::optional<MaterialEstimate> material_estimate(const RegionFit& fit);
 
 /// `estimate` with sd[i]^2 added to its covariance's diagonal: an error of SD sd[i] in each
 /// parameter that every step shares (the measurement chain's, config [pooling]). The errors are
-/// taken as independent of each other, which the standard errors do not depend on. Throws
-/// std::invalid_argument for a negative or non-finite SD.
+/// taken as independent of each other, which the standard errors do not depend on. At a shared m
+/// (slope_on_shared_m set) m's error enters as that m's own does, through the slope: the others
+/// were fitted at it. Throws std::invalid_argument for a negative or non-finite SD.
 MaterialEstimate with_shared_error(MaterialEstimate estimate, const MaterialVector& sd);
 
 /// kbar, n, cbar, m and their standard errors (delta method for kbar and cbar) of an estimate.

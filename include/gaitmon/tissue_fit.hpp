@@ -114,6 +114,11 @@ struct RegionFit {
   /// In the default mode (Identifiable, P declared) with all four determined: the covariance of
   /// (ln kbar, n, ln cbar, m), sigma^2 (J^T J)^-1 as for the standard errors.
   std::optional<MaterialCovariance> material_covariance;
+  /// With m declared (FitSettings::declared_m) and the other three determined: how the fitted
+  /// (ln kbar, n, ln cbar) move with the declared m, -(J^T J)^-1 J^T dr/dm at the optimum (to
+  /// first order, as the covariance). An error in an m declared to many steps moves them all
+  /// alike, which their covariance at that m does not hold; pool_steps carries it.
+  std::optional<std::array<double, 3>> material_slope_on_m;
 
   EllipsoidParams params() const {
     return {A_mm.value,

@@ -244,7 +244,7 @@ nlohmann::json pooling_json(const RegionSessionAnalysis& r) {
   if (!p.pooled || !r.pooled_mean) {
     return {{"pooled", false}, {"steps", p.steps.size()}, {"note", p.not_pooled}};
   }
-  const MaterialParams steps = material_params({p.mean, p.mean_covariance});
+  const MaterialParams steps = material_params({p.mean, p.mean_covariance, std::nullopt});
   const MaterialParams mean = material_params(*r.pooled_mean);
   const auto sd = [&](std::size_t i) { return std::sqrt(p.between_step[i][i]); };
   return {{"pooled", p.pooled},
@@ -263,8 +263,10 @@ nlohmann::json pooling_json(const RegionSessionAnalysis& r) {
            "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
            "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp). se is the "
            "mean's standard error with the measurement chain's shared error, chain_sd from "
-           "[pooling] of the config (ln kbar and ln cbar: relative); se_steps is the steps' "
-           "scatter alone"}};
+           "[pooling] of the config, or [pooling.m_per_session] at one m per session (ln kbar "
+           "and ln cbar: relative); se_steps is the steps' scatter alone. At one m per session "
+           "the steps were pooled at that m, and its error (its se and its chain_sd) enters the "
+           "others' se through how they move with it"}};
 }
 
 nlohmann::json trend_json(const std::optional<LogTrend>& t) {
@@ -352,7 +354,7 @@ nlohmann::json m_per_session_json(const RegionSessionAnalysis& r, bool asked) {
            "the m at which the region's steps, each with its own kbar, n and cbar, fit best "
            "together; every step is fitted at it (regions.csv's m and se_m). Its standard error "
            "is that of the steps' residuals and does not hold the measurement chain's shared "
-           "error"}};
+           "error, which pooling's se does"}};
 }
 
 std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, const Config& config,
@@ -472,11 +474,12 @@ void print_named(const SessionAnalysis& session,
 
 // The pooled means with the standard errors that hold the chain's shared error: what a region's
 // tissue was over the session, where the medians above are what one step gives.
-void print_pooled(const SessionAnalysis& session) {
+void print_pooled(const SessionAnalysis& session, bool m_per_session) {
   fmt::print(
       "pooled over the session, +- one standard error with the measurement chain's error "
-      "([pooling] of the config):\n{:<19}{:>18}{:>17}{:>21}{:>17}\n",
-      "region", "kbar N/mm3", "n", "cbar Ns/mm3", "m");
+      "({} of the config):\n{:<19}{:>18}{:>17}{:>21}{:>17}\n",
+      m_per_session ? "[pooling.m_per_session]" : "[pooling]", "region", "kbar N/mm3", "n",
+      "cbar Ns/mm3", "m");
   for (const RegionSessionAnalysis& r : session.regions) {
     if (!r.pooled_mean) {
       fmt::print("{:<19}not pooled: {}\n", region_name(r.region), r.pooling.not_pooled);
@@ -543,7 +546,7 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
     }
     fmt::print("m per session, every step fitted at it: {}\n", fmt::join(shared, ", "));
   }
-  print_pooled(session);
+  print_pooled(session, args.m_per_session);
   print_named(
       session, &RegionSessionAnalysis::kbar_trend, &RegionSessionAnalysis::cbar_trend,
       [](const LogTrend& t) {

@@ -76,7 +76,7 @@ struct Fixture {
     heel.pooling.between_step[1][1] = 0.0004;  // 0.02 on n
     heel.pooling.between_step[2][2] = 0.04;    // 20 % on cbar, a logarithm too
     // The mean's SEs with the chain's error: 5 % on kbar, 0.01 on n, 10 % on cbar, 0.02 on m.
-    heel.pooled_mean = MaterialEstimate{heel.pooling.mean, {}};
+    heel.pooled_mean = MaterialEstimate{heel.pooling.mean, {}, std::nullopt};
     heel.pooled_mean->covariance[0][0] = 0.0025;
     heel.pooled_mean->covariance[1][1] = 0.0001;
     heel.pooled_mean->covariance[2][2] = 0.01;
