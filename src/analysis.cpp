@@ -257,6 +257,20 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
       estimated_steps.push_back(si);
     }
   }
+  // At one m per session a step whose fit at that m failed keeps its own m and is no estimate
+  // of the shared m's tissue: the pool leaves it out.
+  const bool shared_m = std::any_of(estimates.begin(), estimates.end(),
+                                    [](const auto& e) { return e.slope_on_shared_m.has_value(); });
+  if (shared_m) {
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < estimates.size(); ++k) {
+      if (!estimates[k].slope_on_shared_m) continue;
+      estimates[kept] = estimates[k];
+      estimated_steps[kept++] = estimated_steps[k];
+    }
+    estimates.resize(kept);
+    estimated_steps.resize(kept);
+  }
   r.pooling = pool_steps(estimates, material_bounds(config.fit_bounds));
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
@@ -267,7 +281,6 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   std::tie(r.cbar_trend, r.cbar_asymmetry) =
       step_course(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region,
                   true, config.asymmetry.cbar_pair_sd_pct[index_of(region)]);
-  const bool shared_m = !estimates.empty() && estimates.front().slope_on_shared_m;
   const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
   const std::size_t ri = index_of(region);
   r.chain_sd = {chain.kbar_chain_sd_pct[ri] / 100.0, chain.n_chain_sd[ri],

@@ -485,6 +485,30 @@ TEST(AnalyseSession, AtOneMPerSessionThePooledMeanHoldsThatMsErrorOnce) {
   }
 }
 
+// At one m per session a step whose fit at that m failed keeps its own m (fit_at_shared_exponents);
+// the pool leaves it out rather than mixing it in or refusing the region. Made here by giving one
+// step back its own fit of the heel.
+TEST(AnalyseSession, AtOneMPerSessionAStepAtItsOwnMIsLeftOutOfThePool) {
+  const Simulated& sim = simulated();
+  std::vector<StepAnalysis> shared = analyse_every_step({});
+  const std::vector<StepAnalysis> own = shared;
+  fit_damping_exponent_per_session(shared, sim.config, {});
+  const auto heel = index_of(Region::Heel);
+  const RegionSessionAnalysis all =
+      analyse_session(shared, sim.config, InsoleSize::S37_38, {}).regions[heel];
+  ASSERT_TRUE(all.pooling.pooled) << all.pooling.not_pooled;
+  ASSERT_TRUE(all.pooling.mean_slope_on_shared_m.has_value());
+  shared[1].regions[heel].fit = own[1].regions[heel].fit;
+  ASSERT_NE(shared[1].regions[heel].fit.m.value, all.pooling.mean[3]);
+  const RegionSessionAnalysis mixed =
+      analyse_session(shared, sim.config, InsoleSize::S37_38, {}).regions[heel];
+  ASSERT_TRUE(mixed.pooling.pooled) << mixed.pooling.not_pooled;
+  EXPECT_EQ(mixed.pooling.steps.size() + 1, all.pooling.steps.size());
+  EXPECT_NEAR(mixed.pooling.mean[3], all.pooling.mean[3], 1e-12);
+  EXPECT_FALSE(mixed.pooled_per_step[1].has_value());
+  EXPECT_TRUE(mixed.pooled_per_step[0].has_value());
+}
+
 // The toes, whose one to three cells give no footprint, err more from one walker to the next
 // than the calibration's 120 sessions of 50-90 kg showed: at 60 kg the pooled kbar of toes3_5 is
 // 11-17 % low in every 30-s session of sizes 41-42 and 45-46. Their chain SDs are the larger of
