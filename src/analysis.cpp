@@ -272,15 +272,16 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
     estimated_steps.resize(kept);
   }
   r.pooling = pool_steps(estimates, material_bounds(config.fit_bounds));
+  const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
   }
   std::tie(r.kbar_trend, r.kbar_asymmetry) =
       step_course(steps, estimated_steps, estimates, kLnKbar, &RegionFit::kbar_n_per_mm3, region,
-                  false, config.asymmetry.kbar_pair_sd_pct[index_of(region)]);
+                  false, pair.kbar_pair_sd_pct[index_of(region)]);
   std::tie(r.cbar_trend, r.cbar_asymmetry) =
       step_course(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region,
-                  true, config.asymmetry.cbar_pair_sd_pct[index_of(region)]);
+                  true, pair.cbar_pair_sd_pct[index_of(region)]);
   const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
   const std::size_t ri = index_of(region);
   r.chain_sd = {chain.kbar_chain_sd_pct[ri] / 100.0, chain.n_chain_sd[ri],

@@ -616,9 +616,17 @@ void read_per_region(TableReader regions, std::array<double, kRegionCount>& valu
   regions.finish();
 }
 
+// The pair SDs' own keys of `table`; the caller finishes it.
+void read_pair_sds(TableReader& table, PairSds& sds) {
+  read_per_region(table.table("kbar_pair_sd_pct"), sds.kbar_pair_sd_pct, 100.0);
+  read_per_region(table.table("cbar_pair_sd_pct"), sds.cbar_pair_sd_pct, 100.0);
+}
+
 void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry) {
-  read_per_region(table.table("kbar_pair_sd_pct"), asymmetry.kbar_pair_sd_pct, 100.0);
-  read_per_region(table.table("cbar_pair_sd_pct"), asymmetry.cbar_pair_sd_pct, 100.0);
+  read_pair_sds(table, asymmetry.per_step);
+  TableReader shared = table.table("m_per_session");
+  read_pair_sds(shared, asymmetry.m_per_session);
+  shared.finish();
   table.finish();
 }
 

@@ -853,14 +853,15 @@ TEST(Config, ModelRunningMIsOffByDefaultAndValidated) {
   EXPECT_EQ(load_config(dir / kMain).model.m_window_steps, 50);
 }
 
-// [asymmetry]: every region's SD for kbar and cbar, as the shipped file documents them; each
-// must be there, known and in [0, 100].
+// [asymmetry] and [asymmetry.m_per_session]: every region's SD for kbar and cbar, as the shipped
+// file documents them; each must be there, known and in [0, 100].
 TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   const AsymmetrySettings a = load_config(shipped_config()).asymmetry;
-  EXPECT_EQ(a.kbar_pair_sd_pct,
-            (std::array<double, kRegionCount>{1.0, 4.5, 4.5, 2.5, 1.5, 0.5, 0.5, 2.0}));
-  EXPECT_EQ(a.cbar_pair_sd_pct,
-            (std::array<double, kRegionCount>{1.5, 4.0, 4.0, 4.5, 5.5, 9.5, 9.5, 2.5}));
+  using PerRegion = std::array<double, kRegionCount>;
+  EXPECT_EQ(a.per_step.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.5, 1.5, 0.5, 0.5, 2.0}));
+  EXPECT_EQ(a.per_step.cbar_pair_sd_pct, (PerRegion{1.5, 4.0, 4.0, 4.5, 5.5, 9.5, 9.5, 2.5}));
+  EXPECT_EQ(a.m_per_session.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.0, 1.5, 0.5, 0.5, 2.0}));
+  EXPECT_EQ(a.m_per_session.cbar_pair_sd_pct, (PerRegion{0.5, 1.5, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0}));
   const std::vector<Refusal> cases = {
       {"AsymmetryNegative", kMain,
        replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = -1"),
@@ -875,12 +876,14 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
        "asymmetry.kbar_pair_sd_pct.met3_5", "expected a number"},
       {"AsymmetryMissing", kMain, erase_from_to("[asymmetry]", "[pooling]"), "asymmetry",
        "missing"},
+      {"AsymmetrySharedMMissing", kMain, erase_from_to("[asymmetry.m_per_session]", "[pooling]"),
+       "asymmetry.m_per_session", "missing"},
   };
   expect_refusals(cases);
   const fs::path dir = copy_config("AsymmetryTrusted");
   edit_file(dir / kMain,
             replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = 0"));
-  EXPECT_EQ(load_config(dir / kMain).asymmetry.kbar_pair_sd_pct[0], 0.0);
+  EXPECT_EQ(load_config(dir / kMain).asymmetry.per_step.kbar_pair_sd_pct[0], 0.0);
 }
 
 // [pooling] and [pooling.m_per_session]: every region's chain SD for kbar, n, cbar and m, as the

@@ -104,12 +104,20 @@ struct ModelSettings {
 /// The live monitor's first running m ([model] m_per_session) waits for this many complete steps.
 inline constexpr int kFirstSharedMSteps = 10;
 
-/// [asymmetry]: how differently the pair of insoles alone makes the same tissue read under the two
-/// feet, per region (indexed by index_of(Region)), as the SD of 100 ln(right / left) of kbar and
-/// of cbar. foot_asymmetry (asymmetry.hpp) adds it to the steps' own standard error.
-struct AsymmetrySettings {
+/// How differently the pair of insoles alone makes the same tissue read under the two feet, per
+/// region (indexed by index_of(Region)), as the SD of 100 ln(right / left) of kbar and of cbar.
+/// foot_asymmetry (asymmetry.hpp) adds it to the steps' own standard error.
+struct PairSds {
   std::array<double, kRegionCount> kbar_pair_sd_pct{};
   std::array<double, kRegionCount> cbar_pair_sd_pct{};
+};
+
+/// [asymmetry] for steps fitted each at its own m, [asymmetry.m_per_session] for steps fitted at
+/// one m per region over the session: both feet's cbar are then at the same m, and the pair's
+/// differ by much less (README, "Left against right").
+struct AsymmetrySettings {
+  PairSds per_step;
+  PairSds m_per_session;
 };
 
 /// The error the measurement chain gives every step of a region alike, per region (indexed by

@@ -425,7 +425,8 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                "from a weighted regression of each step's ln kbar and ln cbar on its foot "
                "and its heel strike (null: fewer than {} steps of either foot off the "
                "bounds). Its standard error is that of the steps' scatter and the pair of "
-               "insoles' own SD ([asymmetry] of the config) together; z is the log ratio "
+               "insoles' own SD ([asymmetry] of the config, [asymmetry.m_per_session] at one m "
+               "per session) together; z is the log ratio "
                "over it, and beyond about 3 the feet differ (include/gaitmon/asymmetry.hpp)",
                kMinAsymmetryStepsPerFoot)}}},
         {"appendix_i",
