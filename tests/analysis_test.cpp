@@ -309,6 +309,16 @@ SessionAnalysis analyse_walk(const Config& config, const std::filesystem::path& 
   return analyse_session(steps, config, walk.size, {});
 }
 
+// The same walk analysed with each step at its own m, and at one m per region over the session.
+std::pair<SessionAnalysis, SessionAnalysis> at_own_and_shared_m(const Config& config,
+                                                                const std::filesystem::path& dir,
+                                                                Walk walk) {
+  walk.m_per_session = false;
+  SessionAnalysis own = analyse_walk(config, dir, walk);
+  walk.m_per_session = true;
+  return {std::move(own), analyse_walk(config, dir, walk)};
+}
+
 // A minute's walk whose tissue softens by 10 % a minute while the right foot's is 10 % stiffer and
 // more damped than the left's (simulate --tissue-drift, --tissue-asymmetry), and the same walk
 // without either:
@@ -447,14 +457,10 @@ TEST(AnalyseSession, ThePooledMeansStandardErrorHoldsTheChainsSharedError) {
 TEST(AnalyseSession, AtOneMPerSessionTheFeetsCbarDifferenceIsFound) {
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-asymmetry-shared-m");
-  const Walk walk{.size = InsoleSize::S41_42, .seed = 1, .asymmetry_pct = 10.0};
-  Walk shared_walk = walk;
-  shared_walk.m_per_session = true;
-  const SessionAnalysis own = analyse_walk(config, dir, walk);
-  const SessionAnalysis shared = analyse_walk(config, dir, shared_walk);
-  Walk still = shared_walk;
-  still.asymmetry_pct = 0.0;
-  const SessionAnalysis same = analyse_walk(config, dir, still);
+  const auto [own, shared] = at_own_and_shared_m(
+      config, dir, {.size = InsoleSize::S41_42, .seed = 1, .asymmetry_pct = 10.0});
+  const SessionAnalysis same =
+      analyse_walk(config, dir, {.size = InsoleSize::S41_42, .seed = 1, .m_per_session = true});
   const double truth = std::log(1.1);
   for (Region region : {Region::Heel, Region::MidfootPosterior, Region::MidfootAnterior,
                         Region::Met1_2, Region::Met3_5}) {
@@ -495,11 +501,8 @@ TEST(AnalyseSession, AtOneMPerSessionTheFeetsCbarDifferenceIsFound) {
 TEST(AnalyseSession, AtOneMPerSessionACbarDriftIsFound) {
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-drift-shared-m");
-  const Walk walk{.size = InsoleSize::S41_42, .seed = 401, .drift_pct_per_min = -10.0};
-  Walk shared_walk = walk;
-  shared_walk.m_per_session = true;
-  const SessionAnalysis own = analyse_walk(config, dir, walk);
-  const SessionAnalysis shared = analyse_walk(config, dir, shared_walk);
+  const auto [own, shared] = at_own_and_shared_m(
+      config, dir, {.size = InsoleSize::S41_42, .seed = 401, .drift_pct_per_min = -10.0});
   const double truth = std::log(0.9);
   for (Region region : {Region::Heel, Region::Met3_5}) {
     SCOPED_TRACE(region_name(region));
