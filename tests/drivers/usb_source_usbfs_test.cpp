@@ -277,6 +277,9 @@ TEST(UsbSourceOnUsbfs, ARefusedSubmissionLosesTheLinkAndIsRetriedWithBackoff) {
   insole.refuse_submits(false);
   insole.send({42});
   ASSERT_TRUE(driver.wait_for_bytes(1));
+  // The completion that brought 42 resubmits its transfer after handing the bytes over; refusing
+  // before that (under TSan it can come late) would leave no transfer for 43 to complete.
+  ASSERT_TRUE(eventually([&] { return insole.counts().in_flight == settings.transfers; }, 10s));
   // A refused resubmission, from the completion callback, loses the link the same way.
   insole.refuse_submits(true);
   insole.send({43});
