@@ -858,10 +858,10 @@ TEST(Config, ModelRunningMIsOffByDefaultAndValidated) {
 TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   const AsymmetrySettings a = load_config(shipped_config()).asymmetry;
   using PerRegion = std::array<double, kRegionCount>;
-  EXPECT_EQ(a.per_step.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.5, 1.5, 0.5, 0.5, 2.0}));
-  EXPECT_EQ(a.per_step.cbar_pair_sd_pct, (PerRegion{1.5, 4.0, 4.0, 4.5, 5.5, 9.5, 9.5, 2.5}));
-  EXPECT_EQ(a.m_per_session.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.0, 1.5, 0.5, 0.5, 2.0}));
-  EXPECT_EQ(a.m_per_session.cbar_pair_sd_pct, (PerRegion{0.5, 1.5, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0}));
+  EXPECT_EQ(a.per_step.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.5, 2.0, 1.0, 1.0, 3.0}));
+  EXPECT_EQ(a.per_step.cbar_pair_sd_pct, (PerRegion{3.0, 6.0, 4.5, 5.5, 5.5, 9.5, 9.5, 12.5}));
+  EXPECT_EQ(a.m_per_session.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.0, 2.0, 0.5, 1.0, 3.0}));
+  EXPECT_EQ(a.m_per_session.cbar_pair_sd_pct, (PerRegion{0.5, 1.5, 1.0, 1.0, 1.0, 3.5, 3.5, 3.5}));
   const std::vector<Refusal> cases = {
       {"AsymmetryNegative", kMain,
        replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = -1"),
@@ -872,7 +872,7 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
        replace("cbar_pair_sd_pct", "toe2 = 9.5", "toe2 = 9.5, toe6 = 1"),
        "asymmetry.cbar_pair_sd_pct.toe6", "unknown name"},
       {"AsymmetryNotANumber", kMain,
-       replace("kbar_pair_sd_pct", "met3_5 = 1.5", "met3_5 = \"1.5\""),
+       replace("kbar_pair_sd_pct", "met3_5 = 2.0", "met3_5 = \"2.0\""),
        "asymmetry.kbar_pair_sd_pct.met3_5", "expected a number"},
       {"AsymmetryMissing", kMain, erase_from_to("[asymmetry]", "[pooling]"), "asymmetry",
        "missing"},
@@ -891,18 +891,18 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
   using PerRegion = std::array<double, kRegionCount>;
-  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.0, 6.5, 5.5, 4.5, 12.0, 12.0, 15.0}));
-  EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.06, 0.06, 0.075}));
-  EXPECT_EQ(p.per_step.cbar_chain_sd_pct, (PerRegion{13.5, 0.0, 15.0, 12.0, 13.0, 0.0, 0.0, 0.0}));
-  EXPECT_EQ(p.per_step.m_chain_sd, (PerRegion{0.06, 0.0, 0.04, 0.07, 0.08, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.5, 6.5, 5.5, 4.5, 12.0, 102.5, 15.0}));
+  EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.06, 0.0, 0.075}));
+  EXPECT_EQ(p.per_step.cbar_chain_sd_pct, (PerRegion{13.5, 0.0, 16.0, 11.5, 13.0, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.m_chain_sd, (PerRegion{0.06, 0.0, 0.045, 0.07, 0.08, 0.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.kbar_chain_sd_pct,
-            (PerRegion{4.0, 6.5, 6.5, 5.0, 5.0, 16.5, 93.5, 17.5}));
+            (PerRegion{4.0, 6.5, 6.5, 6.0, 5.0, 16.5, 93.5, 17.5}));
   EXPECT_EQ(p.m_per_session.n_chain_sd,
-            (PerRegion{0.02, 0.025, 0.025, 0.035, 0.03, 0.045, 0.0, 0.075}));
+            (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.045, 0.0, 0.075}));
   EXPECT_EQ(p.m_per_session.cbar_chain_sd_pct,
-            (PerRegion{0.0, 7.5, 16.0, 0.0, 0.0, 33.5, 227.5, 17.5}));
+            (PerRegion{3.0, 7.5, 16.0, 0.0, 2.5, 33.5, 227.5, 17.5}));
   EXPECT_EQ(p.m_per_session.m_chain_sd,
-            (PerRegion{0.055, 0.1, 0.145, 0.145, 0.16, 0.0, 0.215, 0.08}));
+            (PerRegion{0.06, 0.1, 0.145, 0.145, 0.16, 0.0, 0.215, 0.08}));
   const std::vector<Refusal> cases = {
       {"PoolingNAboveOne", kMain, replace("n_chain_sd = { heel = 0.02", "n_chain_sd = { heel = 2"),
        "pooling.n_chain_sd.heel", "must be in [0, 1], got 2"},

@@ -10,6 +10,7 @@
 #include <memory>
 #include <string>
 #include <system_error>
+#include <vector>
 
 #include "gaitmon/error.hpp"
 #include "gaitmon/lcm_connection.hpp"
@@ -53,6 +54,12 @@ CLI::Validator session_file_read_twice() {
         return {};
       },
       "FILE");
+}
+
+std::vector<std::string> insole_size_names() {
+  std::vector<std::string> names;
+  for (InsoleSize s : kInsoleSizes) names.emplace_back(insole_size_name(s));
+  return names;
 }
 
 CLI::Validator whole_number_in(std::uint64_t min, std::uint64_t max) {

@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "drivers/byte_source.hpp"
 #include "gaitmon/config.hpp"
@@ -42,6 +43,9 @@ std::shared_ptr<lcm::LCM> open_lcm_url(const GlobalOptions& global, const std::s
 /// CLI::Range lets nan through, as nan compares false with both bounds.
 CLI::Validator number_in(double min, double max, bool open_min = false);
 
+/// Every insole size's name ("35-36" ...), for the options that take one.
+std::vector<std::string> insole_size_names();
+
 /// The check of an unsigned option: digits only, from min to max. CLI11 takes "-1" and a
 /// number too large for the type, and wraps or clamps them.
 CLI::Validator whole_number_in(std::uint64_t min, std::uint64_t max);
@@ -55,6 +59,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);
 void add_discrepancy_command(CLI::App& app, const GlobalOptions& global);
+void add_calibrate_command(CLI::App& app, const GlobalOptions& global);
 void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
 void add_spy_command(CLI::App& app, const GlobalOptions& global);
 void add_run_command(CLI::App& app, const GlobalOptions& global);

@@ -194,12 +194,6 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   fmt::print("wrote {} and {}\n", args.out.string(), args.truth.string());
 }
 
-std::vector<std::string> names_of_sizes() {
-  std::vector<std::string> names;
-  for (InsoleSize s : kInsoleSizes) names.emplace_back(insole_size_name(s));
-  return names;
-}
-
 }  // namespace
 
 void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
@@ -211,7 +205,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--out,-o", args->out, "Session CSV to write")->required();
   sub->add_option("--truth", args->truth, "Ground-truth JSON (default: OUT with .truth.json)");
   sub->add_option("--size", args->size, "Insole size")
-      ->check(CLI::IsMember(names_of_sizes()))
+      ->check(CLI::IsMember(insole_size_names()))
       ->capture_default_str();
   sub->add_option("--duration", args->options.duration_s, "Length of the recording, s")
       ->check(number_in(0.1, 86400.0))

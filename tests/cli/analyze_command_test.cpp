@@ -667,14 +667,14 @@ TEST(AnalyzeCommand, MPerSessionFitsEveryStepAtOneMPerRegion) {
   EXPECT_GT(distinct.size(), 1u) << "each step's own m";
   for (const std::string& v : shared) EXPECT_NEAR(std::stod(v), m, 1e-5);
   // Pooled at the shared m: the pool's m is it, its se_steps that m's own standard error, and
-  // its se with [pooling.m_per_session]'s chain SD of the heel (0.055).
+  // its se with [pooling.m_per_session]'s chain SD of the heel (0.06).
   const auto& pooling = heel.at("pooling");
   EXPECT_TRUE(pooling.at("pooled").get<bool>());
   EXPECT_NEAR(pooling.at("mean").at("m").get<double>(), m, 1e-9);
   const double se_m = heel.at("m_per_session").at("se").get<double>();
   EXPECT_NEAR(pooling.at("se_steps").at("m").get<double>(), se_m, 1e-9 * se_m);
-  EXPECT_EQ(pooling.at("chain_sd").at("m").get<double>(), 0.055);
-  EXPECT_NEAR(pooling.at("se").at("m").get<double>(), std::hypot(se_m, 0.055), 1e-9);
+  EXPECT_EQ(pooling.at("chain_sd").at("m").get<double>(), 0.06);
+  EXPECT_NEAR(pooling.at("se").at("m").get<double>(), std::hypot(se_m, 0.06), 1e-9);
   EXPECT_NE(out.find("([pooling.m_per_session] of the config)"), std::string::npos) << out;
   EXPECT_TRUE(nlohmann::json::parse(read_all(a.dir / "out" / "session.json"))
                   .at("regions")

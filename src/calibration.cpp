@@ -1,0 +1,219 @@
+// The chain's shared error measured on simulated sessions: simulate, analyse as `analyze` does at
+// each step's own m and at one m per session, collect the pooled means' errors, solve for the SDs.
+#include "gaitmon/calibration.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+#include "gaitmon/analysis.hpp"
+#include "gaitmon/batch.hpp"
+#include "gaitmon/insole.hpp"
+#include "gaitmon/simulator.hpp"
+#include "parallel_for.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The largest SD looked for: 1000 % in kbar and cbar, the most [pooling] takes.
+constexpr double kLargestSd = 10.0;
+
+void add_session(const SessionAnalysis& session, const SimulationTruth& truth, ChainSamples& out) {
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    const RegionSessionAnalysis& region = session.regions[ri];
+    const EllipsoidParams& t = truth.regions[ri].params;
+    if (region.pooling.pooled) {
+      const MaterialVector truth_scaled = {std::log(t.kbar_n_per_mm3), t.n,
+                                           std::log(t.cbar_ns_per_mm3), t.m};
+      for (std::size_t p = 0; p < 4; ++p) {
+        const double slope = region.pooling.mean_slope_on_shared_m
+                                 ? (*region.pooling.mean_slope_on_shared_m)[p]
+                                 : 0.0;
+        // m's own chain SD is what the others' take through their slopes, not m's slope on itself.
+        out.pooled[ri][p].push_back({region.pooling.mean[p] - truth_scaled[p],
+                                     std::sqrt(region.pooling.mean_covariance[p][p]),
+                                     p == 3 ? 0.0 : slope});
+      }
+    }
+    const std::array<const std::optional<FootAsymmetry>*, 2> feet = {&region.kbar_asymmetry,
+                                                                     &region.cbar_asymmetry};
+    for (std::size_t p = 0; p < 2; ++p) {
+      if (*feet[p])
+        out.feet[ri][p].push_back({(*feet[p])->ln_ratio, (*feet[p])->se_steps_ln_ratio});
+    }
+  }
+}
+
+// The analyses in the order `analyze` hands them to analyse_session: by foot, then step.
+SessionAnalysis analyse_in_order(std::vector<StepAnalysis> steps, const Config& config,
+                                 InsoleSize size) {
+  std::sort(steps.begin(), steps.end(), [](const StepAnalysis& a, const StepAnalysis& b) {
+    return std::pair(a.foot, a.step) < std::pair(b.foot, b.step);
+  });
+  return analyse_session(steps, config, size, {});
+}
+
+struct SessionResult {
+  SimulationTruth truth;
+  SessionAnalysis per_step;
+  SessionAnalysis m_per_session;
+};
+
+SessionResult run_session(const Config& config, const CalibrationDesign& design, std::size_t i,
+                          const fs::path& dir, ContactEllipseCache& cache) {
+  SimulationOptions options;
+  options.size = design.size_of(i);
+  options.seed = design.seed_of(i);
+  options.duration_s = design.duration_s;
+  options.body_mass_kg = design.body_mass_kg_of(i);
+  options.noise_sd_bits = design.noise_sd_bits;
+  options.max_bias_bits = design.max_bias_bits;
+  options.placement_sd_mm = design.placement_sd_mm;
+  const fs::path csv = dir / fmt::format("session-{}.csv", i);
+  const fs::path truth_json = dir / fmt::format("session-{}.truth.json", i);
+  SessionResult result;
+  result.truth = simulate_session(config, options, csv, truth_json);
+  const InsoleLayout layout(config.insole(options.size), config.sensor);
+  std::vector<StepAnalysis> steps;
+  segment_session(csv, config, [&](Step&& step) {
+    if (step.status == StepStatus::Ok)
+      steps.push_back(analyse_step(step, layout, config, {}, &cache));
+  });
+  fs::remove(csv);
+  fs::remove(truth_json);
+  std::vector<StepAnalysis> at_shared_m = steps;
+  fit_damping_exponent_per_session(at_shared_m, config, {});
+  result.per_step = analyse_in_order(std::move(steps), config, options.size);
+  result.m_per_session = analyse_in_order(std::move(at_shared_m), config, options.size);
+  return result;
+}
+
+}  // namespace
+
+std::size_t CalibrationDesign::session_count() const {
+  return sizes.size() * static_cast<std::size_t>(last_seed - first_seed + 1);
+}
+
+InsoleSize CalibrationDesign::size_of(std::size_t session) const {
+  return sizes.at(session / static_cast<std::size_t>(last_seed - first_seed + 1));
+}
+
+std::uint64_t CalibrationDesign::seed_of(std::size_t session) const {
+  return first_seed + session % static_cast<std::size_t>(last_seed - first_seed + 1);
+}
+
+double CalibrationDesign::body_mass_kg_of(std::size_t session) const {
+  if (last_seed == first_seed) return min_body_mass_kg;
+  const double share = static_cast<double>(seed_of(session) - first_seed) /
+                       static_cast<double>(last_seed - first_seed);
+  return std::round(10.0 * (min_body_mass_kg + (max_body_mass_kg - min_body_mass_kg) * share)) /
+         10.0;
+}
+
+void CalibrationDesign::check() const {
+  const auto fail = [](const std::string& what) {
+    throw std::invalid_argument("calibration design: " + what);
+  };
+  if (sizes.empty()) fail("sizes: none given");
+  if (first_seed > last_seed) {
+    fail(fmt::format("seeds: the first ({}) is after the last ({})", first_seed, last_seed));
+  }
+  if (last_seed - first_seed >= 100000) fail("seeds: more than 100000");
+  if (!(duration_s > 0.0 && duration_s <= 86400.0)) {
+    fail(fmt::format("duration_s must be in (0, 86400], got {}", duration_s));
+  }
+  if (!(min_body_mass_kg > 0.0 && min_body_mass_kg <= max_body_mass_kg &&
+        max_body_mass_kg <= 300.0)) {
+    fail(fmt::format("body mass must be 0 < min <= max <= 300 kg, got {} to {}", min_body_mass_kg,
+                     max_body_mass_kg));
+  }
+}
+
+CalibrationSamples collect_chain_samples(const Config& config, const CalibrationDesign& design,
+                                         const fs::path& scratch_dir,
+                                         const std::function<void(double)>& on_progress) {
+  design.check();
+  const std::size_t count = design.session_count();
+  const fs::path dir = scratch_dir / "calibration-sessions";
+  fs::create_directories(dir);
+  std::vector<SessionResult> results(count);
+  std::vector<ContactEllipseCache> caches(detail::parallel_workers(count));
+  try {
+    detail::parallel_for_workers(
+        count,
+        [&](std::size_t i, std::size_t worker) {
+          results[i] = run_session(config, design, i, dir, caches[worker]);
+        },
+        [&](std::size_t done) {
+          if (on_progress) on_progress(static_cast<double>(done) / static_cast<double>(count));
+        });
+  } catch (...) {
+    fs::remove_all(dir);
+    throw;
+  }
+  fs::remove_all(dir);
+  // The calling thread reports only the items it finished itself, which may not be the last.
+  if (on_progress) on_progress(1.0);
+  CalibrationSamples samples;
+  samples.sessions = count;
+  for (const SessionResult& r : results) {
+    add_session(r.per_step, r.truth, samples.per_step);
+    add_session(r.m_per_session, r.truth, samples.m_per_session);
+  }
+  return samples;
+}
+
+double rms_z(const std::vector<ChainSample>& samples, double sd, double m_sd) {
+  if (samples.empty()) return std::nan("");
+  double sum = 0.0;
+  for (const ChainSample& s : samples) {
+    const double shared = s.slope_on_shared_m * m_sd;
+    sum += s.error * s.error / (s.se_steps * s.se_steps + shared * shared + sd * sd);
+  }
+  return std::sqrt(sum / static_cast<double>(samples.size()));
+}
+
+std::optional<double> sd_for_unit_rms(const std::vector<ChainSample>& samples, double m_sd) {
+  if (samples.empty()) return std::nullopt;
+  if (rms_z(samples, 0.0, m_sd) <= 1.0) return 0.0;
+  double lo = 0.0;
+  double hi = kLargestSd;
+  if (rms_z(samples, hi, m_sd) > 1.0) return hi;
+  // To the double's resolution, so that rounding up to a step never catches a bisection's slack.
+  for (int i = 0; i < 80 && lo < hi; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (rms_z(samples, mid, m_sd) > 1.0 ? lo : hi) = mid;
+  }
+  return hi;
+}
+
+double round_up_to(double value, double step) {
+  const double steps = std::ceil(value / step - 1e-9);
+  return steps > 0.0 ? steps * step : 0.0;  // never -0, which would print as "-0.0"
+}
+
+MeasuredChainSds measure_chain_sds(const ChainSamples& samples) {
+  constexpr std::array<double, 4> kPercent = {100.0, 1.0, 100.0, 1.0};
+  const auto rounded = [&](std::optional<double> sd, std::size_t p) -> std::optional<double> {
+    if (!sd) return std::nullopt;
+    return round_up_to(*sd * kPercent[p], kPercent[p] == 100.0 ? 0.5 : 0.005);
+  };
+  MeasuredChainSds out;
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    const auto& pooled = samples.pooled[ri];
+    out.chain[3][ri] = rounded(sd_for_unit_rms(pooled[3]), 3);
+    const double m_sd = out.chain[3][ri].value_or(0.0);
+    for (std::size_t p = 0; p < 3; ++p)
+      out.chain[p][ri] = rounded(sd_for_unit_rms(pooled[p], m_sd), p);
+    for (std::size_t p = 0; p < 2; ++p)
+      out.pair[p][ri] = rounded(sd_for_unit_rms(samples.feet[ri][p]), 0);
+  }
+  return out;
+}
+
+}  // namespace gaitmon

@@ -1,0 +1,355 @@
+// `gaitmon calibrate`: the chain's SDs of [pooling] and [asymmetry] measured on simulated sessions,
+// as tables on stdout and, with --out, as JSON and as TOML to paste into the config.
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <cerrno>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "gaitmon/calibration.hpp"
+#include "gaitmon/json.hpp"
+#include "output_file.hpp"
+#include "progress.hpp"
+
+namespace gaitmon::cli {
+namespace {
+
+struct CalibrateArgs {
+  CalibrationDesign design;
+  std::vector<std::string> sizes;
+  std::string seeds = "1-20";
+  std::string body_mass = "50-90";
+  std::filesystem::path out_dir;
+};
+
+// One table of the config: its key, the parameter's index in the samples, and its unit.
+struct TableKey {
+  const char* key;
+  const char* label;
+  std::size_t parameter;
+  bool percent;  ///< 100 ln (kbar, cbar), else as it is (n, m)
+};
+
+constexpr TableKey kChainKeys[] = {{"kbar_chain_sd_pct", "ln kbar %", 0, true},
+                                   {"n_chain_sd", "n", 1, false},
+                                   {"cbar_chain_sd_pct", "ln cbar %", 2, true},
+                                   {"m_chain_sd", "m", 3, false}};
+constexpr TableKey kPairKeys[] = {{"kbar_pair_sd_pct", "ln kbar %", 0, true},
+                                  {"cbar_pair_sd_pct", "ln cbar %", 1, true}};
+
+// "A-B" or "A" as two numbers; `parse` turns one part into a number or throws.
+template <typename T, typename Parse>
+std::pair<T, T> parse_range(const std::string& text, const std::string& option, Parse parse) {
+  const auto dash = text.find('-', 1);
+  try {
+    if (dash == std::string::npos) {
+      const T one = parse(text);
+      return {one, one};
+    }
+    return {parse(text.substr(0, dash)), parse(text.substr(dash + 1))};
+  } catch (const std::exception&) {
+    throw CLI::ValidationError(option, "'" + text + "': expected a number or FIRST-LAST");
+  }
+}
+
+std::uint64_t whole(const std::string& text) {
+  std::uint64_t value = 0;
+  const char* end = text.data() + text.size();
+  const auto [stop, error] = std::from_chars(text.data(), end, value);
+  if (text.empty() || error != std::errc() || stop != end) throw std::invalid_argument(text);
+  return value;
+}
+
+double real(const std::string& text) {
+  std::size_t used = 0;
+  const double value = std::stod(text, &used);
+  if (used != text.size() || !std::isfinite(value)) throw std::invalid_argument(text);
+  return value;
+}
+
+double config_value(const Config& config, bool shared_m, bool pair, std::size_t parameter,
+                    std::size_t region) {
+  if (pair) {
+    const PairSds& sds = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    return (parameter == 0 ? sds.kbar_pair_sd_pct : sds.cbar_pair_sd_pct)[region];
+  }
+  const ChainSds& sds = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+  const std::array<const std::array<double, kRegionCount>*, 4> columns = {
+      &sds.kbar_chain_sd_pct, &sds.n_chain_sd, &sds.cbar_chain_sd_pct, &sds.m_chain_sd};
+  return (*columns[parameter])[region];
+}
+
+// What one mode (each step at its own m, or one m per session) measured, beside the config's.
+struct ModeReport {
+  bool shared_m = false;
+  const ChainSamples* samples = nullptr;
+  MeasuredChainSds measured;
+};
+
+// One entry of a table: a region's samples of one parameter, its SD as measured and as the
+// config has it (on the config's scale: 100 ln for kbar and cbar), and the RMS of z with each and
+// with none.
+struct Cell {
+  const std::vector<ChainSample>* samples = nullptr;
+  std::optional<double> measured;
+  double config = 0.0;
+  double rms_measured = std::nan("");
+  double rms_config = std::nan("");
+  double rms_without = std::nan("");
+};
+
+std::span<const TableKey> keys_of(bool pair) {
+  return pair ? std::span<const TableKey>(kPairKeys) : std::span<const TableKey>(kChainKeys);
+}
+
+Cell cell_of(const Config& config, const ModeReport& mode, bool pair, const TableKey& k,
+             std::size_t region) {
+  Cell c;
+  c.samples =
+      pair ? &mode.samples->feet[region][k.parameter] : &mode.samples->pooled[region][k.parameter];
+  c.measured =
+      pair ? mode.measured.pair[k.parameter][region] : mode.measured.chain[k.parameter][region];
+  c.config = config_value(config, mode.shared_m, pair, k.parameter, region);
+  // m's SD reaches the others through their slopes on a shared m (0 where m is each step's own).
+  const double m_sd = pair ? 0.0 : mode.measured.chain[3][region].value_or(0.0);
+  const double config_m_sd = pair ? 0.0 : config_value(config, mode.shared_m, false, 3, region);
+  const double scale = k.percent ? 0.01 : 1.0;
+  if (c.measured) c.rms_measured = rms_z(*c.samples, *c.measured * scale, m_sd);
+  c.rms_config = rms_z(*c.samples, c.config * scale, config_m_sd);
+  c.rms_without = rms_z(*c.samples, 0.0);
+  return c;
+}
+
+std::string sd_text(std::optional<double> sd, bool percent) {
+  if (!sd) return "-";
+  return percent ? fmt::format("{:.1f}", *sd) : fmt::format("{:.3f}", *sd);
+}
+
+std::string rms_text(double rms) {
+  return std::isnan(rms) ? "-" : fmt::format("{:.2f}", rms);
+}
+
+void print_table(const Config& config, const ModeReport& mode, bool pair) {
+  fmt::print("\n[{}{}] ({}): {}\n", pair ? "asymmetry" : "pooling",
+             mode.shared_m ? ".m_per_session" : "",
+             mode.shared_m ? "one m per region over the session" : "each step at its own m",
+             pair ? "the SD of the feet's difference, whose truth is none; after it the "
+                    "config's in brackets, then the RMS of z with the SD measured / the config's / "
+                    "none"
+                  : "the SD of the pooled means' error against the truth; after it the config's in "
+                    "brackets, then the RMS of z with the SD measured / the config's / none");
+  fmt::print("{:<18} {:>5}", "region", pair ? "pairs" : "pools");
+  for (const TableKey& k : keys_of(pair)) fmt::print("  {:<28}", k.label);
+  fmt::print("\n");
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    fmt::print("{:<18} {:>5}", region_name(kRegions[ri]),
+               cell_of(config, mode, pair, keys_of(pair)[0], ri).samples->size());
+    for (const TableKey& k : keys_of(pair)) {
+      const Cell c = cell_of(config, mode, pair, k, ri);
+      fmt::print("  {:<28}", fmt::format("{} ({}) {}/{}/{}", sd_text(c.measured, k.percent),
+                                         sd_text(c.config, k.percent), rms_text(c.rms_measured),
+                                         rms_text(c.rms_config), rms_text(c.rms_without)));
+    }
+    fmt::print("\n");
+  }
+}
+
+// One config table as TOML, the config's value where nothing was measured (said above it).
+std::string toml_line(const Config& config, const ModeReport& mode, bool pair, const TableKey& k) {
+  std::vector<std::string> entries, kept;
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    const Cell c = cell_of(config, mode, pair, k, ri);
+    if (!c.measured) kept.emplace_back(region_name(kRegions[ri]));
+    entries.push_back(fmt::format("{} = {}", region_name(kRegions[ri]),
+                                  sd_text(c.measured.value_or(c.config), k.percent)));
+  }
+  std::string text;
+  if (!kept.empty()) {
+    text = fmt::format("# {}: nothing to measure in these sessions, the value of {}\n",
+                       fmt::join(kept, ", "), config.source.string());
+  }
+  return text + fmt::format("{} = {{ {} }}\n", k.key, fmt::join(entries, ", "));
+}
+
+template <typename T>
+std::string range_text(T first, T last) {
+  return first == last ? fmt::format("{}", first) : fmt::format("{}-{}", first, last);
+}
+
+std::string design_text(const CalibrationDesign& d) {
+  std::vector<std::string> sizes;
+  for (InsoleSize s : d.sizes) sizes.emplace_back(insole_size_name(s));
+  return fmt::format(
+      "{} simulated session{} of {} s (sizes {}; seeds {}; body mass {} kg; noise {} bits, dc "
+      "bias 0-{} bits, placement SD {} mm)",
+      d.session_count(), d.session_count() == 1 ? "" : "s", d.duration_s, fmt::join(sizes, ", "),
+      range_text(d.first_seed, d.last_seed), range_text(d.min_body_mass_kg, d.max_body_mass_kg),
+      d.noise_sd_bits, d.max_bias_bits, d.placement_sd_mm);
+}
+
+std::string toml_text(const Config& config, const CalibrationDesign& design,
+                      std::span<const ModeReport> modes) {
+  std::string text = fmt::format(
+      "# Measured by gaitmon calibrate on\n# {}:\n# the SD per region that brings the z of the "
+      "pooled means against the truth, and of the\n# feet's difference, to an RMS of 1, rounded "
+      "up. To use them, replace the keys of the same\n# tables in the config.\n",
+      design_text(design));
+  for (const bool pair : {true, false}) {
+    for (const ModeReport& mode : modes) {
+      text += fmt::format("\n[{}{}]\n", pair ? "asymmetry" : "pooling",
+                          mode.shared_m ? ".m_per_session" : "");
+      for (const TableKey& k : keys_of(pair)) text += toml_line(config, mode, pair, k);
+    }
+  }
+  return text;
+}
+
+nlohmann::json mode_json(const Config& config, const ModeReport& mode) {
+  const auto number = [](double v) { return std::isnan(v) ? nlohmann::json() : nlohmann::json(v); };
+  nlohmann::json out;
+  for (const bool pair : {false, true}) {
+    nlohmann::json& table = out[pair ? "asymmetry" : "pooling"];
+    for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+      nlohmann::json& region = table[std::string(region_name(kRegions[ri]))];
+      for (const TableKey& k : keys_of(pair)) {
+        const Cell c = cell_of(config, mode, pair, k, ri);
+        region[k.key] = {{"samples", c.samples->size()},
+                         {"measured", c.measured ? nlohmann::json(*c.measured) : nlohmann::json()},
+                         {"config", c.config},
+                         {"rms_z_measured", number(c.rms_measured)},
+                         {"rms_z_config", number(c.rms_config)},
+                         {"rms_z_without", number(c.rms_without)}};
+      }
+    }
+  }
+  return out;
+}
+
+void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
+  const Config config = load_global_config(global);
+  CalibrationDesign& design = args.design;
+  design.sizes.clear();
+  for (const std::string& s : args.sizes) design.sizes.push_back(*parse_insole_size(s));
+  std::tie(design.first_seed, design.last_seed) =
+      parse_range<std::uint64_t>(args.seeds, "--seeds", whole);
+  std::tie(design.min_body_mass_kg, design.max_body_mass_kg) =
+      parse_range<double>(args.body_mass, "--body-mass", real);
+  try {
+    design.check();
+  } catch (const std::invalid_argument& e) {
+    throw CLI::ValidationError(e.what());
+  }
+  if (!args.out_dir.empty()) check_output_dir(args.out_dir, "--out");
+  std::optional<OutputSet> outputs;
+  if (!args.out_dir.empty()) {
+    outputs.emplace(args.out_dir,
+                    std::initializer_list<std::string_view>{"calibration.json", "calibration.toml"},
+                    std::filesystem::path());
+  }
+
+  // The sessions are written, segmented from their files and removed one by one.
+  std::string pattern =
+      (std::filesystem::temp_directory_path() / "gaitmon-calibrate-XXXXXX").string();
+  if (mkdtemp(pattern.data()) == nullptr) {
+    throw std::runtime_error(
+        fmt::format("cannot make a scratch folder {}: {}", pattern, std::strerror(errno)));
+  }
+  const std::filesystem::path scratch(pattern);
+  fmt::print("calibrate: {}\n", design_text(design));
+  std::fflush(stdout);
+  const auto start = std::chrono::steady_clock::now();
+  CalibrationSamples samples;
+  try {
+    ProgressBar progress("calibrate");
+    samples = collect_chain_samples(config, design, scratch,
+                                    [&](double fraction) { progress.update(fraction); });
+  } catch (...) {
+    std::filesystem::remove_all(scratch);
+    throw;
+  }
+  std::filesystem::remove_all(scratch);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  fmt::print("simulated and analysed in {:.1f} s (each at its own m and at one m per session)\n",
+             seconds);
+
+  const std::array<ModeReport, 2> modes = {
+      ModeReport{false, &samples.per_step, measure_chain_sds(samples.per_step)},
+      ModeReport{true, &samples.m_per_session, measure_chain_sds(samples.m_per_session)}};
+  for (const bool pair : {false, true})
+    for (const ModeReport& mode : modes) print_table(config, mode, pair);
+  if (!outputs) return;
+  std::filesystem::create_directories(args.out_dir);
+  nlohmann::json json = {{"design",
+                          {{"sessions", design.session_count()},
+                           {"duration_s", design.duration_s},
+                           {"first_seed", design.first_seed},
+                           {"last_seed", design.last_seed},
+                           {"min_body_mass_kg", design.min_body_mass_kg},
+                           {"max_body_mass_kg", design.max_body_mass_kg},
+                           {"noise_sd_bits", design.noise_sd_bits},
+                           {"max_bias_bits", design.max_bias_bits},
+                           {"placement_sd_mm", design.placement_sd_mm}}},
+                         {"config", config.source.string()},
+                         {"per_step", mode_json(config, modes[0])},
+                         {"m_per_session", mode_json(config, modes[1])}};
+  for (InsoleSize s : design.sizes) json["design"]["sizes"].push_back(insole_size_name(s));
+  json["note"] =
+      "per table and region: the SD that brings the RMS of z to 1, rounded up (measured; null "
+      "where there were no samples), the config's, and the RMS of z with each and with none; "
+      "kbar and cbar in 100 ln, n and m as they are. At one m per session m's measured SD also "
+      "enters the others' z through their slopes on it";
+  outputs->add("calibration.json", json_file_text(json));
+  outputs->add("calibration.toml", toml_text(config, design, modes));
+  for (const auto& path : outputs->commit()) fmt::print("wrote {}\n", path.string());
+}
+
+}  // namespace
+
+void add_calibrate_command(CLI::App& app, const GlobalOptions& global) {
+  auto args = std::make_shared<CalibrateArgs>();
+  args->sizes = insole_size_names();
+  CLI::App* sub = app.add_subcommand(
+      "calibrate",
+      "Measure the measurement chain's shared error on simulated sessions: the SDs of [pooling] "
+      "and [asymmetry] of the config that bring the z of the pooled means against the truth, and "
+      "of the feet's difference, to an RMS of 1; prints them beside the config's and, with --out, "
+      "writes DIR/calibration.json and DIR/calibration.toml");
+  sub->add_option("--sizes", args->sizes, "Insole sizes, comma-separated (each with every seed)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(insole_size_names()))
+      ->capture_default_str();
+  sub->add_option("--seeds", args->seeds, "Seeds FIRST-LAST (or one), for every size")
+      ->capture_default_str();
+  sub->add_option("--duration", args->design.duration_s, "Length of each session, s")
+      ->check(number_in(5.0, 3600.0))
+      ->capture_default_str();
+  sub->add_option("--body-mass", args->body_mass,
+                  "Body mass MIN-MAX (or one), kg, spread evenly over the seeds")
+      ->capture_default_str();
+  sub->add_option("--noise", args->design.noise_sd_bits, "Sensor noise SD, bits")
+      ->check(number_in(0.0, 50.0))
+      ->capture_default_str();
+  sub->add_option("--max-bias", args->design.max_bias_bits,
+                  "Per-sensor dc bias, uniform integer 0..MAX bits")
+      ->check(CLI::Range(0, 50))
+      ->capture_default_str();
+  sub->add_option("--placement-sd", args->design.placement_sd_mm,
+                  "Step-to-step SD of where the foot lands on the insole, mm")
+      ->check(number_in(0.0, 10.0))
+      ->capture_default_str();
+  sub->add_option("--out,-o", args->out_dir,
+                  "Folder for calibration.json and calibration.toml (nothing written without it)");
+  sub->callback([&global, args] { run_calibrate(global, *args); });
+}
+
+}  // namespace gaitmon::cli

@@ -1,0 +1,274 @@
+// The chain's SDs measured on simulated sessions: the solver on cases with a closed form, the
+// design's sessions, the whole measurement on a few sessions under the sanitizers, and the shipped
+// [pooling] and [asymmetry] tables reproduced from the designs the config and README name.
+#include "gaitmon/calibration.hpp"
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "gaitmon/config.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+const std::vector<InsoleSize> kThreeSizes = {InsoleSize::S37_38, InsoleSize::S41_42,
+                                             InsoleSize::S45_46};
+
+std::vector<ChainSample> plus_minus(double error, double se, double slope = 0.0) {
+  return {{error, se, slope}, {-error, se, slope}};
+}
+
+// Every sample's z has magnitude error / sqrt(se^2 + (slope m_sd)^2 + sd^2), so where all agree
+// the SD with an RMS of 1 is sqrt(error^2 - se^2 - (slope m_sd)^2).
+TEST(Calibration, TheSdThatBringsTheRmsOfZToOneHasItsClosedForm) {
+  EXPECT_NEAR(*sd_for_unit_rms(plus_minus(2.0, 0.0)), 2.0, 1e-8);
+  EXPECT_NEAR(*sd_for_unit_rms(plus_minus(std::sqrt(5.0), 1.0)), 2.0, 1e-8);
+  EXPECT_NEAR(*sd_for_unit_rms(plus_minus(std::sqrt(5.0), 1.0, 2.0), 0.5), std::sqrt(3.0), 1e-8);
+  // Samples whose own standard errors already cover them need none.
+  EXPECT_EQ(*sd_for_unit_rms(plus_minus(0.5, 1.0)), 0.0);
+  EXPECT_EQ(*sd_for_unit_rms(plus_minus(std::sqrt(5.0), 1.0, 2.0), 1.0), 0.0);
+  EXPECT_FALSE(sd_for_unit_rms({}).has_value());
+  // Unequal samples: the mean of z^2, (1 + 9) / (1 + s^2) / 2, is 1 at s = 2.
+  EXPECT_NEAR(*sd_for_unit_rms({{1.0, 1.0, 0.0}, {3.0, 1.0, 0.0}}), 2.0, 1e-8);
+  EXPECT_NEAR(rms_z({{1.0, 1.0, 0.0}, {3.0, 1.0, 0.0}}, 2.0), 1.0, 1e-12);
+  EXPECT_TRUE(std::isnan(rms_z({}, 1.0)));
+}
+
+TEST(Calibration, RoundsUpToTheStepAndNeverBelowZero) {
+  EXPECT_DOUBLE_EQ(round_up_to(4.01, 0.5), 4.5);
+  EXPECT_DOUBLE_EQ(round_up_to(4.0, 0.5), 4.0);
+  EXPECT_DOUBLE_EQ(round_up_to(4.0 + 1e-12, 0.5), 4.0);
+  EXPECT_DOUBLE_EQ(round_up_to(0.0501, 0.005), 0.055);
+  EXPECT_FALSE(std::signbit(round_up_to(0.0, 0.5)));
+}
+
+// m's SD comes first and, rounded, reaches the others through their slopes on a shared m:
+// kbar's samples of 100 ln error 0.05 with a slope of 1 on m whose own error is 0.04 (SD 0.04,
+// rounded to 0.04) leave sqrt(0.05^2 - 0.04^2) = 0.03, 3.0 %; without the slope 5.0 %.
+TEST(Calibration, MsRoundedSdReachesTheOthersThroughTheirSlopes) {
+  ChainSamples samples;
+  samples.pooled[0][3] = plus_minus(0.04, 0.0);
+  samples.pooled[0][0] = plus_minus(0.05, 0.0, 1.0);
+  samples.pooled[1][3] = plus_minus(0.04, 0.0);
+  samples.pooled[1][0] = plus_minus(0.05, 0.0);
+  samples.feet[0][1] = plus_minus(0.021, 0.0);
+  const MeasuredChainSds sds = measure_chain_sds(samples);
+  EXPECT_DOUBLE_EQ(*sds.chain[3][0], 0.04);
+  EXPECT_DOUBLE_EQ(*sds.chain[0][0], 3.0);
+  EXPECT_DOUBLE_EQ(*sds.chain[0][1], 5.0);
+  EXPECT_DOUBLE_EQ(*sds.pair[1][0], 2.5);
+  EXPECT_FALSE(sds.chain[1][0].has_value());
+  EXPECT_FALSE(sds.pair[0][0].has_value());
+}
+
+TEST(Calibration, TheDesignCrossesSizesWithSeedsAndSpreadsTheMassOverTheSeeds) {
+  CalibrationDesign design;
+  design.sizes = {InsoleSize::S35_36, InsoleSize::S45_46};
+  design.first_seed = 1;
+  design.last_seed = 20;
+  ASSERT_EQ(design.session_count(), 40u);
+  EXPECT_EQ(design.size_of(19), InsoleSize::S35_36);
+  EXPECT_EQ(design.size_of(20), InsoleSize::S45_46);
+  EXPECT_EQ(design.seed_of(20), 1u);
+  EXPECT_EQ(design.seed_of(39), 20u);
+  EXPECT_DOUBLE_EQ(design.body_mass_kg_of(0), 50.0);
+  EXPECT_DOUBLE_EQ(design.body_mass_kg_of(1), 52.1);  // 50 + 40 / 19, to 0.1 kg
+  EXPECT_DOUBLE_EQ(design.body_mass_kg_of(39), 90.0);
+  design.last_seed = 1;
+  EXPECT_DOUBLE_EQ(design.body_mass_kg_of(1), 50.0);
+
+  const auto refused = [](CalibrationDesign d, const std::string& says) {
+    try {
+      d.check();
+      ADD_FAILURE() << "accepted: " << says;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  };
+  CalibrationDesign good;
+  good.sizes = {InsoleSize::S41_42};
+  EXPECT_NO_THROW(good.check());
+  refused({}, "sizes: none given");
+  CalibrationDesign d = good;
+  d.first_seed = 5;
+  d.last_seed = 4;
+  refused(d, "seeds: the first (5) is after the last (4)");
+  d = good;
+  d.duration_s = 0.0;
+  refused(d, "duration_s must be in (0, 86400]");
+  d = good;
+  d.min_body_mass_kg = 80.0;
+  d.max_body_mass_kg = 60.0;
+  refused(d, "body mass must be 0 < min <= max <= 300 kg, got 80 to 60");
+}
+
+double rms(const std::vector<ChainSample>& samples, double sd, double m_sd) {
+  double sum = 0.0;
+  for (const ChainSample& s : samples) {
+    const double v =
+        s.se_steps * s.se_steps + s.slope_on_shared_m * s.slope_on_shared_m * m_sd * m_sd + sd * sd;
+    sum += s.error * s.error / v;
+  }
+  return std::sqrt(sum / static_cast<double>(samples.size()));
+}
+
+// On a few short sessions, run under the sanitizers too: every region with pools has samples of
+// all four parameters, only steps at a shared m have slopes on it, and each measured SD is the
+// least multiple of its step whose z (computed here) has an RMS of at most 1.
+TEST(Calibration, EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne) {
+  const Config config = load_config(default_config_path());
+  CalibrationDesign design;
+  design.sizes = {InsoleSize::S41_42};
+  design.first_seed = 1;
+  design.last_seed = 2;
+  design.duration_s = 10.0;
+  std::vector<double> progress;
+  const auto scratch = test::scratch_dir("calibration-few");
+  const CalibrationSamples samples =
+      collect_chain_samples(config, design, scratch, [&](double f) { progress.push_back(f); });
+  ASSERT_EQ(samples.sessions, 2u);
+  ASSERT_FALSE(progress.empty());
+  EXPECT_DOUBLE_EQ(progress.back(), 1.0);
+  EXPECT_TRUE(std::filesystem::is_empty(scratch)) << "the simulated sessions are left behind";
+  const auto& heel = samples.per_step.pooled[0];
+  ASSERT_EQ(heel[0].size(), 2u);
+  for (const auto& p : heel) {
+    EXPECT_EQ(p.size(), 2u);
+    for (const ChainSample& s : p) EXPECT_EQ(s.slope_on_shared_m, 0.0);
+  }
+  ASSERT_EQ(samples.m_per_session.pooled[0][2].size(), 2u);
+  EXPECT_NE(samples.m_per_session.pooled[0][2][0].slope_on_shared_m, 0.0);
+  EXPECT_EQ(samples.m_per_session.pooled[0][3][0].slope_on_shared_m, 0.0);
+  ASSERT_EQ(samples.per_step.feet[0][0].size(), 2u);
+
+  for (const ChainSamples* mode : {&samples.per_step, &samples.m_per_session}) {
+    const MeasuredChainSds sds = measure_chain_sds(*mode);
+    for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+      SCOPED_TRACE(std::string(region_name(kRegions[ri])));
+      const double m_sd = sds.chain[3][ri].value_or(0.0);
+      for (std::size_t p = 0; p < 4; ++p) {
+        const auto& s = mode->pooled[ri][p];
+        ASSERT_EQ(sds.chain[p][ri].has_value(), !s.empty());
+        if (s.empty()) continue;
+        const double scale = (p == 0 || p == 2) ? 100.0 : 1.0;
+        const double step = scale == 100.0 ? 0.5 : 0.005;
+        const double sd = *sds.chain[p][ri] / scale;
+        const double own_m = p == 3 ? 0.0 : m_sd;
+        EXPECT_LE(rms(s, sd, own_m), 1.0 + 1e-9);
+        if (*sds.chain[p][ri] > 0.0) {
+          EXPECT_GT(rms(s, sd - step / scale, own_m), 1.0);
+        }
+      }
+      for (std::size_t p = 0; p < 2; ++p) {
+        const auto& s = mode->feet[ri][p];
+        if (s.empty()) continue;
+        const double sd = *sds.pair[p][ri] / 100.0;
+        EXPECT_LE(rms(s, sd, 0.0), 1.0 + 1e-9);
+        if (sd > 0.0) {
+          EXPECT_GT(rms(s, sd - 0.005, 0.0), 1.0);
+        }
+      }
+    }
+  }
+}
+
+std::string table_key(bool shared_m, const char* section, const char* key) {
+  return fmt::format("[{}{}] {}", section, shared_m ? ".m_per_session" : "", key);
+}
+
+// Per entry, the larger of what the designs measured; where none measured it (a region no session
+// pooled or compared), toe1's.
+std::array<double, kRegionCount> larger_of(
+    const std::vector<const std::array<std::optional<double>, kRegionCount>*>& measured) {
+  std::array<double, kRegionCount> out{};
+  const std::size_t toe1 = index_of(Region::Toe1);
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    std::optional<double> larger;
+    for (const auto* m : measured) {
+      if ((*m)[ri]) larger = std::max(larger.value_or(0.0), *(*m)[ri]);
+    }
+    EXPECT_TRUE(larger || ri > toe1) << region_name(kRegions[ri]) << " was measured in no design";
+    out[ri] = larger ? *larger : out[toe1];
+  }
+  return out;
+}
+
+void expect_shipped(const std::string& table, const std::array<double, kRegionCount>& shipped,
+                    const std::array<double, kRegionCount>& expected) {
+  std::printf("%-42s", table.c_str());
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri)
+    std::printf(" %g/%g", shipped[ri], expected[ri]);
+  std::printf("  (shipped/measured)\n");
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    EXPECT_NEAR(shipped[ri], expected[ri], 1e-9) << table << " " << region_name(kRegions[ri]);
+  }
+}
+
+// The shipped tables are what `gaitmon calibrate` measures on the designs that the config's
+// comments and the README name (README, "Measuring the chain's SDs"), each entry the larger of two:
+// - [pooling] and [pooling.m_per_session]: 120 sessions of 30 s, six sizes, 50-90 kg, seeds 1-20
+//   (the command's defaults), and 60 sessions of 30 s of 60-kg walkers, sizes 37-38, 41-42 and
+//   45-46, seeds 1-20;
+// - [asymmetry] and [asymmetry.m_per_session]: 90 sessions of 60 s of 60-kg walkers, sizes 37-38,
+//   41-42 and 45-46, seeds 1-30, and 90 sessions of 60 s, six sizes, 50-90 kg, seeds 1-15.
+// A change of the fit or the chain that moves them fails here: measure again with the command
+// and update config/gaitmon.toml and the README.
+TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
+  if (test::kSanitized) {
+    GTEST_SKIP() << "360 simulated sessions take too long under the sanitizers; the measurement's "
+                    "code runs under them in EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne";
+  }
+  const Config config = load_config(default_config_path());
+  CalibrationDesign all;
+  all.sizes = {kInsoleSizes.begin(), kInsoleSizes.end()};
+  CalibrationDesign walkers_60kg;
+  walkers_60kg.sizes = kThreeSizes;
+  walkers_60kg.min_body_mass_kg = walkers_60kg.max_body_mass_kg = 60.0;
+  CalibrationDesign feet_60kg = walkers_60kg;
+  feet_60kg.last_seed = 30;
+  feet_60kg.duration_s = 60.0;
+  CalibrationDesign feet_all = all;
+  feet_all.last_seed = 15;
+  feet_all.duration_s = 60.0;
+
+  const auto scratch = test::scratch_dir("calibration-designs");
+  const CalibrationSamples pooled[] = {collect_chain_samples(config, all, scratch),
+                                       collect_chain_samples(config, walkers_60kg, scratch)};
+  const CalibrationSamples feet[] = {collect_chain_samples(config, feet_60kg, scratch),
+                                     collect_chain_samples(config, feet_all, scratch)};
+  const char* kChainNames[] = {"kbar_chain_sd_pct", "n_chain_sd", "cbar_chain_sd_pct",
+                               "m_chain_sd"};
+  const char* kPairNames[] = {"kbar_pair_sd_pct", "cbar_pair_sd_pct"};
+  for (const bool shared_m : {false, true}) {
+    const auto in_mode = [&](const CalibrationSamples& s) {
+      return measure_chain_sds(shared_m ? s.m_per_session : s.per_step);
+    };
+    const MeasuredChainSds p[] = {in_mode(pooled[0]), in_mode(pooled[1])};
+    const MeasuredChainSds f[] = {in_mode(feet[0]), in_mode(feet[1])};
+    const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+    const std::array<const std::array<double, kRegionCount>*, 4> chain_shipped = {
+        &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
+    for (std::size_t k = 0; k < 4; ++k) {
+      expect_shipped(table_key(shared_m, "pooling", kChainNames[k]), *chain_shipped[k],
+                     larger_of({&p[0].chain[k], &p[1].chain[k]}));
+    }
+    const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    const std::array<const std::array<double, kRegionCount>*, 2> pair_shipped = {
+        &pair.kbar_pair_sd_pct, &pair.cbar_pair_sd_pct};
+    for (std::size_t k = 0; k < 2; ++k) {
+      expect_shipped(table_key(shared_m, "asymmetry", kPairNames[k]), *pair_shipped[k],
+                     larger_of({&f[0].pair[k], &f[1].pair[k]}));
+    }
+  }
+}
+
+}  // namespace
+}  // namespace gaitmon

@@ -1,0 +1,143 @@
+// `gaitmon calibrate` as a lab runs it: the tables on stdout, calibration.json with what was
+// measured beside the config's, and calibration.toml that a config takes in place of its own
+// [asymmetry] and [pooling] tables; a malformed design is a usage error that writes nothing.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "gaitmon/config.hpp"
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string read_all(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+std::string calibrate(const std::string& args, int* status) {
+  std::string output;
+  *status = test::run_command(test::gaitmon_binary().string() + " calibrate " + args, &output);
+  return output;
+}
+
+// The measured value of one table's region, or the config's where the sessions had none.
+double expected_value(const nlohmann::json& mode, const char* section, const char* key,
+                      const char* region) {
+  const auto& entry = mode.at(section).at(region).at(key);
+  return entry.at("measured").is_null() ? entry.at("config").get<double>()
+                                        : entry.at("measured").get<double>();
+}
+
+TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
+  const auto dir = test::scratch_dir("calibrate-tables");
+  int status = -1;
+  const std::string out = calibrate(
+      "--sizes 41-42,45-46 --seeds 1-2 --duration 10 --out " + (dir / "out").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("calibrate: 4 simulated sessions of 10 s (sizes 41-42, 45-46; seeds 1-2; "
+                     "body mass 50-90 kg"),
+            std::string::npos)
+      << out;
+  for (const char* table : {"\n[pooling] (each step at its own m)",
+                            "\n[pooling.m_per_session] (one m per region over the session)",
+                            "\n[asymmetry] (each step at its own m)",
+                            "\n[asymmetry.m_per_session] (one m per region over the session)"}) {
+    EXPECT_NE(out.find(table), std::string::npos) << table << "\n" << out;
+  }
+  const auto json = nlohmann::json::parse(read_all(dir / "out" / "calibration.json"));
+  EXPECT_EQ(json.at("design").at("sessions").get<int>(), 4);
+  EXPECT_EQ(json.at("design").at("sizes"), nlohmann::json({"41-42", "45-46"}));
+  const auto& heel = json.at("per_step").at("pooling").at("heel").at("kbar_chain_sd_pct");
+  EXPECT_EQ(heel.at("samples").get<int>(), 4);
+  ASSERT_FALSE(heel.at("measured").is_null());
+  // The SD measured brings the RMS of z to at most 1, and without it the steps' scatter alone
+  // gives more (the heel's pooled kbar errs by more than its steps scatter: README).
+  EXPECT_LE(heel.at("rms_z_measured").get<double>(), 1.0);
+  EXPECT_GT(heel.at("rms_z_without").get<double>(), 1.0);
+
+  // calibration.toml in place of the config's [asymmetry] and [pooling] tables.
+  const auto config_dir = dir / "config";
+  fs::create_directories(config_dir);
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / name, config_dir / name);
+  }
+  std::string config_text = read_all(config_dir / "gaitmon.toml");
+  const auto from = config_text.find("[asymmetry]\n");
+  const auto to = config_text.find("[wire]\n");
+  ASSERT_NE(from, std::string::npos);
+  ASSERT_NE(to, std::string::npos);
+  config_text.replace(from, to - from, read_all(dir / "out" / "calibration.toml") + "\n");
+  test::write_text(config_dir / "gaitmon.toml", config_text);
+  const Config config = load_config(config_dir / "gaitmon.toml");
+  using PerRegion = std::array<double, kRegionCount>;
+  for (const bool shared_m : {false, true}) {
+    const auto& mode = json.at(shared_m ? "m_per_session" : "per_step");
+    const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+    const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    const std::pair<const char*, const PerRegion*> tables[] = {
+        {"kbar_chain_sd_pct", &chain.kbar_chain_sd_pct},
+        {"n_chain_sd", &chain.n_chain_sd},
+        {"cbar_chain_sd_pct", &chain.cbar_chain_sd_pct},
+        {"m_chain_sd", &chain.m_chain_sd},
+        {"kbar_pair_sd_pct", &pair.kbar_pair_sd_pct},
+        {"cbar_pair_sd_pct", &pair.cbar_pair_sd_pct}};
+    for (const auto& [key, values] : tables) {
+      const char* section =
+          std::string(key).find("pair") == std::string::npos ? "pooling" : "asymmetry";
+      for (Region region : kRegions) {
+        const std::string name(region_name(region));
+        EXPECT_DOUBLE_EQ((*values)[index_of(region)],
+                         expected_value(mode, section, key, name.c_str()))
+            << (shared_m ? "m_per_session " : "per_step ") << key << " " << name;
+      }
+    }
+  }
+}
+
+TEST(CalibrateCommand, AMalformedDesignIsAUsageErrorThatSaysWhyAndWritesNothing) {
+  const auto dir = test::scratch_dir("calibrate-bad");
+  const struct {
+    const char* args;
+    const char* says;
+  } cases[] = {
+      {"--seeds 5-1", "seeds: the first (5) is after the last (1)"},
+      {"--seeds one", "--seeds: 'one': expected a number or FIRST-LAST"},
+      {"--seeds -3", "--seeds: '-3': expected a number or FIRST-LAST"},
+      {"--body-mass 90-50", "body mass must be 0 < min <= max <= 300 kg, got 90 to 50"},
+      {"--body-mass 60-nan", "--body-mass: '60-nan': expected a number or FIRST-LAST"},
+      {"--sizes 41-42,40-41", "--sizes: 40-41 not in"},
+      {"--duration 2", "--duration"},
+  };
+  for (const auto& c : cases) {
+    int status = -1;
+    const std::string out =
+        calibrate(std::string(c.args) + " --out " + (dir / "out").string(), &status);
+    EXPECT_EQ(status, 2) << c.args << "\n" << out;
+    EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
+    EXPECT_FALSE(fs::exists(dir / "out")) << c.args;
+  }
+}
+
+TEST(CalibrateCommand, HelpNamesTheDesignsOptionsAndTheirDefaults) {
+  int status = -1;
+  const std::string out = calibrate("--help", &status);
+  ASSERT_EQ(status, 0) << out;
+  for (const char* option : {"--sizes", "--seeds TEXT=1-20", "--duration", "--body-mass TEXT=50-90",
+                             "--noise", "--max-bias", "--placement-sd", "--out"}) {
+    EXPECT_NE(out.find(option), std::string::npos) << option << "\n" << out;
+  }
+}
+
+}  // namespace
+}  // namespace gaitmon
