@@ -49,6 +49,18 @@ void add_session(const SessionAnalysis& session, const SimulationTruth& truth, C
   }
 }
 
+void append(const ChainSamples& from, ChainSamples& to) {
+  for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+    for (std::size_t p = 0; p < 4; ++p) {
+      to.pooled[ri][p].insert(to.pooled[ri][p].end(), from.pooled[ri][p].begin(),
+                              from.pooled[ri][p].end());
+    }
+    for (std::size_t p = 0; p < 2; ++p) {
+      to.feet[ri][p].insert(to.feet[ri][p].end(), from.feet[ri][p].begin(), from.feet[ri][p].end());
+    }
+  }
+}
+
 // The analyses in the order `analyze` hands them to analyse_session: by foot, then step.
 SessionAnalysis analyse_in_order(std::vector<StepAnalysis> steps, const Config& config,
                                  InsoleSize size) {
@@ -58,14 +70,15 @@ SessionAnalysis analyse_in_order(std::vector<StepAnalysis> steps, const Config& 
   return analyse_session(steps, config, size, {});
 }
 
-struct SessionResult {
-  SimulationTruth truth;
-  SessionAnalysis per_step;
-  SessionAnalysis m_per_session;
+// One session's samples, both ways of fitting m: at most one per region and parameter, so that
+// a design of any size keeps only numbers, not its analyses.
+struct SessionSamples {
+  ChainSamples per_step;
+  ChainSamples m_per_session;
 };
 
-SessionResult run_session(const Config& config, const CalibrationDesign& design, std::size_t i,
-                          const fs::path& dir, ContactEllipseCache& cache) {
+SessionSamples run_session(const Config& config, const CalibrationDesign& design, std::size_t i,
+                           const fs::path& dir, ContactEllipseCache& cache) {
   SimulationOptions options;
   options.size = design.size_of(i);
   options.seed = design.seed_of(i);
@@ -76,8 +89,7 @@ SessionResult run_session(const Config& config, const CalibrationDesign& design,
   options.placement_sd_mm = design.placement_sd_mm;
   const fs::path csv = dir / fmt::format("session-{}.csv", i);
   const fs::path truth_json = dir / fmt::format("session-{}.truth.json", i);
-  SessionResult result;
-  result.truth = simulate_session(config, options, csv, truth_json);
+  const SimulationTruth truth = simulate_session(config, options, csv, truth_json);
   const InsoleLayout layout(config.insole(options.size), config.sensor);
   std::vector<StepAnalysis> steps;
   segment_session(csv, config, [&](Step&& step) {
@@ -88,9 +100,11 @@ SessionResult run_session(const Config& config, const CalibrationDesign& design,
   fs::remove(truth_json);
   std::vector<StepAnalysis> at_shared_m = steps;
   fit_damping_exponent_per_session(at_shared_m, config, {});
-  result.per_step = analyse_in_order(std::move(steps), config, options.size);
-  result.m_per_session = analyse_in_order(std::move(at_shared_m), config, options.size);
-  return result;
+  SessionSamples samples;
+  add_session(analyse_in_order(std::move(steps), config, options.size), truth, samples.per_step);
+  add_session(analyse_in_order(std::move(at_shared_m), config, options.size), truth,
+              samples.m_per_session);
+  return samples;
 }
 
 }  // namespace
@@ -141,7 +155,7 @@ CalibrationSamples collect_chain_samples(const Config& config, const Calibration
   const std::size_t count = design.session_count();
   const fs::path dir = scratch_dir / "calibration-sessions";
   fs::create_directories(dir);
-  std::vector<SessionResult> results(count);
+  std::vector<SessionSamples> results(count);
   std::vector<ContactEllipseCache> caches(detail::parallel_workers(count));
   try {
     detail::parallel_for_workers(
@@ -161,9 +175,9 @@ CalibrationSamples collect_chain_samples(const Config& config, const Calibration
   if (on_progress) on_progress(1.0);
   CalibrationSamples samples;
   samples.sessions = count;
-  for (const SessionResult& r : results) {
-    add_session(r.per_step, r.truth, samples.per_step);
-    add_session(r.m_per_session, r.truth, samples.m_per_session);
+  for (const SessionSamples& r : results) {
+    append(r.per_step, samples.per_step);
+    append(r.m_per_session, samples.m_per_session);
   }
   return samples;
 }
