@@ -282,16 +282,14 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   std::tie(r.cbar_trend, r.cbar_asymmetry) =
       step_course(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region,
                   true, pair.cbar_pair_sd_pct[index_of(region)]);
-  const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
-  const std::size_t ri = index_of(region);
-  r.chain_sd = {chain.kbar_chain_sd_pct[ri] / 100.0, chain.n_chain_sd[ri],
-                chain.cbar_chain_sd_pct[ri] / 100.0, chain.m_chain_sd[ri]};
+  r.chain_sd = chain_sd(config.pooling, region, shared_m);
   r.pooled_per_step.resize(steps.size());
   if (r.pooling.pooled) {
     r.pooled_mean = with_shared_error(
         {r.pooling.mean, r.pooling.mean_covariance, r.pooling.mean_slope_on_shared_m}, r.chain_sd);
     for (std::size_t k = 0; k < estimated_steps.size(); ++k) {
-      r.pooled_per_step[estimated_steps[k]] = material_params(r.pooling.steps[k]);
+      r.pooled_per_step[estimated_steps[k]] =
+          material_params(with_shared_error(r.pooling.steps[k], r.chain_sd));
     }
   }
   const SeedTissueStats& seed = config.tissue(size, region);
@@ -312,6 +310,32 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
 }
 
 }  // namespace
+
+MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shared_m) {
+  const ChainSds& chain = shared_m ? pooling.m_per_session : pooling.per_step;
+  const std::size_t ri = index_of(region);
+  return {chain.kbar_chain_sd_pct[ri] / 100.0, chain.n_chain_sd[ri],
+          chain.cbar_chain_sd_pct[ri] / 100.0, chain.m_chain_sd[ri]};
+}
+
+std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region region,
+                                               const PoolingSettings& pooling) {
+  std::optional<MaterialEstimate> estimate = material_estimate(fit);
+  if (!estimate) return std::nullopt;
+  const bool shared_m = estimate->slope_on_shared_m.has_value();
+  if (shared_m) {
+    // The shared m's own variance reaches this step's kbar, n and cbar through their slopes, as
+    // pool_steps carries it into a mean (m's own entry already holds it).
+    const MaterialVector& g = *estimate->slope_on_shared_m;
+    const double m_variance = estimate->covariance[3][3];
+    for (std::size_t a = 0; a < 4; ++a) {
+      for (std::size_t b = 0; b < 4; ++b) {
+        if (a < 3 || b < 3) estimate->covariance[a][b] += g[a] * g[b] * m_variance;
+      }
+    }
+  }
+  return material_params(with_shared_error(*estimate, chain_sd(pooling, region, shared_m)));
+}
 
 SessionAnalysis analyse_session(std::span<const StepAnalysis> steps, const Config& config,
                                 InsoleSize size, const AnalysisSettings& settings) {

@@ -62,7 +62,7 @@ std::string region_status(const RegionFit& fit) {
   return status;
 }
 
-FitReport fit_report(const StepAnalysis& analysis, bool& failed) {
+FitReport fit_report(const StepAnalysis& analysis, const PoolingSettings& pooling, bool& failed) {
   FitReport report;
   report.foot = analysis.foot;
   report.step = analysis.step;
@@ -85,6 +85,12 @@ FitReport fit_report(const StepAnalysis& analysis, bool& failed) {
     out.se_n = f.n.se;
     out.se_cbar = f.cbar_ns_per_mm3.se;
     out.se_m = f.m.se;
+    if (const std::optional<MaterialParams> total = with_chain_error(f, r.region, pooling)) {
+      out.se_kbar_total = total->kbar_n_per_mm3.se;
+      out.se_n_total = total->n.se;
+      out.se_cbar_total = total->cbar_ns_per_mm3.se;
+      out.se_m_total = total->m.se;
+    }
     out.A_mm = f.A_mm.value;
     out.B_mm = f.B_mm.value;
     out.C_mm = f.C_mm.value;
@@ -594,7 +600,7 @@ struct Monitor::Impl {
           ready->report = fit_report(extended     ? *extended
                                      : at_running ? *at_running
                                                   : *analysis,
-                                     ready->failed);
+                                     config.pooling, ready->failed);
           if (extended) {
             ready->report.effects_inside = inside->joined;
             ready->report.effects_utime = inside->utime;

@@ -117,6 +117,38 @@ void expect_close(double actual, double expected, const std::string& what) {
   EXPECT_NEAR(actual, expected, 1e-9 * std::max(1.0, std::abs(expected))) << what;
 }
 
+// What GAITMON_FIT's se_*_total should be for `fit` of `region`, worked from the config's chain
+// SDs: ln kbar's and ln cbar's variances are (se / value)^2; at a declared (running) m its own
+// variance and [pooling.m_per_session]'s SD of m reach the others through their slopes. Zeros
+// where the fit has no covariance of its four parameters.
+std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, const Config& config) {
+  if (!fit.material_covariance) return {0.0, 0.0, 0.0, 0.0};
+  const bool shared = !fit.m.free;
+  const ChainSds& chain = shared ? config.pooling.m_per_session : config.pooling.per_step;
+  const std::size_t ri = index_of(region);
+  const double m_variance =
+      fit.m.se * fit.m.se + (shared ? chain.m_chain_sd[ri] * chain.m_chain_sd[ri] : 0.0);
+  const std::array<double, 3> slope =
+      shared ? *fit.material_slope_on_m : std::array<double, 3>{0.0, 0.0, 0.0};
+  const auto total = [&](double relative_se, double sd, double g) {
+    return std::sqrt(relative_se * relative_se + sd * sd + g * g * m_variance);
+  };
+  const double kbar = fit.kbar_n_per_mm3.value, cbar = fit.cbar_ns_per_mm3.value;
+  return {kbar * total(fit.kbar_n_per_mm3.se / kbar, chain.kbar_chain_sd_pct[ri] / 100, slope[0]),
+          total(fit.n.se, chain.n_chain_sd[ri], slope[1]),
+          cbar * total(fit.cbar_ns_per_mm3.se / cbar, chain.cbar_chain_sd_pct[ri] / 100, slope[2]),
+          shared ? std::sqrt(m_variance) : std::hypot(fit.m.se, chain.m_chain_sd[ri])};
+}
+
+void expect_total_se(const RegionFitReport& got, const RegionFit& fit, Region region,
+                     const Config& config, const std::string& where) {
+  const std::array<double, 4> e = expected_total_se(fit, region, config);
+  expect_close(got.se_kbar_total, e[0], where + " se_kbar_total");
+  expect_close(got.se_n_total, e[1], where + " se_n_total");
+  expect_close(got.se_cbar_total, e[2], where + " se_cbar_total");
+  expect_close(got.se_m_total, e[3], where + " se_m_total");
+}
+
 using StepKey = std::pair<Foot, int>;
 
 // The monitor's step events against the batch pipeline's steps: a heel strike and a toe off per
@@ -211,6 +243,7 @@ TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
       expect_close(g.m, r.fit.m.value, where + " m");
       expect_close(g.se_kbar, r.fit.kbar_n_per_mm3.se, where + " se_kbar");
       expect_close(g.se_m, r.fit.m.se, where + " se_m");
+      expect_total_se(g, r.fit, r.region, config, where);
       expect_close(g.A_mm, r.fit.A_mm.value, where + " A");
       expect_close(g.B_mm, r.fit.B_mm.value, where + " B");
       expect_close(g.C_mm, r.fit.C_mm.value, where + " C");
@@ -708,6 +741,7 @@ TEST(Monitor, RunningMFitsEachStepAfterTheFirstEstimateAtIt) {
       expect_close(got.cbar_ns_per_mm3, r.fit.cbar_ns_per_mm3.value, where + " cbar");
       expect_close(got.m, r.fit.m.value, where + " m");
       expect_close(got.se_m, r.fit.m.se, where + " se_m");
+      expect_total_se(got, r.fit, r.region, config, where);
     }
     EXPECT_TRUE(shared[heel].has_value());
     EXPECT_EQ(fit.regions[heel].m, shared[heel]->m);

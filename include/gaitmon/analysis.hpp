@@ -157,7 +157,8 @@ struct RegionSessionAnalysis {
   /// parameters the data determine; `pooling.steps` holds their posteriors in step order.
   PooledEstimates pooling;
   /// Aligned with analyse_session's `steps`: each step's pooled kbar, n, cbar, m, or nothing
-  /// where the step was not pooled (no contact, a failed fit, or too few steps to pool).
+  /// where the step was not pooled (no contact, a failed fit, or too few steps to pool). Their
+  /// standard errors hold chain_sd, as pooled_mean's do: a posterior leans on the mean.
   std::vector<std::optional<MaterialParams>> pooled_per_step;
   /// [pooling]'s SDs of the error every step of this region shares, on the pooled scale (ln kbar,
   /// n, ln cbar, m); [pooling.m_per_session]'s where the steps were fitted at one m.
@@ -184,6 +185,19 @@ struct SessionAnalysis {
   std::array<RegionSessionAnalysis, kRegionCount> regions;
   Spread nrmse_total_pct;
 };
+
+/// The measurement chain's SDs of `region` on the pooled scale (ln kbar, n, ln cbar, m): those of
+/// `pooling.m_per_session` for steps fitted at one m per region, else of `pooling.per_step`.
+MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shared_m);
+
+/// A region-step's own kbar, n, cbar and m with standard errors against the tissue rather than
+/// against the session's other steps: its fit's covariance (material_estimate) with the
+/// measurement chain's error that every step of the region shares (with_shared_error, chain_sd;
+/// at a shared m that m's whole error reaches kbar, n and cbar through their slopes). The fit's
+/// own standard errors describe how the steps scatter and miss that error (README, "How honest
+/// the standard errors are"). Nothing where the fit has no material estimate.
+std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region region,
+                                               const PoolingSettings& pooling);
 
 /// The session-level fit per region (fit_region_session over the series of every step with
 /// contact in that region), the spread of the per-step fits and their pooling across steps (both

@@ -53,6 +53,9 @@ struct RegionFitReport {
   std::string status;  ///< ok, no_contact, fit_failed:<reason>
   double kbar_n_per_mm3 = 0.0, n = 0.0, cbar_ns_per_mm3 = 0.0, m = 0.0;
   double se_kbar = 0.0, se_n = 0.0, se_cbar = 0.0, se_m = 0.0;
+  /// The same with the measurement chain's shared error (with_chain_error in analysis.hpp):
+  /// against the tissue, not the other steps; 0 where the fit has no material estimate.
+  double se_kbar_total = 0.0, se_n_total = 0.0, se_cbar_total = 0.0, se_m_total = 0.0;
   double A_mm = 0.0, B_mm = 0.0, C_mm = 0.0, d0_mm = 0.0;
   double nrmse_pct = 0.0;
   /// Steps of the running m ([model] m_per_session) the region was fitted at; 0: its own m.

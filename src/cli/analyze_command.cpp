@@ -162,19 +162,31 @@ std::string pooled_columns(const std::optional<MaterialParams>& p) {
                      p->kbar_n_per_mm3.se, p->n.se, p->cbar_ns_per_mm3.se, p->m.se);
 }
 
+// The step's own standard errors with the chain's shared error (with_chain_error), empty where
+// the fit has no material estimate.
+std::string total_se_columns(const RegionFit& fit, Region region, const PoolingSettings& pooling) {
+  const std::optional<MaterialParams> p = with_chain_error(fit, region, pooling);
+  if (!p) return ",,,";
+  return fmt::format("{:.3g},{:.3g},{:.3g},{:.3g}", p->kbar_n_per_mm3.se, p->n.se,
+                     p->cbar_ns_per_mm3.se, p->m.se);
+}
+
 // `analyses` in the order analyse_session was given them.
-std::string regions_csv(const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session) {
+std::string regions_csv(const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
+                        const PoolingSettings& pooling) {
   std::string out =
       "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
       "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct,aspect_a_over_b,"
       "at_bound,iterations,final_cost,area,frames_fitted,kbar_pooled,n_pooled,cbar_pooled,"
-      "m_pooled,se_kbar_pooled,se_n_pooled,se_cbar_pooled,se_m_pooled\n";
+      "m_pooled,se_kbar_pooled,se_n_pooled,se_cbar_pooled,se_m_pooled,se_kbar_total,se_n_total,"
+      "se_cbar_total,se_m_total\n";
   for (std::size_t si = 0; si < analyses.size(); ++si) {
     const StepAnalysis& s = analyses[si];
     for (const RegionAnalysis& r : s.regions) {
       const RegionFit& f = r.fit;
-      const std::string pooled =
-          pooled_columns(session.regions[index_of(r.region)].pooled_per_step[si]);
+      const std::string pooled_and_total =
+          pooled_columns(session.regions[index_of(r.region)].pooled_per_step[si]) + "," +
+          total_se_columns(f, r.region, pooling);
       fmt::format_to(std::back_inserter(out), "{},{},{},{},{},{:.3f},{:.2f},", foot_name(s.foot),
                      s.step, region_name(r.region), status_text(f), r.frames, r.peak_force_n,
                      r.peak_area_mm2);
@@ -186,10 +198,10 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
                        f.kbar_n_per_mm3.value, f.n.value, f.cbar_ns_per_mm3.value, f.m.value,
                        f.kbar_n_per_mm3.se, f.n.se, f.cbar_ns_per_mm3.se, f.m.se, f.nrmse_pct,
                        r.aspect, at_bound_list(f), f.iterations, f.final_cost,
-                       area_source_name(r.area), f.frames, pooled);
+                       area_source_name(r.area), f.frames, pooled_and_total);
       } else {
         fmt::format_to(std::back_inserter(out), ",,,,,,,,,,,,,{:.4f},,{},,{},{},{}\n", r.aspect,
-                       f.iterations, area_source_name(r.area), f.frames, pooled);
+                       f.iterations, area_source_name(r.area), f.frames, pooled_and_total);
       }
     }
   }
@@ -718,7 +730,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
 
   std::filesystem::create_directories(args.out_dir);
   outputs.add("steps.csv", steps_csv(steps));
-  outputs.add("regions.csv", regions_csv(analyses, session));
+  outputs.add("regions.csv", regions_csv(analyses, session, config.pooling));
   outputs.add("session.json",
               session_json(args, header, config, settings, steps, analyses, session, extended));
   if (args.report) {

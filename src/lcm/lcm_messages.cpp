@@ -66,6 +66,10 @@ void copy_region_fit_fields(const From& in, To& out) {
   out.se_n = in.se_n;
   out.se_cbar = in.se_cbar;
   out.se_m = in.se_m;
+  out.se_kbar_total = in.se_kbar_total;
+  out.se_n_total = in.se_n_total;
+  out.se_cbar_total = in.se_cbar_total;
+  out.se_m_total = in.se_m_total;
   out.A_mm = in.A_mm;
   out.B_mm = in.B_mm;
   out.C_mm = in.C_mm;

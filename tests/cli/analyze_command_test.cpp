@@ -175,9 +175,10 @@ TEST(AnalyzeCommand, WritesTheSessionLevelFitsAsJson) {
 }
 
 // The heel's steps are pooled (pooling.hpp): every heel row fitted Ok carries its pooled kbar, n,
-// cbar, m, session.json counts the same steps, and the pooled standard errors are smaller than
-// the steps' own because each step borrows from the others. The pool's mean has a standard error
-// with the measurement chain's shared error, printed in the summary.
+// cbar, m, session.json counts the same steps, and the pooled standard errors, which hold the
+// measurement chain's shared error, are smaller than the steps' own with it (se_*_total) because
+// each step borrows from the others. The pool's mean has a standard error with that error too,
+// printed in the summary.
 TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
@@ -189,7 +190,7 @@ TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
     EXPECT_NE(it, header.end()) << name;
     return static_cast<std::size_t>(it - header.begin());
   };
-  const std::size_t se_kbar = column("se_kbar");
+  const std::size_t se_kbar = column("se_kbar_total");
   const std::size_t pooled_columns[] = {column("kbar_pooled"), column("n_pooled"),
                                         column("cbar_pooled"), column("m_pooled")};
   const std::size_t se_kbar_pooled = column("se_kbar_pooled");
@@ -232,6 +233,74 @@ TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
   std::sort(own_se.begin(), own_se.end());
   std::sort(pooled_se.begin(), pooled_se.end());
   EXPECT_LT(pooled_se[pooled_se.size() / 2], own_se[own_se.size() / 2]);
+  // A step's pooled kbar leans on the mean and carries its chain error.
+  for (const double se : pooled_se) EXPECT_GT(se, 0.04 * 0.9 * kbar);
+}
+
+// Each step's standard errors with the chain's shared error, worked here from the shipped
+// [pooling] SDs of the heel (kbar 4 %, n 0.02, cbar 13.5 %, m 0.06): on the log scale for kbar
+// and cbar, as the fit's covariance is. With --m-per-session the shared m's standard error and
+// [pooling.m_per_session]'s SD of m (0.06) make se_m_total, and reach cbar through its slope.
+TEST(AnalyzeCommand, WritesEachStepsStandardErrorsWithTheChainsSharedError) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto lines = lines_of(a.dir / "out" / "regions.csv");
+  ASSERT_FALSE(lines.empty());
+  const auto header = fields(lines[0]);
+  const std::vector<std::string> tail = {"se_kbar_total", "se_n_total", "se_cbar_total",
+                                         "se_m_total"};
+  ASSERT_GE(header.size(), tail.size());
+  EXPECT_EQ(std::vector<std::string>(header.end() - 4, header.end()), tail);
+  const std::size_t total = header.size() - 4;
+  const auto near = [](double got, double expected, const std::string& line) {
+    EXPECT_NEAR(got, expected, 0.006 * expected) << line;
+  };
+  int heel = 0;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const auto f = fields(lines[i]);
+    if (f[3] != "ok") {
+      for (std::size_t c = total; c < f.size(); ++c) EXPECT_TRUE(f[c].empty()) << lines[i];
+      continue;
+    }
+    for (std::size_t k = 0; k < 4; ++k) {
+      if (f[total + k].empty()) continue;  // a parameter the step does not determine
+      EXPECT_GE(std::stod(f[total + k]), std::stod(f[15 + k]) * (1 - 5e-3)) << lines[i];
+    }
+    if (f[2] != "heel") continue;
+    ++heel;
+    const double kbar = std::stod(f[11]), cbar = std::stod(f[13]);
+    near(std::stod(f[total]), kbar * std::hypot(std::stod(f[15]) / kbar, 0.04), lines[i]);
+    near(std::stod(f[total + 1]), std::hypot(std::stod(f[16]), 0.02), lines[i]);
+    near(std::stod(f[total + 2]), cbar * std::hypot(std::stod(f[17]) / cbar, 0.135), lines[i]);
+    near(std::stod(f[total + 3]), std::hypot(std::stod(f[18]), 0.06), lines[i]);
+  }
+  EXPECT_GE(heel, 6);
+
+  int status = -1;
+  const fs::path out = a.dir / "m-per-session-total";
+  const std::string printed =
+      run("analyze " + (a.dir / "s.csv").string() + " --out " + out.string() + " --m-per-session",
+          &status);
+  ASSERT_EQ(status, 0) << printed;
+  const double se_m = nlohmann::json::parse(read_all(out / "session.json"))
+                          .at("regions")
+                          .at("heel")
+                          .at("m_per_session")
+                          .at("se")
+                          .get<double>();
+  int shared = 0;
+  for (const auto& line : lines_of(out / "regions.csv")) {
+    const auto f = fields(line);
+    if (f[2] != "heel" || f[3] != "ok") continue;
+    ++shared;
+    near(std::stod(f[18]), se_m, line);
+    near(std::stod(f[total + 3]), std::hypot(se_m, 0.06), line);
+    // The shared m's error moves this step's cbar: more than the chain's 3 % of cbar alone.
+    const double cbar = std::stod(f[13]);
+    EXPECT_GT(std::stod(f[total + 2]), cbar * std::hypot(std::stod(f[17]) / cbar, 0.03) * 1.01)
+        << line;
+  }
+  EXPECT_EQ(shared, heel);
 }
 
 TEST(AnalyzeCommand, ReportIsSelfContained) {

@@ -132,6 +132,10 @@ json lua_expected_fit() {
                        {"se_n", g.se_n},
                        {"se_cbar", g.se_cbar},
                        {"se_m", g.se_m},
+                       {"se_kbar_total", g.se_kbar_total},
+                       {"se_n_total", g.se_n_total},
+                       {"se_cbar_total", g.se_cbar_total},
+                       {"se_m_total", g.se_m_total},
                        {"A_mm", g.A_mm},
                        {"B_mm", g.B_mm},
                        {"C_mm", g.C_mm},
@@ -351,6 +355,10 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
     EXPECT_EQ(g["se_n"], e.se_n);
     EXPECT_EQ(g["se_cbar"], e.se_cbar);
     EXPECT_EQ(g["se_m"], e.se_m);
+    EXPECT_EQ(g["se_kbar_total"], e.se_kbar_total);
+    EXPECT_EQ(g["se_n_total"], e.se_n_total);
+    EXPECT_EQ(g["se_cbar_total"], e.se_cbar_total);
+    EXPECT_EQ(g["se_m_total"], e.se_m_total);
     EXPECT_EQ(g["A_mm"], e.A_mm);
     EXPECT_EQ(g["B_mm"], e.B_mm);
     EXPECT_EQ(g["C_mm"], e.C_mm);

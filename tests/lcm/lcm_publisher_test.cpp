@@ -156,6 +156,10 @@ TEST_F(LcmPublisherMemq, FitReportArrivesAsFitT) {
     EXPECT_EQ(g.se_n, 0.02 + 0.001 * i);
     EXPECT_EQ(g.se_cbar, 0.002 + 0.0001 * i);
     EXPECT_EQ(g.se_m, 0.05 + 0.001 * i);
+    EXPECT_EQ(g.se_kbar_total, 0.005 + 0.0001 * i);
+    EXPECT_EQ(g.se_n_total, 0.03 + 0.001 * i);
+    EXPECT_EQ(g.se_cbar_total, 0.004 + 0.0001 * i);
+    EXPECT_EQ(g.se_m_total, 0.0625 + 0.001 * i);
     EXPECT_EQ(g.A_mm, 40.5 + i);
     EXPECT_EQ(g.B_mm, 30.25 + i);
     EXPECT_EQ(g.C_mm, 60.125 + i);

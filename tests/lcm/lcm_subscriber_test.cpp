@@ -106,6 +106,10 @@ void expect_same(const FitReport& a, const FitReport& b) {
     EXPECT_EQ(x.se_n, y.se_n);
     EXPECT_EQ(x.se_cbar, y.se_cbar);
     EXPECT_EQ(x.se_m, y.se_m);
+    EXPECT_EQ(x.se_kbar_total, y.se_kbar_total);
+    EXPECT_EQ(x.se_n_total, y.se_n_total);
+    EXPECT_EQ(x.se_cbar_total, y.se_cbar_total);
+    EXPECT_EQ(x.se_m_total, y.se_m_total);
     EXPECT_EQ(x.A_mm, y.A_mm);
     EXPECT_EQ(x.B_mm, y.B_mm);
     EXPECT_EQ(x.C_mm, y.C_mm);

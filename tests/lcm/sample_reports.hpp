@@ -68,6 +68,10 @@ inline FitReport sample_fit() {
     g.se_n = 0.02 + 0.001 * k;
     g.se_cbar = 0.002 + 0.0001 * k;
     g.se_m = 0.05 + 0.001 * k;
+    g.se_kbar_total = 0.005 + 0.0001 * k;
+    g.se_n_total = 0.03 + 0.001 * k;
+    g.se_cbar_total = 0.004 + 0.0001 * k;
+    g.se_m_total = 0.0625 + 0.001 * k;
     g.A_mm = 40.5 + k;
     g.B_mm = 30.25 + k;
     g.C_mm = 60.125 + k;
