@@ -7,10 +7,12 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -22,6 +24,42 @@
 
 namespace gaitmon::cli {
 namespace {
+
+// The signal (SIGINT or SIGTERM) that asked the sessions to stop, 0 if none: the default action
+// would leave the scratch folder's sessions behind. A second one takes the default action at once.
+volatile std::sig_atomic_t g_stop_signal = 0;
+
+extern "C" void stop_calibrating(int signal) {
+  if (g_stop_signal != 0) {
+    std::signal(signal, SIG_DFL);
+    std::raise(signal);
+    return;
+  }
+  g_stop_signal = signal;
+}
+
+// SIGINT and SIGTERM stop the sessions at the next one the calling thread finishes while it lives.
+class StopSignals {
+ public:
+  StopSignals() {
+    struct sigaction action {};
+    action.sa_handler = stop_calibrating;
+    sigaction(SIGINT, &action, &previous_int_);
+    sigaction(SIGTERM, &action, &previous_term_);
+  }
+  ~StopSignals() {
+    sigaction(SIGINT, &previous_int_, nullptr);
+    sigaction(SIGTERM, &previous_term_, nullptr);
+  }
+  StopSignals(const StopSignals&) = delete;
+  StopSignals& operator=(const StopSignals&) = delete;
+
+ private:
+  struct sigaction previous_int_ {};
+  struct sigaction previous_term_ {};
+};
+
+struct Stopped {};
 
 struct CalibrateArgs {
   CalibrationDesign design;
@@ -269,9 +307,21 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
   const auto start = std::chrono::steady_clock::now();
   CalibrationSamples samples;
   try {
+    const StopSignals stop_signals;
     ProgressBar progress("calibrate");
-    samples = collect_chain_samples(config, design, scratch,
-                                    [&](double fraction) { progress.update(fraction); });
+    samples = collect_chain_samples(config, design, scratch, [&](double fraction) {
+      if (g_stop_signal != 0) throw Stopped{};
+      progress.update(fraction);
+    });
+  } catch (const Stopped&) {
+    std::filesystem::remove_all(scratch);
+    const int signal = g_stop_signal;
+    fmt::print(stderr, "calibrate: stopped by {}; nothing written\n",
+               signal == SIGINT ? "SIGINT" : "SIGTERM");
+    // Ends as the signal would have, for the shell and the caller to see.
+    std::signal(signal, SIG_DFL);
+    std::raise(signal);
+    throw std::runtime_error("calibrate: stopped");
   } catch (...) {
     std::filesystem::remove_all(scratch);
     throw;

@@ -1,14 +1,23 @@
 // `gaitmon calibrate` as a lab runs it: the tables on stdout, calibration.json with what was
 // measured beside the config's, and calibration.toml that a config takes in place of its own
 // [asymmetry] and [pooling] tables; a malformed design is a usage error that writes nothing.
+#include <fcntl.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
+#include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "gaitmon/config.hpp"
 #include "test_support.hpp"
@@ -126,6 +135,85 @@ TEST(CalibrateCommand, AMalformedDesignIsAUsageErrorThatSaysWhyAndWritesNothing)
     EXPECT_EQ(status, 2) << c.args << "\n" << out;
     EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
     EXPECT_FALSE(fs::exists(dir / "out")) << c.args;
+  }
+}
+
+// Whether `dir` holds, at any depth, a file whose name starts with `prefix`.
+bool holds_file(const fs::path& dir, const std::string& prefix) {
+  std::error_code error;
+  for (fs::recursive_directory_iterator it(dir, error), end; !error && it != end;
+       it.increment(error)) {
+    if (it->path().filename().string().starts_with(prefix)) return true;
+  }
+  return false;
+}
+
+// Ctrl-C or SIGTERM while the sessions run: they stop at the next one the command's thread
+// finishes, its scratch folder (under TMPDIR) goes, nothing is written, it says so, and it ends by
+// that signal as the default action would, which would have left the sessions behind.
+TEST(CalibrateCommand, AStopSignalRemovesTheScratchSessionsAndWritesNothing) {
+  for (const int signal : {SIGINT, SIGTERM}) {
+    SCOPED_TRACE(signal == SIGINT ? "SIGINT" : "SIGTERM");
+    const auto dir = test::scratch_dir(signal == SIGINT ? "calibrate-sigint" : "calibrate-sigterm");
+    const fs::path tmp = dir / "tmp";
+    fs::create_directories(tmp);
+    const fs::path log = dir / "log.txt";
+    std::vector<std::string> args{test::gaitmon_binary().string(),
+                                  "calibrate",
+                                  "--seeds",
+                                  "1-500",
+                                  "--duration",
+                                  "30",
+                                  "--out",
+                                  (dir / "out").string()};
+    std::vector<std::string> env{"TMPDIR=" + tmp.string()};
+    for (char** e = environ; *e != nullptr; ++e) {
+      if (!std::string(*e).starts_with("TMPDIR=")) env.emplace_back(*e);
+    }
+    const auto pointers = [](std::vector<std::string>& strings) {
+      std::vector<char*> out;
+      for (std::string& s : strings) out.push_back(s.data());
+      out.push_back(nullptr);
+      return out;
+    };
+    std::vector<char*> argv = pointers(args);
+    std::vector<char*> envp = pointers(env);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log.c_str(),
+                                     O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+    pid_t pid = -1;
+    const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), envp.data());
+    posix_spawn_file_actions_destroy(&actions);
+    ASSERT_EQ(rc, 0);
+
+    // Bounds a hang: the sessions appear within a second or two, sanitizers included.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (!holds_file(tmp, "session-") && std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    const bool started = holds_file(tmp, "session-");
+    ASSERT_EQ(::kill(pid, signal), 0);
+    int wstatus = 0;
+    pid_t ended = 0;
+    while ((ended = ::waitpid(pid, &wstatus, WNOHANG)) == 0 &&
+           std::chrono::steady_clock::now() < until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    if (ended == 0) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &wstatus, 0);
+    }
+    EXPECT_TRUE(started) << read_all(log);
+    EXPECT_EQ(ended, pid) << "still running 120 s on";
+    EXPECT_TRUE(WIFSIGNALED(wstatus) && WTERMSIG(wstatus) == signal) << read_all(log);
+    EXPECT_TRUE(fs::is_empty(tmp)) << read_all(log);
+    EXPECT_FALSE(fs::exists(dir / "out" / "calibration.json"));
+    EXPECT_NE(read_all(log).find(fmt::format("calibrate: stopped by {}; nothing written",
+                                             signal == SIGINT ? "SIGINT" : "SIGTERM")),
+              std::string::npos)
+        << read_all(log);
   }
 }
 
