@@ -73,6 +73,24 @@ class Chart {
     svg_ += "\"/>";
   }
 
+  /// A filled band from `lo` up to `hi` along `xs`, cut at the plot's edges: a wide band must not
+  /// set the scale of the values it surrounds.
+  void band(std::span<const double> xs, std::span<const double> lo, std::span<const double> hi,
+            std::string_view colour, double opacity) {
+    const auto inside = [&](double y) { return py(std::clamp(y, y_.lo, y_.hi)); };
+    fmt::format_to(std::back_inserter(svg_),
+                   "<polygon class=\"band\" fill=\"{}\" fill-opacity=\"{}\" stroke=\"none\" "
+                   "points=\"",
+                   colour, opacity);
+    for (std::size_t i = 0; i < xs.size(); ++i) {
+      fmt::format_to(std::back_inserter(svg_), "{:.1f},{:.1f} ", px(xs[i]), inside(lo[i]));
+    }
+    for (std::size_t i = xs.size(); i-- > 0;) {
+      fmt::format_to(std::back_inserter(svg_), "{:.1f},{:.1f} ", px(xs[i]), inside(hi[i]));
+    }
+    svg_ += "\"/>";
+  }
+
   void dot(double x, double y, std::string_view colour, double r, double opacity = 1.0) {
     fmt::format_to(std::back_inserter(svg_),
                    "<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"{}\" fill=\"{}\" fill-opacity=\"{}\"/>",
@@ -366,13 +384,14 @@ std::string strip_chart(std::span<const StepAnalysis> analyses, Region region, c
 }
 
 /// One fitted parameter per step against its heel strike, a colour per foot, with each foot's
-/// pooled per-step values as a line where the steps were pooled, and the trend over the session
-/// where there is one: a drift over the walk (warm-up, fatigue, a sensor warming) shows here and
-/// in no distribution.
+/// pooled per-step values as a line in a band of one standard error either side (the chain's
+/// shared error included) where the steps were pooled, and the trend over the session where there
+/// is one: a drift over the walk (warm-up, fatigue, a sensor warming) shows here and in no
+/// distribution.
 std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSessionAnalysis& r,
                          const ParamView& p) {
   struct FootCourse {
-    std::vector<double> t, own, t_pooled, pooled;
+    std::vector<double> t, own, t_pooled, pooled, pooled_lo, pooled_hi;
   };
   std::array<FootCourse, 2> feet;
   // pooled_per_step is aligned with the steps analyse_session was given, which are these.
@@ -388,9 +407,12 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
     x.add(s.t_heel_strike_s);
     y.add(course.own.back());
     if (aligned && r.pooled_per_step[i]) {
+      const Estimate& e = (*r.pooled_per_step[i]).*p.pooled_estimate;
       course.t_pooled.push_back(s.t_heel_strike_s);
-      course.pooled.push_back(((*r.pooled_per_step[i]).*p.pooled_estimate).value);
-      y.add(course.pooled.back());
+      course.pooled.push_back(e.value);
+      course.pooled_lo.push_back(e.value - e.se);
+      course.pooled_hi.push_back(e.value + e.se);
+      y.add(e.value);
     }
   }
   const LogTrend* trend = p.trend != nullptr && r.*p.trend ? &*(r.*p.trend) : nullptr;
@@ -411,12 +433,13 @@ std::string course_chart(std::span<const StepAnalysis> analyses, const RegionSes
       c.dot(feet[foot].t[k], feet[foot].own[k], colours[foot], 2.2, 0.6);
     }
     if (feet[foot].pooled.empty()) continue;
+    c.band(feet[foot].t_pooled, feet[foot].pooled_lo, feet[foot].pooled_hi, colours[foot], 0.15);
     c.line(feet[foot].t_pooled, feet[foot].pooled, colours[foot], 1.5);
     pooled = true;
   }
   std::vector<std::pair<std::string_view, std::string_view>> legend = {
       {kLeftFoot, "left, each step"}, {kRightFoot, "right"}};
-  if (pooled) legend.emplace_back(kMeasured, "pooled (lines)");
+  if (pooled) legend.emplace_back(kMeasured, "pooled \u00b1 SE (lines)");
   std::string trend_label;
   if (trend != nullptr) {
     c.line(ends, trend_ends, kModel, 2.0, 0.8);

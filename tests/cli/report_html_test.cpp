@@ -223,9 +223,35 @@ std::vector<std::pair<double, double>> polyline_points(const std::string& svg,
   return out;
 }
 
+/// The top and bottom of a chart's plot frame, in pixels.
+std::pair<double, double> frame_span(const std::string& svg) {
+  const auto frame = svg.rfind("<rect ", svg.find("class=\"frame\""));
+  const auto y = svg.find("y=\"", frame) + 3;
+  const auto height = svg.find("height=\"", frame) + 8;
+  const double top = std::stod(svg.substr(y));
+  return {top, top + std::stod(svg.substr(height))};
+}
+
+/// The points of every band drawn in `colour`, in pixels, in the order drawn.
+std::vector<std::vector<std::pair<double, double>>> band_points(const std::string& svg,
+                                                                const std::string& colour) {
+  std::vector<std::vector<std::pair<double, double>>> out;
+  const std::string tag = "<polygon class=\"band\" fill=\"" + colour + "\"";
+  for (auto at = svg.find(tag); at != std::string::npos; at = svg.find(tag, at + 1)) {
+    const auto points = svg.find("points=\"", at) + 8;
+    std::istringstream xy(svg.substr(points, svg.find('"', points) - points));
+    auto& band = out.emplace_back();
+    double x, y;
+    char comma;
+    while (xy >> x >> comma >> y) band.emplace_back(x, y);
+  }
+  return out;
+}
+
 // kbar over the session: a dot per fitted step at its heel strike, blue for the left foot and
 // green for the right, and where the steps were pooled a line per foot through their pooled
-// values; nothing for the step whose fit failed.
+// values in a band of one standard error either side, cut at the plot's edges; nothing for the
+// step whose fit failed.
 TEST(ReportHtml, DrawsEachStepsStiffnessAgainstItsHeelStrikePerFoot) {
   Fixture f;
   RegionSessionAnalysis& heel = f.session.regions[index_of(Region::Heel)];
@@ -233,6 +259,8 @@ TEST(ReportHtml, DrawsEachStepsStiffnessAgainstItsHeelStrikePerFoot) {
   for (std::size_t i = 0; i + 1 < f.analyses.size(); ++i) {
     MaterialParams p;
     p.kbar_n_per_mm3.value = 0.115;
+    // The left foot's steps are 0 and 1 of the analyses, the right one's 2 (below).
+    p.kbar_n_per_mm3.se = i < 2 ? 0.002 : 10.0;
     heel.pooled_per_step[i] = p;
   }
   const std::vector<std::string> svgs = charts(render_report_html(f.input()));
@@ -253,12 +281,34 @@ TEST(ReportHtml, DrawsEachStepsStiffnessAgainstItsHeelStrikePerFoot) {
   ASSERT_EQ(left.size(), 2u) << kbar;
   EXPECT_LT(left[0].first, left[1].first);
   EXPECT_DOUBLE_EQ(left[0].second, left[1].second);
-  EXPECT_TRUE(has(kbar, ">pooled (lines)</text>"));
+  EXPECT_TRUE(has(kbar, ">pooled \u00b1 SE (lines)</text>"));
+  // The left band: along the line's two steps at the SE below, then back at the SE above, as
+  // far from the line on either side.
+  const auto left_bands = band_points(kbar, "#1f77b4");
+  ASSERT_EQ(left_bands.size(), 1u) << kbar;
+  const auto& band = left_bands[0];
+  ASSERT_EQ(band.size(), 4u) << kbar;
+  EXPECT_EQ(band[0].first, left[0].first);
+  EXPECT_EQ(band[1].first, left[1].first);
+  EXPECT_EQ(band[2].first, left[1].first);
+  EXPECT_EQ(band[3].first, left[0].first);
+  EXPECT_GT(band[0].second, left[0].second + 1.0) << "below the line: further down the chart";
+  EXPECT_NEAR(band[0].second - left[0].second, left[0].second - band[3].second, 0.11);
+  // The right foot's SE of 10 would span the chart a hundred times over: cut at its frame, the
+  // scale set by the values.
+  const auto right_bands = band_points(kbar, "#2ca02c");
+  ASSERT_EQ(right_bands.size(), 1u) << kbar;
+  const auto [frame_top, frame_bottom] = frame_span(kbar);
+  for (const auto& [x, y] : right_bands[0]) {
+    EXPECT_GE(y, frame_top - 0.05) << kbar;
+    EXPECT_LE(y, frame_bottom + 0.05) << kbar;
+  }
 
   const std::vector<std::string> unpooled = charts(render_report_html(Fixture().input()));
   ASSERT_EQ(unpooled.size(), 9u);
   EXPECT_EQ(count(unpooled[7], "<polyline "), 0u);
-  EXPECT_FALSE(has(unpooled[7], ">pooled (lines)</text>"));
+  EXPECT_EQ(count(unpooled[7], "<polygon "), 0u);
+  EXPECT_FALSE(has(unpooled[7], ">pooled \u00b1 SE (lines)</text>"));
 }
 
 // A region's trend over the session is drawn as a line across the steps' span, falling where
