@@ -318,7 +318,8 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
     const int signal = g_stop_signal;
     fmt::print(stderr, "calibrate: stopped by {}; nothing written\n",
                signal == SIGINT ? "SIGINT" : "SIGTERM");
-    // Ends as the signal would have, for the shell and the caller to see.
+    // Ends as the signal would have, for the shell and the caller to see; raise returns only
+    // where the caller blocked the signal, and the run then fails as any other would.
     std::signal(signal, SIG_DFL);
     std::raise(signal);
     throw std::runtime_error("calibrate: stopped");
