@@ -123,7 +123,7 @@ void run_fake_insole(const GlobalOptions& global, const FakeInsoleArgs& args) {
     injector.append(wire, sent.foot, sent.sequence, batch);
     if (batch.size() >= 64 * 1024 || !std::isinf(speed)) stopped = !flush();
   }
-  if (!stopped) stopped = !flush();
+  if (!stopped) flush();  // the rest: after the last frame a reader that left changes nothing
   const int unread = pty ? pty->wait_drained(10s, &g_stop) : 0;
   while (args.hold && !g_stop.load()) std::this_thread::sleep_for(50ms);
   pty.reset();

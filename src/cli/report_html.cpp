@@ -46,8 +46,8 @@ struct Range {
 /// One chart: a plot area with ticked axes and labels, into which series are drawn.
 class Chart {
  public:
-  Chart(int width, int height, Range x, Range y, std::string title, std::string x_label,
-        std::string y_label)
+  Chart(int width, int height, Range x, Range y, const std::string& title,
+        const std::string& x_label, const std::string& y_label)
       : w_(width), h_(height), x_(x), y_(y) {
     fmt::format_to(std::back_inserter(svg_),
                    "<svg width=\"{0}\" height=\"{1}\" "
