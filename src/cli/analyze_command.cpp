@@ -259,26 +259,29 @@ nlohmann::json pooling_json(const RegionSessionAnalysis& r) {
   const MaterialParams steps = material_params({p.mean, p.mean_covariance, std::nullopt});
   const MaterialParams mean = material_params(*r.pooled_mean);
   const auto sd = [&](std::size_t i) { return std::sqrt(p.between_step[i][i]); };
-  return {{"pooled", p.pooled},
-          {"steps", p.steps.size()},
-          {"iterations", p.iterations},
-          {"mean", material_json(mean, &Estimate::value)},
-          {"se", material_json(mean, &Estimate::se)},
-          {"se_steps", material_json(steps, &Estimate::se)},
-          {"chain_sd",
-           {{"ln_kbar", r.chain_sd[0]},
-            {"n", r.chain_sd[1]},
-            {"ln_cbar", r.chain_sd[2]},
-            {"m", r.chain_sd[3]}}},
-          {"between_step_sd", {{"ln_kbar", sd(0)}, {"n", sd(1)}, {"ln_cbar", sd(2)}, {"m", sd(3)}}},
-          {"note",
-           "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
-           "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp). se is the "
-           "mean's standard error with the measurement chain's shared error, chain_sd from "
-           "[pooling] of the config, or [pooling.m_per_session] at one m per session (ln kbar "
-           "and ln cbar: relative); se_steps is the steps' scatter alone. At one m per session "
-           "the steps were pooled at that m, and its error (its se and its chain_sd) enters the "
-           "others' se through how they move with it"}};
+  return {
+      {"pooled", p.pooled},
+      {"steps", p.steps.size()},
+      {"iterations", p.iterations},
+      {"mean", material_json(mean, &Estimate::value)},
+      {"se", material_json(mean, &Estimate::se)},
+      {"se_steps", material_json(steps, &Estimate::se)},
+      {"chain_sd",
+       {{"ln_kbar", r.chain_sd[0]},
+        {"n", r.chain_sd[1]},
+        {"ln_cbar", r.chain_sd[2]},
+        {"m", r.chain_sd[3]}}},
+      {"between_step_sd", {{"ln_kbar", sd(0)}, {"n", sd(1)}, {"ln_cbar", sd(2)}, {"m", sd(3)}}},
+      {"note",
+       "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
+       "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp). se is the "
+       "mean's standard error with the measurement chain's shared error, chain_sd from "
+       "[pooling] of the config, or [pooling.m_per_session] at one m per session (ln kbar "
+       "and ln cbar: relative); se_steps is the steps' scatter alone. At one m per session "
+       "the steps were pooled at that m, and its error (its se and its chain_sd) enters the "
+       "others' se through how they move with it. For the region's tissue over the session "
+       "read this mean: session_fit's standard errors are its Jacobian's, and up to fifteen times "
+       "too small against the truth (README, \"Per-step estimates pooled across steps\")"}};
 }
 
 nlohmann::json trend_json(const std::optional<LogTrend>& t) {

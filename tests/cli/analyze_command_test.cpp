@@ -212,6 +212,9 @@ TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
   EXPECT_GE(heel_pooled, 6);
   EXPECT_TRUE(pooling.at("mean").at("cbar_ns_per_mm3").is_number());
   EXPECT_GE(pooling.at("between_step_sd").at("ln_kbar").get<double>(), 0.0);
+  EXPECT_NE(pooling.at("note").get<std::string>().find("read this mean: session_fit's standard "
+                                                       "errors are its Jacobian's"),
+            std::string::npos);
   // The mean's SE holds the chain's shared error ([pooling] of the shipped config: heel kbar
   // 4 %, n 0.02) beside the steps' scatter: sqrt(se_steps^2 + (mean x 0.04)^2) for kbar.
   const auto part = [&](const char* field, const char* parameter) {
