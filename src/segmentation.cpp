@@ -485,19 +485,18 @@ Step StepSegmenter::make_step(const Pending& pending, std::int64_t toe_off,
 }
 
 void StepSegmenter::trim() {
-  std::int64_t keep = first_;
-  if (pending_) {
-    // A contact classified again keeps its swing, whose window may be taken again.
-    keep = pending_->pre ? pending_->pre->midpoint - (settings_.swing_window_frames - 1) / 2
-                         : pending_->heel_strike;
-  } else if (detector_.in_contact) {
-    keep = detector_.last_above + 1;
-  } else {
+  const std::int64_t keep = [&]() -> std::int64_t {
+    if (pending_) {
+      // A contact classified again keeps its swing, whose window may be taken again.
+      return pending_->pre ? pending_->pre->midpoint - (settings_.swing_window_frames - 1) / 2
+                           : pending_->heel_strike;
+    }
+    if (detector_.in_contact) return detector_.last_above + 1;
     // The next contact's pre-swing window lies at most H + half a window before its heel strike.
     const std::int64_t earliest = detector_.earliest_start(next_);
-    keep = std::max(swing_start_, earliest - 1 - limits_.max_swing_half_frames -
+    return std::max(swing_start_, earliest - 1 - limits_.max_swing_half_frames -
                                       (settings_.swing_window_frames - 1) / 2);
-  }
+  }();
   while (first_ < keep && !buffer_.empty()) {
     buffer_.pop_front();
     ++first_;
