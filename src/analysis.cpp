@@ -284,9 +284,8 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
                   true, pair.cbar_pair_sd_pct[index_of(region)]);
   r.chain_sd = chain_sd(config.pooling, region, shared_m);
   r.pooled_per_step.resize(steps.size());
+  r.pooled_mean = pooled_mean_with_chain_error(r.pooling, r.chain_sd);
   if (r.pooling.pooled) {
-    r.pooled_mean = with_shared_error(
-        {r.pooling.mean, r.pooling.mean_covariance, r.pooling.mean_slope_on_shared_m}, r.chain_sd);
     for (std::size_t k = 0; k < estimated_steps.size(); ++k) {
       r.pooled_per_step[estimated_steps[k]] =
           material_params(with_shared_error(r.pooling.steps[k], r.chain_sd));
@@ -316,6 +315,13 @@ MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shar
   const std::size_t ri = index_of(region);
   return {chain.kbar_chain_sd_pct[ri] / 100.0, chain.n_chain_sd[ri],
           chain.cbar_chain_sd_pct[ri] / 100.0, chain.m_chain_sd[ri]};
+}
+
+std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimates& pooling,
+                                                             const MaterialVector& chain_sd) {
+  if (!pooling.pooled) return std::nullopt;
+  return with_shared_error({pooling.mean, pooling.mean_covariance, pooling.mean_slope_on_shared_m},
+                           chain_sd);
 }
 
 std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region region,

@@ -26,6 +26,7 @@
 
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/error.hpp"
+#include "gaitmon/pooling.hpp"
 
 namespace gaitmon {
 namespace {
@@ -551,7 +552,8 @@ void read_lcm(TableReader table, LcmSettings& lcm) {
                            {"fit", &lcm.channels.fit},
                            {"status", &lcm.channels.status},
                            {"raw", &lcm.channels.raw},
-                           {"effects", &lcm.channels.effects}}) {
+                           {"effects", &lcm.channels.effects},
+                           {"tissue", &lcm.channels.tissue}}) {
     *name = read_channel(channels, key);
     const auto [it, fresh] = used.try_emplace(*name, std::string(key));
     if (!fresh) {
@@ -734,6 +736,8 @@ void read_monitor(TableReader table, MonitorSettings& monitor) {
                fmt::format("must be in [0.01, 3600], got {}", monitor.status_period_s));
   }
   monitor.publish_frames = read_boolean(table, "publish_frames");
+  monitor.tissue_window_steps =
+      integer_in(table, "tissue_window_steps", static_cast<int>(kMinPoolingSteps), 100000);
   table.finish();
 }
 

@@ -51,6 +51,9 @@ constexpr auto kIdlePoll = std::chrono::microseconds(500);
 constexpr std::size_t kPopBatch = 64;
 // Fit latencies kept for the status percentiles: the latest ones, about 8 minutes of walking.
 constexpr std::size_t kLatencyWindow = 1024;
+// The least time between two reports of the regions' tissue: walking gives a step every quarter
+// second or more, so each gets its own at real time, and a replay at full speed is not slowed.
+constexpr auto kTissuePeriod = std::chrono::milliseconds(100);
 
 double ms_between(Clock::time_point from, Clock::time_point to) {
   return std::chrono::duration<double, std::milli>(to - from).count();
@@ -228,6 +231,15 @@ struct Monitor::Impl {
     std::size_t fresh = 0;  ///< steps added since the last estimate took its copy
     bool fitting = false;   ///< an estimate is queued or running
     std::shared_ptr<const SharedExponents> current;  ///< the latest, for the steps after it
+  };
+  /// One step's own fits as the pooled tissue takes them: each region's material estimate where
+  /// the fit determined it.
+  struct TissueStep {
+    Foot foot = Foot::Left;
+    int step = 0;
+    double t_heel_strike_s = 0.0;
+    double t_toe_off_s = 0.0;
+    std::array<std::optional<MaterialEstimate>, kRegionCount> regions;
   };
   /// Detector-thread state of one foot.
   struct FootState {
@@ -624,11 +636,152 @@ struct Monitor::Impl {
         ready.reset();
       }
       complete(job->foot, std::move(job->slot), std::move(ready));
+      if (analysis) add_to_tissue(job->arrival, *analysis);
       if (analysis && !config.model.effects.empty()) {
         remember_for_effects(job->arrival, std::move(job->step), std::move(*analysis), job->layout);
       } else if (analysis && config.model.m_per_session) {
         remember_for_running_m(job->arrival, std::move(*analysis));
       }
+    }
+  }
+
+  // ---- each region's tissue over the latest steps (GAITMON_TISSUE) ----
+
+  /// Adds a step's own fits to the window and has the tissue thread publish the pools over it.
+  /// Never throws: the step's fit is out.
+  void add_to_tissue(std::uint64_t arrival, const StepAnalysis& analysis) noexcept {
+    try {
+      auto entry = std::make_shared<TissueStep>(TissueStep{
+          analysis.foot, analysis.step, analysis.t_heel_strike_s, analysis.t_toe_off_s, {}});
+      for (const RegionAnalysis& r : analysis.regions) {
+        entry->regions[index_of(r.region)] = material_estimate(r.fit);
+      }
+      const std::lock_guard lock(tissue_mutex);
+      tissue_window.insert_or_assign(arrival, std::move(entry));
+      while (tissue_window.size() > static_cast<std::size_t>(config.monitor.tissue_window_steps)) {
+        tissue_window.erase(tissue_window.begin());
+      }
+      tissue_fresh = true;
+      if (!tissue_publishing) {
+        boost::asio::post(tissue_thread, [this] { publish_tissue(); });
+        tissue_publishing = true;
+      }
+    } catch (const std::exception& e) {
+      if (auto held = tissue_log.allow()) {
+        spdlog::warn(
+            "monitor: foot {} step {}: left out of the regions' tissue over the steps: {} ({} "
+            "similar suppressed)",
+            foot_name(analysis.foot), analysis.step, e.what(), *held);
+      }
+    }
+  }
+
+  /// The window as it is, oldest first.
+  std::vector<std::shared_ptr<const TissueStep>> tissue_snapshot() const {
+    std::vector<std::shared_ptr<const TissueStep>> steps;
+    steps.reserve(tissue_window.size());
+    for (const auto& [arrival, s] : tissue_window) steps.push_back(s);
+    return steps;
+  }
+
+  /// On the tissue thread: publishes the pools over the window until no step came in during the
+  /// last, at most one every kTissuePeriod. Pooling the window takes milliseconds, so that a
+  /// replay at full speed would otherwise spend more time on it than on the steps' fits. Never
+  /// throws: it runs on a pool thread.
+  void publish_tissue() noexcept {
+    for (;;) {
+      std::vector<std::shared_ptr<const TissueStep>> steps;
+      try {
+        {
+          const std::lock_guard lock(tissue_mutex);
+          if (!tissue_fresh) {
+            tissue_publishing = false;
+            return;
+          }
+          tissue_fresh = false;
+          steps = tissue_snapshot();
+        }
+        TissueReport report = tissue_report(steps);
+        report.utime = now_utime();
+        send(report);
+      } catch (const std::exception& e) {
+        if (auto held = tissue_log.allow()) {
+          spdlog::warn(
+              "monitor: the regions' tissue over the steps was not published: {} ({} similar "
+              "suppressed)",
+              e.what(), *held);
+        }
+      }
+      std::unique_lock lock(tissue_mutex);
+      tissue_wake.wait_for(lock, kTissuePeriod, [this] { return tissue_ending; });
+    }
+  }
+
+  /// The pools over `steps` (oldest first, at least one), after the last of them.
+  TissueReport tissue_report(std::span<const std::shared_ptr<const TissueStep>> steps) const {
+    TissueReport report;
+    const TissueStep& latest = *steps.back();
+    report.foot = latest.foot;
+    report.step = latest.step;
+    report.t_first_heel_strike_s = latest.t_heel_strike_s;
+    report.t_last_toe_off_s = latest.t_toe_off_s;
+    for (const auto& s : steps) {
+      report.t_first_heel_strike_s = std::min(report.t_first_heel_strike_s, s->t_heel_strike_s);
+      report.t_last_toe_off_s = std::max(report.t_last_toe_off_s, s->t_toe_off_s);
+    }
+    const bool default_fit =
+        options.analysis.fit.mode == FitMode::Identifiable && !options.analysis.fit.free_scale;
+    std::vector<MaterialEstimate> estimates;
+    for (std::size_t i = 0; i < kRegionCount; ++i) {
+      RegionTissueReport& out = report.regions[i];
+      out.region = kRegions[i];
+      estimates.clear();
+      for (const auto& s : steps) {
+        if (s->regions[i]) estimates.push_back(*s->regions[i]);
+      }
+      out.steps = static_cast<int>(estimates.size());
+      if (!default_fit) {
+        out.status = "not_pooled:pooling needs the default fit (identifiable, P declared)";
+        continue;
+      }
+      const PooledEstimates pooled = pool_steps(estimates, material_bounds(config.fit_bounds));
+      const std::optional<MaterialEstimate> mean =
+          pooled_mean_with_chain_error(pooled, chain_sd(config.pooling, kRegions[i], false));
+      if (!mean) {
+        out.status = "not_pooled:" + pooled.not_pooled;
+        continue;
+      }
+      const MaterialParams p = material_params(*mean);
+      out.status = "ok";
+      out.kbar_n_per_mm3 = p.kbar_n_per_mm3.value;
+      out.n = p.n.value;
+      out.cbar_ns_per_mm3 = p.cbar_ns_per_mm3.value;
+      out.m = p.m.value;
+      out.se_kbar = p.kbar_n_per_mm3.se;
+      out.se_n = p.n.se;
+      out.se_cbar = p.cbar_ns_per_mm3.se;
+      out.se_m = p.m.se;
+    }
+    return report;
+  }
+
+  /// At the end of the run, once the workers and the tissue thread are done: the pools over the
+  /// window as it ends, marked final.
+  void finish_tissue() noexcept {
+    try {
+      std::vector<std::shared_ptr<const TissueStep>> steps;
+      {
+        const std::lock_guard lock(tissue_mutex);
+        steps = tissue_snapshot();
+      }
+      if (steps.empty()) return;
+      TissueReport report = tissue_report(steps);
+      report.final_estimate = true;
+      report.utime = now_utime();
+      send(report);
+    } catch (const std::exception& e) {
+      spdlog::error("monitor: the regions' final tissue over the steps was not published: {}",
+                    e.what());
     }
   }
 
@@ -1076,9 +1229,16 @@ struct Monitor::Impl {
     if (detector.joinable()) detector.join();
     pool.join();
     run_leftover_jobs();
+    {
+      const std::lock_guard lock(tissue_mutex);
+      tissue_ending = true;
+    }
+    tissue_wake.notify_all();
+    tissue_thread.join();
     if (effects_thread) effects_thread->join();
     if (exponent_thread) exponent_thread->join();
     finish_effects();
+    finish_tissue();
     publish_status(true);
     stopped = true;
   }
@@ -1123,7 +1283,18 @@ struct Monitor::Impl {
   std::vector<double> latencies;
   std::size_t latency_next = 0;
 
-  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log, gap_log, exponent_log;
+  LogThrottle reject_log, step_drop_log, fit_log, publish_log, effects_log, gap_log, exponent_log,
+      tissue_log;
+
+  // Each region's tissue over the latest steps: the workers fill the window, the tissue thread
+  // pools it.
+  std::mutex tissue_mutex;
+  std::condition_variable tissue_wake;  ///< ends the tissue thread's wait at shutdown
+  std::map<std::uint64_t, std::shared_ptr<const TissueStep>> tissue_window;  ///< by arrival
+  bool tissue_fresh = false;       ///< steps came in since the last report took its copy
+  bool tissue_publishing = false;  ///< the tissue thread is posted or running
+  bool tissue_ending = false;
+  boost::asio::thread_pool tissue_thread{1};
 
   // The extended model's window: the workers fill it, the effects thread copies it.
   std::mutex effects_mutex;

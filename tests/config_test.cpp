@@ -686,6 +686,8 @@ TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
   EXPECT_EQ(config.monitor.max_step_backlog, 32);
   EXPECT_DOUBLE_EQ(config.monitor.status_period_s, 1.0);
   EXPECT_TRUE(config.monitor.publish_frames);
+  EXPECT_EQ(config.monitor.tissue_window_steps, 400);
+  EXPECT_EQ(MonitorSettings{}.tissue_window_steps, 400);
 }
 
 TEST(Config, RingAndMonitorAreValidated) {
@@ -709,8 +711,16 @@ TEST(Config, RingAndMonitorAreValidated) {
        "monitor.publish_frames", "missing"},
       {"MonitorUnknownKey", kMain, replace("[monitor]\n", "[monitor]\nthreads = 2\n"),
        "monitor.threads", "unknown key"},
+      {"MonitorTissueWindowBelowAPool", kMain,
+       replace("tissue_window_steps = 400", "tissue_window_steps = 2"),
+       "monitor.tissue_window_steps", "must be in [3, 100000], got 2"},
+      {"MonitorTissueWindowMissing", kMain, replace("tissue_window_steps = 400\n", ""),
+       "monitor.tissue_window_steps", "missing"},
   };
   expect_refusals(cases);
+  const fs::path dir = copy_config("MonitorTissueWindow");
+  edit_file(dir / kMain, replace("tissue_window_steps = 400", "tissue_window_steps = 3"));
+  EXPECT_EQ(load_config(dir / kMain).monitor.tissue_window_steps, 3);
 }
 
 TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
@@ -723,6 +733,7 @@ TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
   EXPECT_EQ(lcm.channels.status, "GAITMON_STATUS");
   EXPECT_EQ(lcm.channels.raw, "GAITMON_RAW");
   EXPECT_EQ(lcm.channels.effects, "GAITMON_EFFECTS");
+  EXPECT_EQ(lcm.channels.tissue, "GAITMON_TISSUE");
   // The struct's defaults are the shipped file's, for code that builds settings by hand.
   const LcmSettings defaults;
   EXPECT_EQ(defaults.url, lcm.url);
@@ -776,6 +787,12 @@ TEST(Config, LcmSettingsAreValidated) {
       {"LcmEffectsChannelTwice", kMain,
        replace("[lcm.channels]", "\"GAITMON_EFFECTS\"", "\"GAITMON_STEP\""), "lcm.channels.effects",
        "is also the step channel"},
+      {"LcmTissueChannelMissing", kMain,
+       replace("[lcm.channels]", "tissue = \"GAITMON_TISSUE\"", ""), "lcm.channels.tissue",
+       "missing"},
+      {"LcmTissueChannelTwice", kMain,
+       replace("[lcm.channels]", "\"GAITMON_TISSUE\"", "\"GAITMON_EFFECTS\""),
+       "lcm.channels.tissue", "is also the effects channel"},
   };
   expect_refusals(cases);
 }

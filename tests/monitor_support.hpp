@@ -17,7 +17,7 @@ namespace gaitmon::test {
 /// Keeps every message. Thread-safe, as Publisher requires.
 class RecordingPublisher : public Publisher {
  public:
-  enum class Kind { Frame, Step, Fit, Status, Raw, Effects };
+  enum class Kind { Frame, Step, Fit, Status, Raw, Effects, Tissue };
 
   void publish(const FrameReport& r) override { add(frames_, r, Kind::Frame); }
   void publish(const StepEvent& r) override { add(events_, r, Kind::Step); }
@@ -25,6 +25,7 @@ class RecordingPublisher : public Publisher {
   void publish(const StatusReport& r) override { add(statuses_, r, Kind::Status); }
   void publish(const RawFrameReport& r) override { add(raws_, r, Kind::Raw); }
   void publish(const EffectsReport& r) override { add(effects_, r, Kind::Effects); }
+  void publish(const TissueReport& r) override { add(tissues_, r, Kind::Tissue); }
 
   std::vector<FrameReport> frames() const { return copy(frames_); }
   std::vector<StepEvent> events() const { return copy(events_); }
@@ -32,6 +33,7 @@ class RecordingPublisher : public Publisher {
   std::vector<StatusReport> statuses() const { return copy(statuses_); }
   std::vector<RawFrameReport> raws() const { return copy(raws_); }
   std::vector<EffectsReport> effects() const { return copy(effects_); }
+  std::vector<TissueReport> tissues() const { return copy(tissues_); }
   /// The kinds in publication order.
   std::vector<Kind> order() const { return copy(order_); }
 
@@ -55,6 +57,7 @@ class RecordingPublisher : public Publisher {
   std::vector<StatusReport> statuses_;
   std::vector<RawFrameReport> raws_;
   std::vector<EffectsReport> effects_;
+  std::vector<TissueReport> tissues_;
   std::vector<Kind> order_;
 };
 

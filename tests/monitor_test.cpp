@@ -18,6 +18,7 @@
 #include <memory>
 #include <mutex>
 #include <regex>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -221,9 +222,11 @@ TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
     fit_of[{fit.foot, fit.step}] = fit;
   }
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+  std::vector<StepAnalysis> analysed;
   for (const Step& step : steps) {
     if (step.status != StepStatus::Ok) continue;
-    const StepAnalysis expected = analyse_step(step, layout, config, options.analysis);
+    const StepAnalysis& expected =
+        analysed.emplace_back(analyse_step(step, layout, config, options.analysis));
     const auto it = fit_of.find({step.foot, step.index});
     ASSERT_NE(it, fit_of.end());
     const FitReport& got = it->second;
@@ -250,6 +253,57 @@ TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
       expect_close(g.d0_mm, r.fit.d0_mm.value, where + " d0");
       expect_close(g.nrmse_pct, r.fit.nrmse_pct, where + " nrmse");
     }
+  }
+
+  // The regions' tissue: the last one, marked final, is every step pooled as `analyze` pools a
+  // session (the window of 400 holds them all), at the last step to finish.
+  const auto tissues = publisher.tissues();
+  ASSERT_GE(tissues.size(), 2u);
+  EXPECT_EQ(std::count_if(tissues.begin(), tissues.end(),
+                          [](const TissueReport& t) { return t.final_estimate; }),
+            1);
+  const TissueReport& final_tissue = tissues.back();
+  EXPECT_TRUE(final_tissue.final_estimate);
+  EXPECT_EQ(final_tissue.t_first_heel_strike_s, analysed.front().t_heel_strike_s);
+  double last_toe_off = 0.0;
+  for (const StepAnalysis& a : analysed) last_toe_off = std::max(last_toe_off, a.t_toe_off_s);
+  EXPECT_EQ(final_tissue.t_last_toe_off_s, last_toe_off);
+  const SessionAnalysis session =
+      analyse_session(analysed, config, header.insole_size, options.analysis);
+  int pooled_regions = 0;
+  for (const RegionSessionAnalysis& r : session.regions) {
+    const RegionTissueReport& got = final_tissue.regions[index_of(r.region)];
+    const std::string where(region_name(r.region));
+    EXPECT_EQ(got.region, r.region) << where;
+    EXPECT_EQ(got.steps, static_cast<int>(r.pooling.steps.size())) << where;
+    if (!r.pooled_mean) {
+      EXPECT_EQ(got.status, "not_pooled:" + r.pooling.not_pooled) << where;
+      continue;
+    }
+    ++pooled_regions;
+    EXPECT_EQ(got.status, "ok") << where;
+    const MaterialParams p = material_params(*r.pooled_mean);
+    // The pool's sums run in another order here (the workers' finishing order's window).
+    const auto near = [&](double actual, const Estimate& expected, const char* what) {
+      EXPECT_NEAR(actual, expected.value, 1e-8 * std::abs(expected.value)) << where << what;
+    };
+    near(got.kbar_n_per_mm3, p.kbar_n_per_mm3, " kbar");
+    near(got.n, p.n, " n");
+    near(got.cbar_ns_per_mm3, p.cbar_ns_per_mm3, " cbar");
+    near(got.m, p.m, " m");
+    EXPECT_NEAR(got.se_kbar, p.kbar_n_per_mm3.se, 1e-8 * p.kbar_n_per_mm3.se) << where;
+    EXPECT_NEAR(got.se_n, p.n.se, 1e-8 * p.n.se) << where;
+    EXPECT_NEAR(got.se_cbar, p.cbar_ns_per_mm3.se, 1e-8 * p.cbar_ns_per_mm3.se) << where;
+    EXPECT_NEAR(got.se_m, p.m.se, 1e-8 * p.m.se) << where;
+    // With the chain's SD: never narrower than [pooling]'s share of ln kbar alone.
+    EXPECT_GE(got.se_kbar / got.kbar_n_per_mm3,
+              config.pooling.per_step.kbar_chain_sd_pct[index_of(r.region)] / 100.0)
+        << where;
+  }
+  EXPECT_GE(pooled_regions, 5) << "the heel, midfoot and metatarsals";
+  for (std::size_t i = 1; i < tissues.size(); ++i) {
+    EXPECT_GE(tissues[i].regions[0].steps, tissues[i - 1].regions[0].steps)
+        << "a window below its 400 steps only grows";
   }
 
   // Frames: one report per frame, numbered per foot, at the file's times.
@@ -294,6 +348,101 @@ TEST(Monitor, StepsAndFitsEqualTheBatchPipeline) {
   EXPECT_EQ(last.step_backlog, 0u);
   EXPECT_GT(last.fit_latency_p99_ms, 0.0);
   EXPECT_GE(last.fit_latency_p99_ms, last.fit_latency_p50_ms);
+}
+
+TEST(Monitor, TheTissueIsPooledOverTheLatestStepsOfTheWindow) {
+  Config config = shipped_config();
+  config.monitor.tissue_window_steps = 8;
+  const std::vector<Step> ok = complete_steps(demo_30s(), config);
+  ASSERT_GT(ok.size(), 20u);
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  {
+    Monitor monitor(config, options, publisher);
+    offer_all(monitor, frames);
+    monitor.stop();
+  }
+  const auto tissues = publisher.tissues();
+  ASSERT_GE(tissues.size(), 2u);
+  for (const TissueReport& t : tissues) {
+    for (const RegionTissueReport& r : t.regions) EXPECT_LE(r.steps, 8) << region_name(r.region);
+  }
+  // The last eight steps the segmenters finalised, of both feet.
+  const TissueReport& last = tissues.back();
+  ASSERT_TRUE(last.final_estimate);
+  const std::span<const Step> window(ok.end() - 8, ok.end());
+  double first = window.front().t_heel_strike_s;
+  for (const Step& step : window) first = std::min(first, step.t_heel_strike_s);
+  EXPECT_EQ(last.t_first_heel_strike_s, first);
+  EXPECT_EQ(last.regions[index_of(Region::Heel)].steps, 8);
+  EXPECT_EQ(last.regions[index_of(Region::Heel)].status, "ok");
+  EXPECT_EQ(publisher.order().back(), RecordingPublisher::Kind::Status)
+      << "the final status after the final tissue";
+}
+
+TEST(Monitor, EveryStepHasATissueReportWhenStepsComeNoFasterThanWalking) {
+  Config config = shipped_config();
+  config.monitor.workers = 1;
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  std::size_t events_seen = 0, steps = 0;
+  {
+    Monitor monitor(config, options, publisher);
+    std::uint64_t offered = 0;
+    for (const SensorFrame& frame : frames) {
+      ASSERT_TRUE(monitor.offer_wait(frame));
+      ++offered;
+      while (monitor.counters().frames_processed < offered) std::this_thread::yield();
+      // A step is finalised when its events are published; no frame more comes until its
+      // report, as at real time, where steps are a quarter of a second apart or more.
+      const auto events = publisher.events();
+      for (; events_seen < events.size(); ++events_seen) {
+        const StepEvent& e = events[events_seen];
+        if (e.kind != StepEvent::Kind::ToeOff || !e.complete) continue;
+        ++steps;
+        ASSERT_TRUE(wait_until([&] {
+          const auto tissues = publisher.tissues();
+          return std::any_of(tissues.begin(), tissues.end(), [&](const TissueReport& t) {
+            return t.foot == e.foot && t.step == e.step;
+          });
+        })) << foot_name(e.foot)
+            << " step " << e.step;
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
+    }
+    monitor.stop();
+  }
+  EXPECT_GT(steps, 20u);
+  // The steps the end of input finalises come after the loop; at most one report per fit besides
+  // the final one.
+  EXPECT_GE(publisher.tissues().size(), steps + 1);
+  EXPECT_LE(publisher.tissues().size(), publisher.fits().size() + 1);
+}
+
+TEST(Monitor, TheTissueIsNotPooledOutsideTheDefaultFit) {
+  const Config config = shipped_config();
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(demo_30s(), &header);
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  options.analysis.fit.mode = FitMode::Seed8;
+  {
+    Monitor monitor(config, options, publisher);
+    offer_all(monitor, frames);
+    monitor.stop();
+  }
+  const auto tissues = publisher.tissues();
+  ASSERT_FALSE(tissues.empty());
+  for (const RegionTissueReport& r : tissues.back().regions) {
+    EXPECT_EQ(r.status, "not_pooled:pooling needs the default fit (identifiable, P declared)");
+  }
 }
 
 // Holds the first message of one kind inside publish() until released, keeping its thread busy.

@@ -190,6 +190,12 @@ struct SessionAnalysis {
 /// `pooling.m_per_session` for steps fitted at one m per region, else of `pooling.per_step`.
 MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shared_m);
 
+/// The pooled mean of `pooling` with `chain_sd` added (with_shared_error): the region's tissue
+/// over the pooled steps, carrying the error every step shares, which pooling cannot average
+/// down. Nothing where the steps were not pooled.
+std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimates& pooling,
+                                                             const MaterialVector& chain_sd);
+
 /// A region-step's own kbar, n, cbar and m with standard errors against the tissue rather than
 /// against the session's other steps: its fit's covariance (material_estimate) with the
 /// measurement chain's error that every step of the region shares (with_shared_error, chain_sd;

@@ -151,6 +151,9 @@ struct MonitorSettings {
   int max_step_backlog = 32;     ///< finalised steps waiting for a worker; beyond, oldest dropped
   double status_period_s = 1.0;  ///< between two status reports
   bool publish_frames = true;    ///< per-frame region reports (GAITMON_FRAME)
+  /// The latest steps of both feet whose own fits are pooled into each region's tissue
+  /// (GAITMON_TISSUE).
+  int tissue_window_steps = 400;
 };
 
 /// [lcm]: where the live monitor publishes (include/gaitmon/lcm/*.lcm defines the messages).
@@ -161,6 +164,7 @@ struct LcmChannels {
   std::string status = "GAITMON_STATUS";    ///< StatusReport, 1 Hz
   std::string raw = "GAITMON_RAW";          ///< RawFrameReport, only when raw_enabled
   std::string effects = "GAITMON_EFFECTS";  ///< EffectsReport, only with [model] effects
+  std::string tissue = "GAITMON_TISSUE";    ///< TissueReport, after every fitted step
 };
 
 struct LcmSettings {

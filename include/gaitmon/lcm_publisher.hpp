@@ -18,7 +18,8 @@ class LCM;
 namespace gaitmon {
 
 /// Maps FrameReport -> frame_t, StepEvent -> step_t, FitReport -> fit_t, StatusReport -> status_t,
-/// EffectsReport -> effects_t and RawFrameReport -> raw_t (dropped unless settings.raw_enabled).
+/// EffectsReport -> effects_t, TissueReport -> tissue_t and RawFrameReport -> raw_t (dropped unless
+/// settings.raw_enabled).
 /// Fields are copied as given, utime included; feet become 0 = left, 1 = right.
 ///
 /// Thread safety: the publish functions may be called from any number of threads at once; each
@@ -46,6 +47,7 @@ class LcmPublisher final : public Publisher {
   void publish(const StatusReport& report) override;
   void publish(const RawFrameReport& report) override;
   void publish(const EffectsReport& report) override;
+  void publish(const TissueReport& report) override;
 
   /// Messages handed to LCM and accepted, since construction.
   std::uint64_t published() const noexcept { return published_.load(std::memory_order_relaxed); }

@@ -22,8 +22,8 @@ class Subscription;
 namespace gaitmon {
 
 /// One decoded message; the alternative tells its type.
-using LcmMessage =
-    std::variant<FrameReport, StepEvent, FitReport, StatusReport, RawFrameReport, EffectsReport>;
+using LcmMessage = std::variant<FrameReport, StepEvent, FitReport, StatusReport, RawFrameReport,
+                                EffectsReport, TissueReport>;
 
 /// Thread safety: construct it, then call handle() from one thread at a time; the handler runs
 /// on that thread, inside handle().
@@ -32,7 +32,7 @@ class LcmSubscriber {
   using Handler = std::function<void(const std::string& channel, const LcmMessage& message)>;
 
   /// Subscribes on its own connection to settings.url. `channels` are names among
-  /// settings.channels (each decoded as that channel's type); empty means all six.
+  /// settings.channels (each decoded as that channel's type); empty means all seven.
   /// @throw LcmError for a URL LCM cannot open or a channel settings does not name.
   LcmSubscriber(const LcmSettings& settings, const std::vector<std::string>& channels,
                 Handler handler);

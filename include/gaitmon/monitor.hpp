@@ -39,6 +39,12 @@
 //    FitReport's regions say over how many steps (m_steps); a step whose such fit fails is
 //    published with its own. At shutdown a running estimate is waited for; one not yet started is
 //    skipped once close() was called.
+//  - Each analysed Ok step's own fits (at each step's own m, without effects, as `gaitmon
+//    analyze` pools them) go into a window of the latest config.monitor.tissue_window_steps
+//    (both feet, in the detector's order), and a thread of its own pools each region's over it
+//    (pool_steps, with [pooling]'s chain SDs) and publishes a TissueReport: after each step, or
+//    at most once every 100 ms, the steps that came in meanwhile taken together. Over a session
+//    no longer than the window the final one equals `gaitmon analyze`'s pooled means.
 //
 // Time: a frame's session time is its device_time_us, unwrapped per foot across the 32-bit
 // wrap, divided by 1e6 (for replays that is the session's t_s, which the drivers encode as
@@ -77,7 +83,8 @@
 // recording (its last steps are finalised and queued) and exits; (3) the workers finish every
 // queued step and publish it; with effects, the extended model is fitted to the window as it
 // ends (unless the last estimate already covers it, or close() was called: see there) and
-// published with final_estimate set; (4) the final status is published, its connection "finished"
+// published with final_estimate set, and the regions' tissue over the window as it ends, with
+// final_estimate set too; (4) the final status is published, its connection "finished"
 // (the driver callback fills the other driver fields); (5) every thread is joined. The caller must
 // have stopped its driver thread first (offer() may race with stop(), but a frame offered after the
 // drain would be lost); close() alone does step (1), from any thread, to release a driver blocked

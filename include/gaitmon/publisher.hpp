@@ -78,6 +78,27 @@ struct FitReport {
   std::array<RegionFitReport, kRegionCount> regions{};
 };
 
+struct RegionTissueReport {
+  Region region = Region::Heel;
+  std::string status;  ///< ok, not_pooled:<reason>
+  int steps = 0;       ///< step fits pooled (those that determined the four parameters)
+  double kbar_n_per_mm3 = 0.0, n = 0.0, cbar_ns_per_mm3 = 0.0, m = 0.0;
+  /// Of the pooled mean with the measurement chain's shared error ([pooling]), as session.json's.
+  double se_kbar = 0.0, se_n = 0.0, se_cbar = 0.0, se_m = 0.0;
+};
+
+/// Each region's tissue over the latest steps of both feet, their own fits pooled
+/// (GAITMON_TISSUE): after every fitted step, and once more at the end of the run.
+struct TissueReport {
+  std::int64_t utime = 0;
+  bool final_estimate = false;
+  Foot foot = Foot::Left;  ///< the latest step taken in
+  int step = 0;
+  double t_first_heel_strike_s = 0.0;  ///< over the steps in the window
+  double t_last_toe_off_s = 0.0;
+  std::array<RegionTissueReport, kRegionCount> regions{};
+};
+
 /// 1 Hz health of the pipeline (GAITMON_STATUS). Counters are totals since start.
 struct StatusReport {
   std::int64_t utime = 0;
@@ -151,6 +172,7 @@ class Publisher {
   virtual void publish(const StatusReport& report) = 0;
   virtual void publish(const RawFrameReport& report) = 0;
   virtual void publish(const EffectsReport& report) = 0;
+  virtual void publish(const TissueReport& report) = 0;
 };
 
 }  // namespace gaitmon

@@ -160,6 +160,32 @@ void StepPrinter::publish(const EffectsReport& report) {
   print(line);
 }
 
+void StepPrinter::publish(const TissueReport& report) {
+  next_.publish(report);
+  // After every step the same table would bury the steps' lines; the run ends with the last one.
+  if (!report.final_estimate) return;
+  std::string text = fmt::format(
+      "tissue over the steps of {:.1f}-{:.1f} s, pooled, +- one standard error with "
+      "the measurement chain's error:",
+      report.t_first_heel_strike_s, report.t_last_toe_off_s);
+  for (const RegionTissueReport& r : report.regions) {
+    fmt::format_to(std::back_inserter(text), "\n  {:<18} {:>4} steps  ", region_name(r.region),
+                   r.steps);
+    if (r.status == "ok") {
+      fmt::format_to(
+          std::back_inserter(text), "kbar {} N/mm3  n {}  cbar {} Ns/mm3  m {}",
+          estimate_text(r.kbar_n_per_mm3, r.se_kbar, " +- "), estimate_text(r.n, r.se_n, " +- "),
+          estimate_text(r.cbar_ns_per_mm3, r.se_cbar, " +- "), estimate_text(r.m, r.se_m, " +- "));
+    } else {
+      const std::string_view prefix = "not_pooled:";
+      const std::string_view status = r.status;
+      fmt::format_to(std::back_inserter(text), "not pooled: {}",
+                     status.starts_with(prefix) ? status.substr(prefix.size()) : status);
+    }
+  }
+  print(text);
+}
+
 void StepPrinter::print(const std::string& line) {
   const std::lock_guard lock(print_mutex_);
   std::fputs(line.c_str(), stdout);

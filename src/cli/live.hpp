@@ -71,8 +71,9 @@ class LinkStatus {
 };
 
 /// Forwards every message to `next` and prints one line per fitted step on stdout: the foot,
-/// the step, the stance time and every region's kbar and cbar; and one per estimate of the
-/// extended model's effects. Thread-safe.
+/// the step, the stance time and every region's kbar and cbar; one per estimate of the extended
+/// model's effects; and at the end a table of each region's tissue pooled over the steps.
+/// Thread-safe.
 class StepPrinter final : public Publisher {
  public:
   explicit StepPrinter(Publisher& next) : next_(next) {}
@@ -82,6 +83,7 @@ class StepPrinter final : public Publisher {
   void publish(const StatusReport& report) override { next_.publish(report); }
   void publish(const RawFrameReport& report) override { next_.publish(report); }
   void publish(const EffectsReport& report) override;
+  void publish(const TissueReport& report) override;
 
  private:
   void print(const std::string& line);

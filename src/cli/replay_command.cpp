@@ -99,7 +99,8 @@ void add_replay_command(CLI::App& app, const GlobalOptions& global) {
   CLI::App* sub = app.add_subcommand(
       "replay",
       "Replays a session CSV through the live pipeline (fake driver, wire format, decoder, "
-      "monitor, LCM); one line per fitted step. No argument: the bundled demo session");
+      "monitor, LCM); one line per fitted step and the regions' pooled tissue at the end. No "
+      "argument: the bundled demo session");
   sub->add_option("session", args->session, "Session CSV v1 (default: the bundled demo)")
       ->check(session_file_read_twice());
   sub->add_option("--speed", args->speed, "x real time (default 1, at least 0.001), or max");

@@ -84,7 +84,8 @@ void add_run_command(CLI::App& app, const GlobalOptions& global) {
   CLI::App* sub = app.add_subcommand(
       "run",
       "The live monitor: reads an insole link, segments steps, fits every step and publishes "
-      "over LCM; one line per fitted step. Ctrl-C stops it cleanly");
+      "over LCM; one line per fitted step and the regions' pooled tissue at the end. Ctrl-C stops "
+      "it cleanly");
   CLI::Option* serial =
       sub->add_option("--serial", args->serial,
                       "Serial device (default: [serial] device of the config), e.g. the pty "

@@ -2,6 +2,7 @@
 // watching a live run and for scripts and tests that check what was published.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -10,6 +11,8 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include "commands.hpp"
@@ -152,34 +155,54 @@ json to_json(const EffectsReport& r) {
           {"params", std::move(params)}};
 }
 
+json to_json(const TissueReport& r) {
+  json regions = json::array();
+  for (const RegionTissueReport& g : r.regions) {
+    regions.push_back({{"region", region_name(g.region)},
+                       {"status", g.status},
+                       {"steps", g.steps},
+                       {"kbar_n_per_mm3", g.kbar_n_per_mm3},
+                       {"n", g.n},
+                       {"cbar_ns_per_mm3", g.cbar_ns_per_mm3},
+                       {"m", g.m},
+                       {"se_kbar", g.se_kbar},
+                       {"se_n", g.se_n},
+                       {"se_cbar", g.se_cbar},
+                       {"se_m", g.se_m}});
+  }
+  return {{"type", "tissue_t"},
+          {"utime", r.utime},
+          {"final_estimate", r.final_estimate},
+          {"foot", foot_name(r.foot)},
+          {"step", r.step},
+          {"t_first_heel_strike_s", r.t_first_heel_strike_s},
+          {"t_last_toe_off_s", r.t_last_toe_off_s},
+          {"regions", std::move(regions)}};
+}
+
 // Channel arguments may be the configured names or the message kinds; anything else is a usage
 // error, as a typo on the command line is.
 std::vector<std::string> resolve_channels(const LcmChannels& channels,
                                           const std::vector<std::string>& wanted) {
+  const std::pair<std::string_view, const std::string*> known[] = {
+      {"frame", &channels.frame},   {"step", &channels.step}, {"fit", &channels.fit},
+      {"status", &channels.status}, {"raw", &channels.raw},   {"effects", &channels.effects},
+      {"tissue", &channels.tissue}};
   std::vector<std::string> out;
   for (const std::string& name : wanted) {
-    if (name == "frame") {
-      out.push_back(channels.frame);
-    } else if (name == "step") {
-      out.push_back(channels.step);
-    } else if (name == "fit") {
-      out.push_back(channels.fit);
-    } else if (name == "status") {
-      out.push_back(channels.status);
-    } else if (name == "raw") {
-      out.push_back(channels.raw);
-    } else if (name == "effects") {
-      out.push_back(channels.effects);
-    } else if (name == channels.frame || name == channels.step || name == channels.fit ||
-               name == channels.status || name == channels.raw || name == channels.effects) {
-      out.push_back(name);
-    } else {
+    const auto match = std::find_if(std::begin(known), std::end(known), [&](const auto& k) {
+      return name == k.first || name == *k.second;
+    });
+    if (match == std::end(known)) {
       throw CLI::ValidationError(
-          "channels", fmt::format("\"{}\" is not a gaitmon channel: frame, step, fit, status, "
-                                  "raw, effects or the config's names {}, {}, {}, {}, {}, {}",
-                                  name, channels.frame, channels.step, channels.fit,
-                                  channels.status, channels.raw, channels.effects));
+          "channels",
+          fmt::format("\"{}\" is not a gaitmon channel: frame, step, fit, status, "
+                      "raw, effects, tissue or the config's names {}, {}, {}, {}, "
+                      "{}, {}, {}",
+                      name, channels.frame, channels.step, channels.fit, channels.status,
+                      channels.raw, channels.effects, channels.tissue));
     }
+    out.push_back(*match->second);
   }
   return out;
 }
@@ -239,7 +262,7 @@ void add_spy_command(CLI::App& app, const GlobalOptions& global) {
       "until --count messages, --timeout-s or Ctrl-C");
   sub->add_option("channels", args->channels,
                   "Channels to print: the config's channel names, or frame, step, fit, status, "
-                  "raw, effects (default: all six)");
+                  "raw, effects, tissue (default: all seven)");
   sub->add_option("--lcm-url", args->lcm_url, "LCM URL (default: [lcm] url of the config)");
   sub->add_option("--count", args->count,
                   "Exit after this many messages (exit code 1 if --timeout-s comes first)")

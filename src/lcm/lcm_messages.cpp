@@ -91,6 +91,29 @@ void copy_effects_fields(const From& in, To& out) {
   out.extended_heldout_nrmse_pct = in.extended_heldout_nrmse_pct;
 }
 
+template <typename From, typename To>
+void copy_tissue_fields(const From& in, To& out) {
+  out.utime = in.utime;
+  out.final_estimate = in.final_estimate;
+  out.step = in.step;
+  out.t_first_heel_strike_s = in.t_first_heel_strike_s;
+  out.t_last_toe_off_s = in.t_last_toe_off_s;
+}
+
+template <typename From, typename To>
+void copy_region_tissue_fields(const From& in, To& out) {
+  out.status = in.status;
+  out.steps = in.steps;
+  out.kbar_n_per_mm3 = in.kbar_n_per_mm3;
+  out.n = in.n;
+  out.cbar_ns_per_mm3 = in.cbar_ns_per_mm3;
+  out.m = in.m;
+  out.se_kbar = in.se_kbar;
+  out.se_n = in.se_n;
+  out.se_cbar = in.se_cbar;
+  out.se_m = in.se_m;
+}
+
 // Calls visit(report member, message member) for every counter of the status report.
 template <typename Visit>
 void for_each_counter(Visit&& visit) {
@@ -182,6 +205,18 @@ void to_lcm(const EffectsReport& report, effects_t& message) {
     out.name = in.name;
     out.value = in.value;
     out.se = in.se;
+  }
+}
+
+void to_lcm(const TissueReport& report, tissue_t& message) {
+  copy_tissue_fields(report, message);
+  message.foot = foot_code(report.foot);
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    const RegionTissueReport& in = report.regions[i];
+    region_tissue_t& out = message.regions[i];
+    out.region = static_cast<std::int8_t>(index_of(in.region));
+    out.region_name = region_name(in.region);
+    copy_region_tissue_fields(in, out);
   }
 }
 
@@ -281,6 +316,24 @@ std::optional<EffectsReport> from_lcm(const effects_t& message) {
   copy_effects_fields(message, report);
   for (const effect_param_t& p : message.params) {
     report.params.push_back({p.effect, p.name, p.value, p.se});
+  }
+  return report;
+}
+
+std::optional<TissueReport> from_lcm(const tissue_t& message) {
+  TissueReport report;
+  const auto foot = foot_of(message.foot);
+  if (!foot) return std::nullopt;
+  copy_tissue_fields(message, report);
+  report.foot = *foot;
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    const region_tissue_t& in = message.regions[i];
+    if (in.region < 0 || static_cast<std::size_t>(in.region) >= kRegionCount || in.steps < 0) {
+      return std::nullopt;
+    }
+    RegionTissueReport& out = report.regions[i];
+    out.region = kRegions[static_cast<std::size_t>(in.region)];
+    copy_region_tissue_fields(in, out);
   }
   return report;
 }

@@ -91,4 +91,9 @@ void LcmPublisher::publish(const EffectsReport& report) {
   send(settings_.channels.effects, report, message);
 }
 
+void LcmPublisher::publish(const TissueReport& report) {
+  thread_local tissue_t message;
+  send(settings_.channels.tissue, report, message);
+}
+
 }  // namespace gaitmon

@@ -14,7 +14,7 @@
 
 namespace gaitmon {
 
-enum class MessageKind { Frame, Step, Fit, Status, Raw, Effects };
+enum class MessageKind { Frame, Step, Fit, Status, Raw, Effects, Tissue };
 
 struct LcmSubscriber::Route {
   LcmSubscriber* owner = nullptr;
@@ -49,6 +49,8 @@ bool decode(MessageKind kind, const void* data, std::uint32_t size, LcmMessage& 
       return decode_into<raw_t>(data, size, out);
     case MessageKind::Effects:
       return decode_into<effects_t>(data, size, out);
+    case MessageKind::Tissue:
+      return decode_into<tissue_t>(data, size, out);
   }
   return false;
 }
@@ -80,7 +82,8 @@ LcmSubscriber::LcmSubscriber(std::shared_ptr<lcm::LCM> lcm, const LcmSettings& s
       {&settings.channels.fit, MessageKind::Fit},
       {&settings.channels.status, MessageKind::Status},
       {&settings.channels.raw, MessageKind::Raw},
-      {&settings.channels.effects, MessageKind::Effects}};
+      {&settings.channels.effects, MessageKind::Effects},
+      {&settings.channels.tissue, MessageKind::Tissue}};
   std::vector<std::string> wanted = channels;
   if (wanted.empty()) {
     for (const auto& [name, kind] : known) wanted.push_back(*name);
@@ -100,7 +103,8 @@ LcmSubscriber::LcmSubscriber(std::shared_ptr<lcm::LCM> lcm, const LcmSettings& s
       throw LcmError("\"" + channel + "\" is not a gaitmon channel; the config names " +
                      settings.channels.frame + ", " + settings.channels.step + ", " +
                      settings.channels.fit + ", " + settings.channels.status + ", " +
-                     settings.channels.raw + " and " + settings.channels.effects);
+                     settings.channels.raw + ", " + settings.channels.effects + " and " +
+                     settings.channels.tissue);
     }
     route->subscription = lcm_->subscribeFunction(
         literal_pattern(channel),

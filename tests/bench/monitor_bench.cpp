@@ -48,6 +48,7 @@ class LatencyPublisher : public gaitmon::Publisher {
   void publish(const gaitmon::StatusReport&) override {}
   void publish(const gaitmon::RawFrameReport&) override {}
   void publish(const gaitmon::EffectsReport&) override {}
+  void publish(const gaitmon::TissueReport&) override {}
   void publish(const gaitmon::FitReport& r) override {
     const std::lock_guard lock(mutex_);
     latencies_ms_.push_back(r.latency_ms);

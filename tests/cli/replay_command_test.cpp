@@ -1,7 +1,7 @@
 // `gaitmon replay` end to end through the in-process fake driver, the wire format, the real
 // decoder, the monitor and LCM (the file:// provider writes an LCM log): the fits equal
-// `gaitmon analyze` on the same session (with [model] effects, the extended model's too), and
-// SIGINT stops it cleanly.
+// `gaitmon analyze` on the same session (with [model] effects, the extended model's too), the
+// regions' tissue at the end equals its pooled means, and SIGINT stops it cleanly.
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -12,6 +12,7 @@
 #include <gaitmon/effects_t.hpp>
 #include <gaitmon/fit_t.hpp>
 #include <gaitmon/status_t.hpp>
+#include <gaitmon/tissue_t.hpp>
 #include <iterator>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -63,13 +64,13 @@ TEST(ReplayCommand, FitsEqualAnalyzeOnTheSameSession) {
   const fs::path dir = test::scratch_dir("replay-vs-analyze");
   const fs::path session = demo_30s(dir);
   const fs::path log = dir / "replay.lcmlog";
-  std::string output;
+  std::string replay_output, output;
   ASSERT_EQ(test::run_command(test::gaitmon_binary().string() + " --log-level warn replay " +
                                   session.string() + " --speed max --lcm-url 'file://" +
                                   log.string() + "?mode=w'",
-                              &output),
+                              &replay_output),
             0)
-      << output;
+      << replay_output;
   ASSERT_EQ(test::run_command(test::gaitmon_binary().string() + " analyze " + session.string() +
                                   " --out " + (dir / "analyze").string(),
                               &output),
@@ -99,6 +100,49 @@ TEST(ReplayCommand, FitsEqualAnalyzeOnTheSameSession) {
       expect_printed(r.nrmse_pct, row.at("nrmse_pct"), where + " nrmse");
     }
   }
+  // The regions' tissue at the end: analyze's pooled means of the same steps (session.json), on
+  // the bus and in the table printed last.
+  const auto tissues = decode<gaitmon::tissue_t>(events, "GAITMON_TISSUE");
+  ASSERT_GE(tissues.size(), 2u);
+  const gaitmon::tissue_t& final_tissue = tissues.back();
+  EXPECT_TRUE(final_tissue.final_estimate);
+  std::ifstream session_json(dir / "analyze" / "session.json");
+  const nlohmann::json session_regions = nlohmann::json::parse(session_json)["regions"];
+  int pooled = 0;
+  for (const gaitmon::region_tissue_t& r : final_tissue.regions) {
+    const nlohmann::json& pooling = session_regions.at(r.region_name).at("pooling");
+    EXPECT_EQ(r.steps, pooling.at("steps").get<int>()) << r.region_name;
+    EXPECT_EQ(r.status == "ok", pooling.at("pooled").get<bool>()) << r.region_name;
+    if (r.status != "ok") {
+      EXPECT_EQ(r.status, "not_pooled:" + pooling.at("note").get<std::string>());
+      EXPECT_NE(output.find(r.region_name), std::string::npos);
+      continue;
+    }
+    ++pooled;
+    const nlohmann::json& mean = pooling.at("mean");
+    const nlohmann::json& se = pooling.at("se");
+    // The same pool of the same fits, its sums taken in the workers' order.
+    const auto near = [&](double got, const nlohmann::json& expected, const std::string& what) {
+      EXPECT_NEAR(got, expected.get<double>(), 1e-8 * std::abs(expected.get<double>()))
+          << r.region_name << " " << what;
+    };
+    near(r.kbar_n_per_mm3, mean.at("kbar_n_per_mm3"), "kbar");
+    near(r.n, mean.at("n"), "n");
+    near(r.cbar_ns_per_mm3, mean.at("cbar_ns_per_mm3"), "cbar");
+    near(r.m, mean.at("m"), "m");
+    near(r.se_kbar, se.at("kbar_n_per_mm3"), "se_kbar");
+    near(r.se_n, se.at("n"), "se_n");
+    near(r.se_cbar, se.at("cbar_ns_per_mm3"), "se_cbar");
+    near(r.se_m, se.at("m"), "se_m");
+  }
+  EXPECT_GE(pooled, 5);
+  const auto table = replay_output.find("tissue over the steps of");
+  ASSERT_NE(table, std::string::npos) << replay_output;
+  EXPECT_NE(replay_output.find("\n  heel ", table), std::string::npos) << replay_output;
+  EXPECT_NE(replay_output.find("not pooled: the pooled mean leaves the fit bounds", table),
+            std::string::npos)
+      << replay_output;
+
   const auto statuses = decode<gaitmon::status_t>(events, "GAITMON_STATUS");
   ASSERT_FALSE(statuses.empty());
   EXPECT_EQ(statuses.back().connection, "finished");

@@ -40,7 +40,7 @@ TEST(SpyCommand, BadOptionsAreExitCodeTwoAndSayWhy) {
                 "--lcm-url: LCM has no connection for \"tcpq://127.0.0.1:1\""},
            Case{"fit bogus --timeout-s 1",
                 "channels: \"bogus\" is not a gaitmon channel: frame, step, fit, status, raw, "
-                "effects or the config's names GAITMON_FRAME,"},
+                "effects, tissue or the config's names GAITMON_FRAME,"},
        }) {
     SCOPED_TRACE(c.args);
     int status = -1;

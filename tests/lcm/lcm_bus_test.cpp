@@ -11,6 +11,7 @@
 #include <gaitmon/raw_t.hpp>
 #include <gaitmon/status_t.hpp>
 #include <gaitmon/step_t.hpp>
+#include <gaitmon/tissue_t.hpp>
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -30,7 +31,8 @@ using Clock = std::chrono::steady_clock;
 using test::ChildProcess;
 
 const std::set<std::string> kAllChannels{"GAITMON_FRAME",  "GAITMON_STEP", "GAITMON_FIT",
-                                         "GAITMON_STATUS", "GAITMON_RAW",  "GAITMON_EFFECTS"};
+                                         "GAITMON_STATUS", "GAITMON_RAW",  "GAITMON_EFFECTS",
+                                         "GAITMON_TISSUE"};
 
 class LcmBus : public ::testing::Test {
  protected:
@@ -174,6 +176,33 @@ json lua_expected_effects() {
           {"params", params}};
 }
 
+json lua_expected_tissue() {
+  const TissueReport r = test::sample_tissue();
+  json regions = json::array();
+  for (int i = 0; i < 8; ++i) {
+    const RegionTissueReport& g = r.regions[static_cast<std::size_t>(i)];
+    regions.push_back({{"region", i},
+                       {"region_name", region_name(g.region)},
+                       {"status", g.status},
+                       {"steps", g.steps},
+                       {"kbar_n_per_mm3", g.kbar_n_per_mm3},
+                       {"n", g.n},
+                       {"cbar_ns_per_mm3", g.cbar_ns_per_mm3},
+                       {"m", g.m},
+                       {"se_kbar", g.se_kbar},
+                       {"se_n", g.se_n},
+                       {"se_cbar", g.se_cbar},
+                       {"se_m", g.se_m}});
+  }
+  return {{"utime", r.utime},
+          {"final_estimate", false},
+          {"foot", 0},
+          {"step", r.step},
+          {"t_first_heel_strike_s", r.t_first_heel_strike_s},
+          {"t_last_toe_off_s", r.t_last_toe_off_s},
+          {"regions", regions}};
+}
+
 json lua_expected_status() {
   const StatusReport s = test::sample_status();
   return {{"utime", s.utime},           {"connection", "connected"}, {"bytes_received", 123456789},
@@ -214,7 +243,7 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   });
   ASSERT_TRUE(lua_listener.warm);
   test::publish_samples(publisher);
-  read_messages(lua_listener, 6);
+  read_messages(lua_listener, 7);
   EXPECT_EQ(publisher.failed_publishes(), 0U);
 
   // The Lua client decoded each message with the lcm-gen Lua types.
@@ -238,6 +267,10 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   ASSERT_TRUE(effects);
   EXPECT_EQ((*effects)["type"], "gaitmon.effects_t");
   EXPECT_EQ((*effects)["message"], lua_expected_effects());
+  const json* tissue = find_channel(lua_listener.messages, "GAITMON_TISSUE");
+  ASSERT_TRUE(tissue);
+  EXPECT_EQ((*tissue)["type"], "gaitmon.tissue_t");
+  EXPECT_EQ((*tissue)["message"], lua_expected_tissue());
   const json* frame = find_channel(lua_listener.messages, "GAITMON_FRAME");
   const json* raw = find_channel(lua_listener.messages, "GAITMON_RAW");
   ASSERT_TRUE(frame && raw);
@@ -267,12 +300,14 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   status_t u;
   raw_t r;
   effects_t e;
+  tissue_t g;
   ASSERT_TRUE(decode_last("GAITMON_FRAME", f));
   ASSERT_TRUE(decode_last("GAITMON_STEP", s));
   ASSERT_TRUE(decode_last("GAITMON_FIT", t));
   ASSERT_TRUE(decode_last("GAITMON_STATUS", u));
   ASSERT_TRUE(decode_last("GAITMON_RAW", r));
   ASSERT_TRUE(decode_last("GAITMON_EFFECTS", e));
+  ASSERT_TRUE(decode_last("GAITMON_TISSUE", g));
   EXPECT_EQ(f.utime, 1763737200123456);
   EXPECT_EQ(s.utime, 1763737200223456);
   EXPECT_EQ(t.utime, 1763737200323456);
@@ -280,6 +315,7 @@ TEST_F(LcmBus, LoggerAndLuaClientReceiveWhatIsPublished) {
   EXPECT_EQ(u.connection, "connected");
   EXPECT_EQ(r.bits.size(), 161U);
   EXPECT_EQ(e.params.size(), 3U);
+  EXPECT_EQ(g.regions[4].steps, 76);
   // Event numbers count up from 0 in the order the logger received the messages.
   std::int64_t expected_number = 0;
   for (const auto& event : test::read_lcm_log(log_path)) {
@@ -298,8 +334,8 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
   LcmPublisher publisher(settings());
   warm_up(publisher, {&listener}, [] { return true; });
   test::publish_samples(publisher);
-  read_messages(listener, 6);
-  ASSERT_EQ(listener.messages.size(), 6U);
+  read_messages(listener, 7);
+  ASSERT_EQ(listener.messages.size(), 7U);
 
   const json* frame = find_channel(listener.messages, "GAITMON_FRAME");
   const json* step = find_channel(listener.messages, "GAITMON_STEP");
@@ -386,6 +422,19 @@ TEST_F(LcmBus, SpyPrintsEveryMessageAsJson) {
   const json* effects = find_channel(listener.messages, "GAITMON_EFFECTS");
   ASSERT_TRUE(effects);
   EXPECT_EQ(*effects, expected_effects);
+
+  // As the Lua client's, but with the foot and the regions by name.
+  json expected_tissue = lua_expected_tissue();
+  expected_tissue["foot"] = "L";
+  for (json& g : expected_tissue["regions"]) {
+    g["region"] = g["region_name"];
+    g.erase("region_name");
+  }
+  expected_tissue["channel"] = "GAITMON_TISSUE";
+  expected_tissue["type"] = "tissue_t";
+  const json* tissue = find_channel(listener.messages, "GAITMON_TISSUE");
+  ASSERT_TRUE(tissue);
+  EXPECT_EQ(*tissue, expected_tissue);
 }
 
 // Named channels only (by kind here), and --count ends the spy with exit code 0. UDP has no

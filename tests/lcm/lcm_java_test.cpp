@@ -17,9 +17,9 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 
-const char* const kTypes[] = {"frame_t", "region_frame_t", "step_t",
-                              "fit_t",   "region_fit_t",   "status_t",
-                              "raw_t",   "effects_t",      "effect_param_t"};
+const char* const kTypes[] = {"frame_t",        "region_frame_t", "step_t",         "fit_t",
+                              "region_fit_t",   "status_t",       "raw_t",          "effects_t",
+                              "effect_param_t", "tissue_t",       "region_tissue_t"};
 
 std::vector<std::string> lines_of(const std::string& text) {
   std::vector<std::string> lines;
@@ -45,7 +45,7 @@ TEST(LcmJava, LcmSpyFindsTheTypesOnClasspath) {
                         " timeout 60 java -Djava.awt.headless=true -cp " +
                         GAITMON_LCM_JAVA_LIB_JAR + " lcm.spy.Spy --lcm-url=memq:// 2>&1",
                     &output);
-  EXPECT_THAT(output, HasSubstr("Found 9 LCM types")) << output;
+  EXPECT_THAT(output, HasSubstr("Found 11 LCM types")) << output;
 }
 
 // Decodes the way lcm-spy does (fingerprint -> class through lcm.spy.LCMTypeDatabase), and once
@@ -77,6 +77,12 @@ public class Decode {
             + fit.regions[6].status.replace(' ', '_') + " " + fit.effects_inside + " "
             + fit.effects_utime);
       }
+      if (e.channel.equals("GAITMON_TISSUE")) {
+        gaitmon.tissue_t tissue = new gaitmon.tissue_t(e.data);
+        System.out.println("tissue " + tissue.foot + " " + tissue.step + " "
+            + tissue.regions[0].region_name + " " + tissue.regions[0].steps + " "
+            + tissue.regions[0].kbar_n_per_mm3 + " " + tissue.regions[0].se_kbar);
+      }
     }
   }
 }
@@ -91,7 +97,7 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
     settings.raw_enabled = true;
     LcmPublisher publisher(settings);
     test::publish_samples(publisher);
-    ASSERT_EQ(publisher.published(), 6U);
+    ASSERT_EQ(publisher.published(), 7U);
   }
   test::write_text(dir / "Decode.java", kDecodeJava);
   const std::string classpath =
@@ -107,10 +113,11 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
       << output;
   // lcm.spy's class discovery also prints what it could not load; only our lines count.
   std::vector<std::string> events;
-  std::string fit_line;
+  std::string fit_line, tissue_line;
   for (const std::string& line : lines_of(output)) {
     if (line.rfind("event ", 0) == 0) events.push_back(line);
     if (line.rfind("fit ", 0) == 0) fit_line = line;
+    if (line.rfind("tissue ", 0) == 0) tissue_line = line;
   }
   const std::vector<std::string> expected{
       "event GAITMON_FRAME gaitmon.frame_t 1763737200123456",
@@ -118,7 +125,8 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
       "event GAITMON_FIT gaitmon.fit_t 1763737200323456",
       "event GAITMON_STATUS gaitmon.status_t 1763737200423456",
       "event GAITMON_RAW gaitmon.raw_t 1763737200523456",
-      "event GAITMON_EFFECTS gaitmon.effects_t 1763737200623456"};
+      "event GAITMON_EFFECTS gaitmon.effects_t 1763737200623456",
+      "event GAITMON_TISSUE gaitmon.tissue_t 1763737200723456"};
   EXPECT_EQ(events, expected) << output;
   std::istringstream fit(fit_line);
   std::string word, foot, step, latency, region, kbar, status, inside, effects_utime;
@@ -132,6 +140,8 @@ TEST(LcmJava, JavaProgramDecodesALoggedMessage) {
   EXPECT_EQ(status, "fit_failed:no_convergence");
   EXPECT_EQ(inside, "stress_relaxation,hysteresis");
   EXPECT_EQ(effects_utime, "1763737199000000");
+  // As sample_tissue() gives them; Java prints the shortest decimal that reads back.
+  EXPECT_EQ(tissue_line, "tissue 0 41 heel 80 0.125 0.0046") << output;
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <gaitmon/raw_t.hpp>
 #include <gaitmon/status_t.hpp>
 #include <gaitmon/step_t.hpp>
+#include <gaitmon/tissue_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
 #include <memory>
@@ -242,6 +243,37 @@ TEST_F(LcmPublisherMemq, EffectsReportArrivesAsEffectsT) {
   EXPECT_EQ(m.params[2].se, 4.25);
 }
 
+TEST_F(LcmPublisherMemq, TissueReportArrivesAsTissueT) {
+  LcmPublisher publisher(bus, memq_settings());
+  publisher.publish(test::sample_tissue());
+  drain(*bus);
+  const auto m = only_message<tissue_t>(received, "GAITMON_TISSUE");
+  EXPECT_EQ(m.utime, 1763737200723456);
+  EXPECT_FALSE(m.final_estimate);
+  EXPECT_EQ(m.foot, tissue_t::LEFT);
+  EXPECT_EQ(m.step, 41);
+  EXPECT_EQ(m.t_first_heel_strike_s, 2.5);
+  EXPECT_EQ(m.t_last_toe_off_s, 95.25);
+  for (int i = 0; i < 8; ++i) {
+    SCOPED_TRACE(i);
+    const region_tissue_t& g = m.regions[i];
+    EXPECT_EQ(g.region, i);
+    EXPECT_EQ(g.steps, 80 - i);
+    EXPECT_EQ(g.kbar_n_per_mm3, 0.125 + 0.001 * i);
+    EXPECT_EQ(g.se_m, 0.061 + 0.001 * i);
+  }
+  EXPECT_EQ(m.regions[0].region_name, "heel");
+  EXPECT_EQ(m.regions[0].status, "ok");
+  EXPECT_EQ(m.regions[7].region_name, "toes3_5");
+  EXPECT_EQ(m.regions[7].status, "not_pooled:the pooled mean leaves the fit bounds");
+  EXPECT_EQ(m.regions[3].n, 0.375 + 0.03);
+  EXPECT_EQ(m.regions[3].cbar_ns_per_mm3, 0.015625 + 0.003);
+  EXPECT_EQ(m.regions[3].m, 1.0625 + 0.03);
+  EXPECT_EQ(m.regions[3].se_kbar, 0.0046 + 0.0003);
+  EXPECT_EQ(m.regions[3].se_n, 0.021 + 0.003);
+  EXPECT_EQ(m.regions[3].se_cbar, 0.0013 + 0.0003);
+}
+
 TEST_F(LcmPublisherMemq, RawFramesAreNotPublishedByDefault) {
   LcmSettings settings;
   settings.url = "memq://";
@@ -257,14 +289,14 @@ TEST_F(LcmPublisherMemq, RawFramesAreNotPublishedByDefault) {
 
 TEST_F(LcmPublisherMemq, UsesTheConfiguredChannels) {
   LcmSettings settings = memq_settings();
-  settings.channels = {"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW", "A_EFFECTS"};
+  settings.channels = {"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW", "A_EFFECTS", "A_TISSUE"};
   LcmPublisher publisher(bus, settings);
   test::publish_samples(publisher);
   drain(*bus);
   std::multiset<std::string> channels;
   for (const auto& [channel, bytes] : received.messages) channels.insert(channel);
   EXPECT_EQ(channels, (std::multiset<std::string>{"A.FRAME", "A_STEP", "A_FIT", "A_STATUS", "A_RAW",
-                                                  "A_EFFECTS"}));
+                                                  "A_EFFECTS", "A_TISSUE"}));
   // Each channel carries its own type: decoding as another type fails on the fingerprint.
   EXPECT_EQ(only_message<fit_t>(received, "A_FIT").step, 23);
   const auto& frame_bytes = received.messages.find("A.FRAME")->second;

@@ -8,6 +8,7 @@
 #include <gaitmon/frame_t.hpp>
 #include <gaitmon/raw_t.hpp>
 #include <gaitmon/step_t.hpp>
+#include <gaitmon/tissue_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
 #include <stdexcept>
@@ -174,6 +175,31 @@ void expect_same(const EffectsReport& a, const EffectsReport& b) {
   }
 }
 
+void expect_same(const TissueReport& a, const TissueReport& b) {
+  EXPECT_EQ(a.utime, b.utime);
+  EXPECT_EQ(a.final_estimate, b.final_estimate);
+  EXPECT_EQ(a.foot, b.foot);
+  EXPECT_EQ(a.step, b.step);
+  EXPECT_EQ(a.t_first_heel_strike_s, b.t_first_heel_strike_s);
+  EXPECT_EQ(a.t_last_toe_off_s, b.t_last_toe_off_s);
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    SCOPED_TRACE(i);
+    const RegionTissueReport& x = a.regions[i];
+    const RegionTissueReport& y = b.regions[i];
+    EXPECT_EQ(x.region, y.region);
+    EXPECT_EQ(x.status, y.status);
+    EXPECT_EQ(x.steps, y.steps);
+    EXPECT_EQ(x.kbar_n_per_mm3, y.kbar_n_per_mm3);
+    EXPECT_EQ(x.n, y.n);
+    EXPECT_EQ(x.cbar_ns_per_mm3, y.cbar_ns_per_mm3);
+    EXPECT_EQ(x.m, y.m);
+    EXPECT_EQ(x.se_kbar, y.se_kbar);
+    EXPECT_EQ(x.se_n, y.se_n);
+    EXPECT_EQ(x.se_cbar, y.se_cbar);
+    EXPECT_EQ(x.se_m, y.se_m);
+  }
+}
+
 template <typename Report>
 void expect_delivered(const Delivery& d, const std::string& channel, const Report& sent) {
   EXPECT_EQ(d.channel, channel);
@@ -187,13 +213,14 @@ TEST_F(LcmSubscriberMemq, EveryReportComesBackAsPublished) {
   LcmPublisher publisher(bus, settings);
   test::publish_samples(publisher);
   drain(subscriber);
-  ASSERT_EQ(deliveries.size(), 6U);
+  ASSERT_EQ(deliveries.size(), 7U);
   expect_delivered(deliveries[0], "GAITMON_FRAME", test::sample_frame());
   expect_delivered(deliveries[1], "GAITMON_STEP", test::sample_step());
   expect_delivered(deliveries[2], "GAITMON_FIT", test::sample_fit());
   expect_delivered(deliveries[3], "GAITMON_STATUS", test::sample_status());
   expect_delivered(deliveries[4], "GAITMON_RAW", test::sample_raw());
   expect_delivered(deliveries[5], "GAITMON_EFFECTS", test::sample_effects());
+  expect_delivered(deliveries[6], "GAITMON_TISSUE", test::sample_tissue());
   EXPECT_EQ(subscriber.decode_errors(), 0U);
 }
 
@@ -232,10 +259,16 @@ TEST_F(LcmSubscriberMemq, ForeignAndImpossibleMessagesAreCountedNotDelivered) {
   frame.foot = 0;
   frame.regions[3].ellipse_case = 6;
   bus->publish("GAITMON_FRAME", &frame);
+  // A tissue_t with a negative step count.
+  tissue_t tissue;
+  tissue.foot = 1;
+  for (std::int8_t i = 0; i < 8; ++i) tissue.regions[i].region = i;
+  tissue.regions[2].steps = -1;
+  bus->publish("GAITMON_TISSUE", &tissue);
   const test::LogCapture log;
   drain(subscriber);
   EXPECT_TRUE(deliveries.empty());
-  EXPECT_EQ(subscriber.decode_errors(), 4U);
+  EXPECT_EQ(subscriber.decode_errors(), 5U);
   // Logged too, the first of them (the others come within the same second).
   EXPECT_NE(
       log.text.str().find("LCM: a malformed message on GAITMON_FIT skipped: another type, cut "

@@ -138,6 +138,32 @@ inline EffectsReport sample_effects() {
   return r;
 }
 
+inline TissueReport sample_tissue() {
+  TissueReport r;
+  r.utime = 1763737200723456;
+  r.final_estimate = false;
+  r.foot = Foot::Left;
+  r.step = 41;
+  r.t_first_heel_strike_s = 2.5;
+  r.t_last_toe_off_s = 95.25;
+  for (std::size_t i = 0; i < kRegionCount; ++i) {
+    const double k = static_cast<double>(i);
+    RegionTissueReport& g = r.regions[i];
+    g.region = kRegions[i];
+    g.status = i >= 5 ? "not_pooled:the pooled mean leaves the fit bounds" : "ok";
+    g.steps = 80 - static_cast<int>(i);
+    g.kbar_n_per_mm3 = 0.125 + 0.001 * k;
+    g.n = 0.375 + 0.01 * k;
+    g.cbar_ns_per_mm3 = 0.015625 + 0.001 * k;
+    g.m = 1.0625 + 0.01 * k;
+    g.se_kbar = 0.0046 + 0.0001 * k;
+    g.se_n = 0.021 + 0.001 * k;
+    g.se_cbar = 0.0013 + 0.0001 * k;
+    g.se_m = 0.061 + 0.001 * k;
+  }
+  return r;
+}
+
 /// One of each sample, in the order of the Publisher interface.
 inline void publish_samples(Publisher& publisher) {
   publisher.publish(sample_frame());
@@ -146,6 +172,7 @@ inline void publish_samples(Publisher& publisher) {
   publisher.publish(sample_status());
   publisher.publish(sample_raw());
   publisher.publish(sample_effects());
+  publisher.publish(sample_tissue());
 }
 
 }  // namespace gaitmon::test

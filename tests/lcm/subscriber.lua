@@ -5,7 +5,7 @@
 -- lua5.2 subscriber.lua --url URL --types LUA_DIR [--count N] [--timeout-s S] [CHANNEL=TYPE ...]
 --
 -- LUA_DIR is the lcm-gen Lua output (build/lcm/lua). Without CHANNEL=TYPE pairs it listens to the
--- six default gaitmon channels. After subscribing it prints the line "ready"; it exits after N
+-- seven default gaitmon channels. After subscribing it prints the line "ready"; it exits after N
 -- messages, after S seconds (to the whole second), or when killed.
 package.cpath = "/usr/lib/lua/5.2/?.so;" .. package.cpath
 
@@ -35,7 +35,8 @@ if not url or not types_dir then
 end
 if next(routes) == nil then
   routes = {GAITMON_FRAME = "frame_t", GAITMON_STEP = "step_t", GAITMON_FIT = "fit_t",
-            GAITMON_STATUS = "status_t", GAITMON_RAW = "raw_t", GAITMON_EFFECTS = "effects_t"}
+            GAITMON_STATUS = "status_t", GAITMON_RAW = "raw_t", GAITMON_EFFECTS = "effects_t",
+            GAITMON_TISSUE = "tissue_t"}
 end
 package.path = types_dir .. "/?.lua;" .. types_dir .. "/?/init.lua;" .. package.path
 
