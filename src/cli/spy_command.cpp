@@ -63,29 +63,37 @@ json to_json(const StepEvent& e) {
           {"t_s", e.t_s}};
 }
 
+// A region's name, status, four tissue parameters and their standard errors, in its fit and in
+// its pool.
+template <typename RegionReport>
+json region_json(const RegionReport& g) {
+  return {{"region", region_name(g.region)},
+          {"status", g.status},
+          {"kbar_n_per_mm3", g.kbar_n_per_mm3},
+          {"n", g.n},
+          {"cbar_ns_per_mm3", g.cbar_ns_per_mm3},
+          {"m", g.m},
+          {"se_kbar", g.se_kbar},
+          {"se_n", g.se_n},
+          {"se_cbar", g.se_cbar},
+          {"se_m", g.se_m}};
+}
+
 json to_json(const FitReport& r) {
   json regions = json::array();
   for (const RegionFitReport& g : r.regions) {
-    regions.push_back({{"region", region_name(g.region)},
-                       {"status", g.status},
-                       {"kbar_n_per_mm3", g.kbar_n_per_mm3},
-                       {"n", g.n},
-                       {"cbar_ns_per_mm3", g.cbar_ns_per_mm3},
-                       {"m", g.m},
-                       {"se_kbar", g.se_kbar},
-                       {"se_n", g.se_n},
-                       {"se_cbar", g.se_cbar},
-                       {"se_m", g.se_m},
-                       {"se_kbar_total", g.se_kbar_total},
-                       {"se_n_total", g.se_n_total},
-                       {"se_cbar_total", g.se_cbar_total},
-                       {"se_m_total", g.se_m_total},
-                       {"A_mm", g.A_mm},
-                       {"B_mm", g.B_mm},
-                       {"C_mm", g.C_mm},
-                       {"d0_mm", g.d0_mm},
-                       {"nrmse_pct", g.nrmse_pct},
-                       {"m_steps", g.m_steps}});
+    json region = region_json(g);
+    region.update({{"se_kbar_total", g.se_kbar_total},
+                   {"se_n_total", g.se_n_total},
+                   {"se_cbar_total", g.se_cbar_total},
+                   {"se_m_total", g.se_m_total},
+                   {"A_mm", g.A_mm},
+                   {"B_mm", g.B_mm},
+                   {"C_mm", g.C_mm},
+                   {"d0_mm", g.d0_mm},
+                   {"nrmse_pct", g.nrmse_pct},
+                   {"m_steps", g.m_steps}});
+    regions.push_back(std::move(region));
   }
   return {{"type", "fit_t"},
           {"utime", r.utime},
@@ -158,17 +166,9 @@ json to_json(const EffectsReport& r) {
 json to_json(const TissueReport& r) {
   json regions = json::array();
   for (const RegionTissueReport& g : r.regions) {
-    regions.push_back({{"region", region_name(g.region)},
-                       {"status", g.status},
-                       {"steps", g.steps},
-                       {"kbar_n_per_mm3", g.kbar_n_per_mm3},
-                       {"n", g.n},
-                       {"cbar_ns_per_mm3", g.cbar_ns_per_mm3},
-                       {"m", g.m},
-                       {"se_kbar", g.se_kbar},
-                       {"se_n", g.se_n},
-                       {"se_cbar", g.se_cbar},
-                       {"se_m", g.se_m}});
+    json region = region_json(g);
+    region["steps"] = g.steps;
+    regions.push_back(std::move(region));
   }
   return {{"type", "tissue_t"},
           {"utime", r.utime},

@@ -55,9 +55,9 @@ void copy_fit_fields(const From& in, To& out) {
   out.effects_utime = in.effects_utime;
 }
 
+// A region's four tissue parameters and their standard errors, in its fit and in its pool.
 template <typename From, typename To>
-void copy_region_fit_fields(const From& in, To& out) {
-  out.status = in.status;
+void copy_material_fields(const From& in, To& out) {
   out.kbar_n_per_mm3 = in.kbar_n_per_mm3;
   out.n = in.n;
   out.cbar_ns_per_mm3 = in.cbar_ns_per_mm3;
@@ -66,6 +66,12 @@ void copy_region_fit_fields(const From& in, To& out) {
   out.se_n = in.se_n;
   out.se_cbar = in.se_cbar;
   out.se_m = in.se_m;
+}
+
+template <typename From, typename To>
+void copy_region_fit_fields(const From& in, To& out) {
+  out.status = in.status;
+  copy_material_fields(in, out);
   out.se_kbar_total = in.se_kbar_total;
   out.se_n_total = in.se_n_total;
   out.se_cbar_total = in.se_cbar_total;
@@ -104,14 +110,7 @@ template <typename From, typename To>
 void copy_region_tissue_fields(const From& in, To& out) {
   out.status = in.status;
   out.steps = in.steps;
-  out.kbar_n_per_mm3 = in.kbar_n_per_mm3;
-  out.n = in.n;
-  out.cbar_ns_per_mm3 = in.cbar_ns_per_mm3;
-  out.m = in.m;
-  out.se_kbar = in.se_kbar;
-  out.se_n = in.se_n;
-  out.se_cbar = in.se_cbar;
-  out.se_m = in.se_m;
+  copy_material_fields(in, out);
 }
 
 // Calls visit(report member, message member) for every counter of the status report.
