@@ -317,6 +317,13 @@ MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shar
           chain.cbar_chain_sd_pct[ri] / 100.0, chain.m_chain_sd[ri]};
 }
 
+MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool shared_m) {
+  const ChainSds& chain = shared_m ? pooling.m_per_session : pooling.per_step;
+  const std::size_t ri = index_of(region);
+  return {chain.kbar_step_sd_pct[ri] / 100.0, chain.n_step_sd[ri],
+          chain.cbar_step_sd_pct[ri] / 100.0, chain.m_step_sd[ri]};
+}
+
 std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimates& pooling,
                                                              const MaterialVector& chain_sd) {
   if (!pooling.pooled) return std::nullopt;
@@ -340,7 +347,11 @@ std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region regi
       }
     }
   }
-  return material_params(with_shared_error(*estimate, chain_sd(pooling, region, shared_m)));
+  MaterialEstimate total = with_shared_error(*estimate, chain_sd(pooling, region, shared_m));
+  // The step's own error beyond its Jacobian's, independent of the other steps' and parameters'.
+  const MaterialVector own = step_sd(pooling, region, shared_m);
+  for (std::size_t p = 0; p < 4; ++p) total.covariance[p][p] += own[p] * own[p];
+  return material_params(total);
 }
 
 SessionAnalysis analyse_session(std::span<const StepAnalysis> steps, const Config& config,

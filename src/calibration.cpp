@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <span>
 #include <stdexcept>
 
 #include "gaitmon/analysis.hpp"
@@ -23,13 +24,35 @@ namespace fs = std::filesystem;
 // The largest SD looked for: 1000 % in kbar and cbar, the most [pooling] takes.
 constexpr double kLargestSd = 10.0;
 
+MaterialVector scaled_truth(const SimulationTruth& truth, std::size_t region) {
+  const EllipsoidParams& t = truth.regions[region].params;
+  return {std::log(t.kbar_n_per_mm3), t.n, std::log(t.cbar_ns_per_mm3), t.m};
+}
+
+// Each step's own estimates, as with_chain_error takes them before the chain's SDs.
+void add_steps(std::span<const StepAnalysis> steps, const SimulationTruth& truth,
+               ChainSamples& out) {
+  for (const StepAnalysis& step : steps) {
+    for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+      const std::optional<MaterialEstimate> e = material_estimate(step.regions[ri].fit);
+      if (!e) continue;
+      const MaterialVector t = scaled_truth(truth, ri);
+      const double m_variance = e->covariance[3][3];
+      for (std::size_t p = 0; p < 4; ++p) {
+        const double slope = e->slope_on_shared_m && p < 3 ? (*e->slope_on_shared_m)[p] : 0.0;
+        out.steps[ri][p].push_back({e->value[p] - t[p],
+                                    std::sqrt(e->covariance[p][p] + slope * slope * m_variance),
+                                    slope});
+      }
+    }
+  }
+}
+
 void add_session(const SessionAnalysis& session, const SimulationTruth& truth, ChainSamples& out) {
   for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
     const RegionSessionAnalysis& region = session.regions[ri];
-    const EllipsoidParams& t = truth.regions[ri].params;
     if (region.pooling.pooled) {
-      const MaterialVector truth_scaled = {std::log(t.kbar_n_per_mm3), t.n,
-                                           std::log(t.cbar_ns_per_mm3), t.m};
+      const MaterialVector truth_scaled = scaled_truth(truth, ri);
       for (std::size_t p = 0; p < 4; ++p) {
         const double slope = region.pooling.mean_slope_on_shared_m
                                  ? (*region.pooling.mean_slope_on_shared_m)[p]
@@ -54,6 +77,8 @@ void append(const ChainSamples& from, ChainSamples& to) {
     for (std::size_t p = 0; p < 4; ++p) {
       to.pooled[ri][p].insert(to.pooled[ri][p].end(), from.pooled[ri][p].begin(),
                               from.pooled[ri][p].end());
+      to.steps[ri][p].insert(to.steps[ri][p].end(), from.steps[ri][p].begin(),
+                             from.steps[ri][p].end());
     }
     for (std::size_t p = 0; p < 2; ++p) {
       to.feet[ri][p].insert(to.feet[ri][p].end(), from.feet[ri][p].begin(), from.feet[ri][p].end());
@@ -101,6 +126,8 @@ SessionSamples run_session(const Config& config, const CalibrationDesign& design
   std::vector<StepAnalysis> at_shared_m = steps;
   fit_damping_exponent_per_session(at_shared_m, config, {});
   SessionSamples samples;
+  add_steps(steps, truth, samples.per_step);
+  add_steps(at_shared_m, truth, samples.m_per_session);
   add_session(analyse_in_order(std::move(steps), config, options.size), truth, samples.per_step);
   add_session(analyse_in_order(std::move(at_shared_m), config, options.size), truth,
               samples.m_per_session);
@@ -224,6 +251,12 @@ MeasuredChainSds measure_chain_sds(const ChainSamples& samples) {
     const double m_sd = out.chain[3][ri].value_or(0.0);
     for (std::size_t p = 0; p < 3; ++p)
       out.chain[p][ri] = rounded(sd_for_unit_rms(pooled[p], m_sd), p);
+    for (std::size_t p = 0; p < 4; ++p) {
+      const std::optional<double> total = sd_for_unit_rms(samples.steps[ri][p], m_sd);
+      if (!total) continue;
+      const double chain = out.chain[p][ri].value_or(0.0) / kPercent[p];
+      out.step[p][ri] = rounded(std::sqrt(std::max(0.0, *total * *total - chain * chain)), p);
+    }
     for (std::size_t p = 0; p < 2; ++p)
       out.pair[p][ri] = rounded(sd_for_unit_rms(samples.feet[ri][p]), 0);
   }

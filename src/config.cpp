@@ -638,6 +638,10 @@ void read_chain_sds(TableReader& table, ChainSds& sds) {
   read_per_region(table.table("n_chain_sd"), sds.n_chain_sd, 1.0);
   read_per_region(table.table("cbar_chain_sd_pct"), sds.cbar_chain_sd_pct, 1000.0);
   read_per_region(table.table("m_chain_sd"), sds.m_chain_sd, 1.0);
+  read_per_region(table.table("kbar_step_sd_pct"), sds.kbar_step_sd_pct, 1000.0);
+  read_per_region(table.table("n_step_sd"), sds.n_step_sd, 1.0);
+  read_per_region(table.table("cbar_step_sd_pct"), sds.cbar_step_sd_pct, 1000.0);
+  read_per_region(table.table("m_step_sd"), sds.m_step_sd, 1.0);
 }
 
 void read_pooling(TableReader table, PoolingSettings& pooling) {

@@ -584,8 +584,8 @@ TEST(AnalyseSession, AtOneMPerSessionThePooledMeanHoldsThatMsErrorOnce) {
 }
 
 // with_chain_error against the delta method worked here: ln kbar's variance is (se_kbar / kbar)^2,
-// the chain's SD adds to each parameter's, and at a shared m that m's own variance and its chain
-// SD reach the others through their slopes on it.
+// the chain's SD and the step's own add to each parameter's, and at a shared m that m's own
+// variance and its chain SD (not the step's own) reach the others through their slopes on it.
 TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
   PoolingSettings pooling;
   const std::size_t ri = index_of(Region::Met1_2);
@@ -597,6 +597,14 @@ TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
   pooling.m_per_session.n_chain_sd[ri] = 0.03;
   pooling.m_per_session.cbar_chain_sd_pct[ri] = 2.0;
   pooling.m_per_session.m_chain_sd[ri] = 0.15;
+  pooling.per_step.kbar_step_sd_pct[ri] = 8.0;
+  pooling.per_step.n_step_sd[ri] = 0.06;
+  pooling.per_step.cbar_step_sd_pct[ri] = 20.0;
+  pooling.per_step.m_step_sd[ri] = 0.12;
+  pooling.m_per_session.kbar_step_sd_pct[ri] = 9.0;
+  pooling.m_per_session.n_step_sd[ri] = 0.05;
+  pooling.m_per_session.cbar_step_sd_pct[ri] = 10.0;
+  pooling.m_per_session.m_step_sd[ri] = 0.04;
 
   RegionFit fit;
   fit.status = FitStatus::Ok;
@@ -612,10 +620,12 @@ TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
   const std::optional<MaterialParams> own = with_chain_error(fit, Region::Met1_2, pooling);
   ASSERT_TRUE(own.has_value());
   EXPECT_DOUBLE_EQ(own->kbar_n_per_mm3.value, 0.2);
-  EXPECT_NEAR(own->kbar_n_per_mm3.se, 0.2 * std::hypot(0.05, 0.05), 1e-15);
-  EXPECT_NEAR(own->n.se, std::hypot(0.02, 0.04), 1e-15);
-  EXPECT_NEAR(own->cbar_ns_per_mm3.se, 0.05 * std::hypot(0.4, 0.12), 1e-15);
-  EXPECT_NEAR(own->m.se, std::hypot(0.1, 0.07), 1e-15);
+  EXPECT_NEAR(own->kbar_n_per_mm3.se, 0.2 * std::sqrt(0.05 * 0.05 + 0.05 * 0.05 + 0.08 * 0.08),
+              1e-15);
+  EXPECT_NEAR(own->n.se, std::sqrt(0.02 * 0.02 + 0.04 * 0.04 + 0.06 * 0.06), 1e-15);
+  EXPECT_NEAR(own->cbar_ns_per_mm3.se, 0.05 * std::sqrt(0.4 * 0.4 + 0.12 * 0.12 + 0.2 * 0.2),
+              1e-15);
+  EXPECT_NEAR(own->m.se, std::sqrt(0.1 * 0.1 + 0.07 * 0.07 + 0.12 * 0.12), 1e-15);
 
   // The same step fitted at a shared m of SE 0.05 (m's row and column zero).
   (*fit.material_covariance)[3][3] = 0.0;
@@ -625,11 +635,14 @@ TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
   ASSERT_TRUE(shared.has_value());
   const double m_variance = 0.05 * 0.05 + 0.15 * 0.15;
   EXPECT_NEAR(shared->kbar_n_per_mm3.se,
-              0.2 * std::sqrt(0.05 * 0.05 + 0.06 * 0.06 + 0.3 * 0.3 * m_variance), 1e-15);
-  EXPECT_NEAR(shared->n.se, std::sqrt(0.02 * 0.02 + 0.03 * 0.03 + 0.1 * 0.1 * m_variance), 1e-15);
+              0.2 * std::sqrt(0.05 * 0.05 + 0.06 * 0.06 + 0.09 * 0.09 + 0.3 * 0.3 * m_variance),
+              1e-15);
+  EXPECT_NEAR(shared->n.se,
+              std::sqrt(0.02 * 0.02 + 0.03 * 0.03 + 0.05 * 0.05 + 0.1 * 0.1 * m_variance), 1e-15);
   EXPECT_NEAR(shared->cbar_ns_per_mm3.se,
-              0.05 * std::sqrt(0.4 * 0.4 + 0.02 * 0.02 + 0.8 * 0.8 * m_variance), 1e-15);
-  EXPECT_NEAR(shared->m.se, std::sqrt(m_variance), 1e-15);
+              0.05 * std::sqrt(0.4 * 0.4 + 0.02 * 0.02 + 0.1 * 0.1 + 0.8 * 0.8 * m_variance),
+              1e-15);
+  EXPECT_NEAR(shared->m.se, std::sqrt(m_variance + 0.04 * 0.04), 1e-15);
 
   fit.material_covariance.reset();
   EXPECT_FALSE(with_chain_error(fit, Region::Met1_2, pooling).has_value());
@@ -659,13 +672,15 @@ std::array<double, 4> z_against(const std::array<const Estimate*, 4>& e,
 // SDs did not come from (sizes 37-38, 41-42, 45-46; seeds 301, 302; 10 s). So does that of the
 // pooled posteriors (pooled_per_step), which lean on the pooled mean and carry its chain SD.
 // Measured, ln kbar / n / ln cbar / m over the 510 region-steps of each:
-// - each step at its own m: with the chain 1.10 / 1.06 / 0.91 / 0.95, the fit's own 1.57 / 1.55 /
-//   1.07 / 1.13; pooled 1.17 / 1.11 / 0.92 / 0.98 (without the chain 3.05 / 2.72 / 1.77 / 1.78);
-// - at one m per session: with the chain 1.00 / 1.00 / 0.92 / 0.90, the fit's own 1.52 / 1.52 /
-//   9.31 / 2.62 (cbar's and m's leave out that m's error, which every step shares); pooled 0.95 /
-//   0.94 / 0.88 / 0.86 (without the chain 3.19 / 2.84 / 2.63 / 2.61).
-// The metatarsals' stay at 1.2-1.5 at each step's own m: their steps scatter more than their
-// Jacobians say (README, "How honest the standard errors are").
+// - each step at its own m: with the chain and the step's own 0.87 / 0.85 / 0.72 / 0.71, the
+//   fit's own 1.57 / 1.55 / 1.07 / 1.13; pooled 1.17 / 1.11 / 0.92 / 0.98 (without the chain
+//   3.05 / 2.72 / 1.77 / 1.78);
+// - at one m per session: with the chain and the step's own 0.87 / 0.85 / 0.86 / 0.84, the fit's
+//   own 1.52 / 1.52 / 9.31 / 2.62 (cbar's and m's leave out that m's error, which every step
+//   shares); pooled 0.95 / 0.94 / 0.88 / 0.86 (without the chain 3.19 / 2.84 / 2.63 / 2.61).
+// The metatarsals' steps scatter more than their Jacobians and the chain say: their own SDs
+// ([pooling] *_step_sd) take their kbar and n from 1.41 / 1.39 to 0.95 / 0.95 at each step's own
+// m (at one m per session from 1.20 / 1.25 to 0.93 / 0.93).
 TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgainstTheTissue) {
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-step-total-se");
@@ -673,7 +688,11 @@ TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgains
                             Region::Met1_2, Region::Met3_5};
   const char* names[] = {"ln kbar", "n", "ln cbar", "m"};
   for (const bool shared_m : {false, true}) {
-    std::array<std::vector<double>, 4> z_own, z_total, z_pooled;
+    std::array<std::vector<double>, 4> z_own, z_total, z_pooled, z_mets, z_mets_chain;
+    PoolingSettings chain_only = config.pooling;
+    for (ChainSds* sds : {&chain_only.per_step, &chain_only.m_per_session}) {
+      sds->kbar_step_sd_pct = sds->n_step_sd = sds->cbar_step_sd_pct = sds->m_step_sd = {};
+    }
     const auto add = [](std::array<std::vector<double>, 4>& to, const std::array<double, 4>& z) {
       for (std::size_t k = 0; k < 4; ++k) to[k].push_back(z[k]);
     };
@@ -699,6 +718,11 @@ TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgains
             }
             add(z_own, z_against(fitted, truth));
             add(z_total, z_against(with, truth));
+            if (region == Region::Met1_2 || region == Region::Met3_5) {
+              add(z_mets, z_against(with, truth));
+              add(z_mets_chain,
+                  z_against(material_of(*with_chain_error(f, region, chain_only)), truth));
+            }
             if (r.pooled_per_step[si])
               add(z_pooled, z_against(material_of(*r.pooled_per_step[si]), truth));
           }
@@ -719,6 +743,15 @@ TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgains
       EXPECT_LT(root_mean_square(z_total[k]), 1.6);
       EXPECT_GT(root_mean_square(z_pooled[k]), 0.6);
       EXPECT_LT(root_mean_square(z_pooled[k]), 1.6);
+    }
+    for (std::size_t k = 0; k < 2; ++k) {
+      std::printf("%s, %-7s the metatarsals' per-step z: RMS %.2f (without their own SD %.2f)\n",
+                  shared_m ? "one m per session" : "each step's own m", names[k],
+                  root_mean_square(z_mets[k]), root_mean_square(z_mets_chain[k]));
+      if (!shared_m) {
+        EXPECT_LT(root_mean_square(z_mets[k]), 1.2) << names[k];
+        EXPECT_GT(root_mean_square(z_mets_chain[k]), root_mean_square(z_mets[k]) + 0.1) << names[k];
+      }
     }
     // What the chain adds is needed: kbar's own SEs are too small at every m, and at one m per
     // session cbar's are several times too small.

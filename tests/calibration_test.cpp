@@ -52,7 +52,9 @@ TEST(Calibration, RoundsUpToTheStepAndNeverBelowZero) {
 
 // m's SD comes first and, rounded, reaches the others through their slopes on a shared m:
 // kbar's samples of 100 ln error 0.05 with a slope of 1 on m whose own error is 0.04 (SD 0.04,
-// rounded to 0.04) leave sqrt(0.05^2 - 0.04^2) = 0.03, 3.0 %; without the slope 5.0 %.
+// rounded to 0.04) leave sqrt(0.05^2 - 0.04^2) = 0.03, 3.0 %; without the slope 5.0 %. A step's
+// own SD is what its samples need beside that chain SD: errors 0.13 with standard errors 0.05 need
+// 0.12 in all, so sqrt(0.12^2 - 0.05^2) = 0.109 of their own, 11.0 % rounded up.
 TEST(Calibration, MsRoundedSdReachesTheOthersThroughTheirSlopes) {
   ChainSamples samples;
   samples.pooled[0][3] = plus_minus(0.04, 0.0);
@@ -60,7 +62,12 @@ TEST(Calibration, MsRoundedSdReachesTheOthersThroughTheirSlopes) {
   samples.pooled[1][3] = plus_minus(0.04, 0.0);
   samples.pooled[1][0] = plus_minus(0.05, 0.0);
   samples.feet[0][1] = plus_minus(0.021, 0.0);
+  samples.steps[1][0] = plus_minus(0.13, 0.05);
+  samples.steps[1][1] = plus_minus(0.01, 0.05);
   const MeasuredChainSds sds = measure_chain_sds(samples);
+  EXPECT_DOUBLE_EQ(*sds.step[0][1], 11.0);
+  EXPECT_DOUBLE_EQ(*sds.step[1][1], 0.0) << "covered by the steps' own standard errors";
+  EXPECT_FALSE(sds.step[0][0].has_value());
   EXPECT_DOUBLE_EQ(*sds.chain[3][0], 0.04);
   EXPECT_DOUBLE_EQ(*sds.chain[0][0], 3.0);
   EXPECT_DOUBLE_EQ(*sds.chain[0][1], 5.0);
@@ -148,6 +155,11 @@ TEST(Calibration, EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne) {
   EXPECT_NE(samples.m_per_session.pooled[0][2][0].slope_on_shared_m, 0.0);
   EXPECT_EQ(samples.m_per_session.pooled[0][3][0].slope_on_shared_m, 0.0);
   ASSERT_EQ(samples.per_step.feet[0][0].size(), 2u);
+  // Each step's own estimate, once per step with one: more than the sessions' pools.
+  EXPECT_GT(samples.per_step.steps[0][0].size(), 10u);
+  for (const ChainSample& s : samples.per_step.steps[0][2]) EXPECT_EQ(s.slope_on_shared_m, 0.0);
+  EXPECT_NE(samples.m_per_session.steps[0][2].front().slope_on_shared_m, 0.0);
+  EXPECT_EQ(samples.m_per_session.steps[0][3].front().slope_on_shared_m, 0.0);
 
   for (const ChainSamples* mode : {&samples.per_step, &samples.m_per_session}) {
     const MeasuredChainSds sds = measure_chain_sds(*mode);
@@ -165,6 +177,21 @@ TEST(Calibration, EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne) {
         EXPECT_LE(rms(s, sd, own_m), 1.0 + 1e-9);
         if (*sds.chain[p][ri] > 0.0) {
           EXPECT_GT(rms(s, sd - step / scale, own_m), 1.0);
+        }
+      }
+      // A step's own SD, with the chain's: the least step of it that brings the steps' z to 1.
+      for (std::size_t p = 0; p < 4; ++p) {
+        const auto& s = mode->steps[ri][p];
+        ASSERT_EQ(sds.step[p][ri].has_value(), !s.empty());
+        if (s.empty()) continue;
+        const double scale = (p == 0 || p == 2) ? 100.0 : 1.0;
+        const double step = scale == 100.0 ? 0.5 : 0.005;
+        const double chain = sds.chain[p][ri].value_or(0.0) / scale;
+        const double own = *sds.step[p][ri] / scale;
+        const double own_m = p == 3 ? 0.0 : m_sd;
+        EXPECT_LE(rms(s, std::hypot(chain, own), own_m), 1.0 + 1e-9);
+        if (own > 0.0) {
+          EXPECT_GT(rms(s, std::hypot(chain, own - step / scale), own_m), 1.0);
         }
       }
       for (std::size_t p = 0; p < 2; ++p) {
@@ -214,7 +241,8 @@ void expect_shipped(const std::string& table, const std::array<double, kRegionCo
 
 // The shipped tables are what `gaitmon calibrate` measures on the designs that the config's
 // comments and the README name (README, "Measuring the chain's SDs"), each entry the larger of two:
-// - [pooling] and [pooling.m_per_session]: 120 sessions of 30 s, six sizes, 50-90 kg, seeds 1-20
+// - [pooling] and [pooling.m_per_session], the chain's and the steps' own: 120 sessions of 30 s,
+// six sizes, 50-90 kg, seeds 1-20
 //   (the command's defaults), and 60 sessions of 30 s of 60-kg walkers, sizes 37-38, 41-42 and
 //   45-46, seeds 1-20;
 // - [asymmetry] and [asymmetry.m_per_session]: 90 sessions of 60 s of 60-kg walkers, sizes 37-38,
@@ -246,6 +274,7 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
                                      collect_chain_samples(config, feet_all, scratch)};
   const char* kChainNames[] = {"kbar_chain_sd_pct", "n_chain_sd", "cbar_chain_sd_pct",
                                "m_chain_sd"};
+  const char* kStepNames[] = {"kbar_step_sd_pct", "n_step_sd", "cbar_step_sd_pct", "m_step_sd"};
   const char* kPairNames[] = {"kbar_pair_sd_pct", "cbar_pair_sd_pct"};
   for (const bool shared_m : {false, true}) {
     const auto in_mode = [&](const CalibrationSamples& s) {
@@ -256,9 +285,13 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
     const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
     const std::array<const std::array<double, kRegionCount>*, 4> chain_shipped = {
         &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
+    const std::array<const std::array<double, kRegionCount>*, 4> step_shipped = {
+        &chain.kbar_step_sd_pct, &chain.n_step_sd, &chain.cbar_step_sd_pct, &chain.m_step_sd};
     for (std::size_t k = 0; k < 4; ++k) {
       expect_shipped(table_key(shared_m, "pooling", kChainNames[k]), *chain_shipped[k],
                      larger_of({&p[0].chain[k], &p[1].chain[k]}));
+      expect_shipped(table_key(shared_m, "pooling", kStepNames[k]), *step_shipped[k],
+                     larger_of({&p[0].step[k], &p[1].step[k]}));
     }
     const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
     const std::array<const std::array<double, kRegionCount>*, 2> pair_shipped = {

@@ -903,8 +903,9 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   EXPECT_EQ(load_config(dir / kMain).asymmetry.per_step.kbar_pair_sd_pct[0], 0.0);
 }
 
-// [pooling] and [pooling.m_per_session]: every region's chain SD for kbar, n, cbar and m, as the
-// shipped file documents them; kbar's and cbar's in [0, 1000] (per cent), n's and m's in [0, 1].
+// [pooling] and [pooling.m_per_session]: every region's chain SD and step SD for kbar, n, cbar and
+// m, as the shipped file documents them; kbar's and cbar's in [0, 1000] (per cent), n's and m's in
+// [0, 1].
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
   using PerRegion = std::array<double, kRegionCount>;
@@ -920,6 +921,15 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
             (PerRegion{3.0, 7.5, 16.0, 0.0, 2.5, 33.5, 227.5, 17.5}));
   EXPECT_EQ(p.m_per_session.m_chain_sd,
             (PerRegion{0.06, 0.1, 0.145, 0.145, 0.16, 0.0, 0.215, 0.08}));
+  EXPECT_EQ(p.per_step.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 10.5, 7.5, 12.5, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.n_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.07, 0.045, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.cbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 18.0, 25.0, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.m_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.145, 0.16, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.m_per_session.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 9.5, 5.5, 18.0, 0.0, 0.0}));
+  EXPECT_EQ(p.m_per_session.n_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.065, 0.035, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.m_per_session.cbar_step_sd_pct,
+            (PerRegion{0.0, 24.5, 11.5, 15.0, 5.0, 109.5, 0.0, 0.0}));
+  EXPECT_EQ(p.m_per_session.m_step_sd, (PerRegion{0.0, 0.075, 0.01, 0.08, 0.05, 0.175, 0.0, 0.04}));
   const std::vector<Refusal> cases = {
       {"PoolingNAboveOne", kMain, replace("n_chain_sd = { heel = 0.02", "n_chain_sd = { heel = 2"),
        "pooling.n_chain_sd.heel", "must be in [0, 1], got 2"},
@@ -934,6 +944,13 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
        "pooling.m_chain_sd.toes3_5", "missing"},
       {"PoolingTableMissing", kMain, erase_from_to("cbar_chain_sd_pct", "m_chain_sd"),
        "pooling.cbar_chain_sd_pct", "missing"},
+      {"PoolingStepNegative", kMain, replace("kbar_step_sd_pct", "met1_2 = 10.5", "met1_2 = -1"),
+       "pooling.kbar_step_sd_pct.met1_2", "must be in [0, 1000], got -1"},
+      {"PoolingSharedMStepAboveOne", kMain,
+       replace("[pooling.m_per_session]", "m_step_sd = { heel = 0.000", "m_step_sd = { heel = 1.5"),
+       "pooling.m_per_session.m_step_sd.heel", "must be in [0, 1], got 1.5"},
+      {"PoolingStepTableMissing", kMain, erase_from_to("n_step_sd", "cbar_step_sd_pct"),
+       "pooling.n_step_sd", "missing"},
   };
   expect_refusals(cases);
 }

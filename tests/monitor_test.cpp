@@ -119,9 +119,9 @@ void expect_close(double actual, double expected, const std::string& what) {
 }
 
 // What GAITMON_FIT's se_*_total should be for `fit` of `region`, worked from the config's chain
-// SDs: ln kbar's and ln cbar's variances are (se / value)^2; at a declared (running) m its own
-// variance and [pooling.m_per_session]'s SD of m reach the others through their slopes. Zeros
-// where the fit has no covariance of its four parameters.
+// and step SDs: ln kbar's and ln cbar's variances are (se / value)^2; at a declared (running) m
+// its own variance and [pooling.m_per_session]'s chain SD of m reach the others through their
+// slopes. Zeros where the fit has no covariance of its four parameters.
 std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, const Config& config) {
   if (!fit.material_covariance) return {0.0, 0.0, 0.0, 0.0};
   const bool shared = !fit.m.free;
@@ -131,14 +131,18 @@ std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, con
       fit.m.se * fit.m.se + (shared ? chain.m_chain_sd[ri] * chain.m_chain_sd[ri] : 0.0);
   const std::array<double, 3> slope =
       shared ? *fit.material_slope_on_m : std::array<double, 3>{0.0, 0.0, 0.0};
-  const auto total = [&](double relative_se, double sd, double g) {
-    return std::sqrt(relative_se * relative_se + sd * sd + g * g * m_variance);
+  const auto total = [&](double relative_se, double sd, double step, double g) {
+    return std::sqrt(relative_se * relative_se + sd * sd + step * step + g * g * m_variance);
   };
   const double kbar = fit.kbar_n_per_mm3.value, cbar = fit.cbar_ns_per_mm3.value;
-  return {kbar * total(fit.kbar_n_per_mm3.se / kbar, chain.kbar_chain_sd_pct[ri] / 100, slope[0]),
-          total(fit.n.se, chain.n_chain_sd[ri], slope[1]),
-          cbar * total(fit.cbar_ns_per_mm3.se / cbar, chain.cbar_chain_sd_pct[ri] / 100, slope[2]),
-          shared ? std::sqrt(m_variance) : std::hypot(fit.m.se, chain.m_chain_sd[ri])};
+  return {kbar * total(fit.kbar_n_per_mm3.se / kbar, chain.kbar_chain_sd_pct[ri] / 100,
+                       chain.kbar_step_sd_pct[ri] / 100, slope[0]),
+          total(fit.n.se, chain.n_chain_sd[ri], chain.n_step_sd[ri], slope[1]),
+          cbar * total(fit.cbar_ns_per_mm3.se / cbar, chain.cbar_chain_sd_pct[ri] / 100,
+                       chain.cbar_step_sd_pct[ri] / 100, slope[2]),
+          shared ? std::hypot(std::sqrt(m_variance), chain.m_step_sd[ri])
+                 : std::sqrt(fit.m.se * fit.m.se + chain.m_chain_sd[ri] * chain.m_chain_sd[ri] +
+                             chain.m_step_sd[ri] * chain.m_step_sd[ri])};
 }
 
 void expect_total_se(const RegionFitReport& got, const RegionFit& fit, Region region,

@@ -190,6 +190,9 @@ struct SessionAnalysis {
 /// `pooling.m_per_session` for steps fitted at one m per region, else of `pooling.per_step`.
 MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shared_m);
 
+/// The same for the error each step's own fit makes beyond its Jacobian's (ChainSds' *_step_sd).
+MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool shared_m);
+
 /// The pooled mean of `pooling` with `chain_sd` added (with_shared_error): the region's tissue
 /// over the pooled steps, carrying the error every step shares, which pooling cannot average
 /// down. Nothing where the steps were not pooled.
@@ -199,9 +202,10 @@ std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimat
 /// A region-step's own kbar, n, cbar and m with standard errors against the tissue rather than
 /// against the session's other steps: its fit's covariance (material_estimate) with the
 /// measurement chain's error that every step of the region shares (with_shared_error, chain_sd;
-/// at a shared m that m's whole error reaches kbar, n and cbar through their slopes). The fit's
-/// own standard errors describe how the steps scatter and miss that error (README, "How honest
-/// the standard errors are"). Nothing where the fit has no material estimate.
+/// at a shared m that m's whole error reaches kbar, n and cbar through their slopes) and the
+/// step's own beyond its Jacobian's (step_sd, on each parameter's variance). The fit's own
+/// standard errors describe how the steps scatter and miss both (README, "How honest the
+/// standard errors are"). Nothing where the fit has no material estimate.
 std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region region,
                                                const PoolingSettings& pooling);
 

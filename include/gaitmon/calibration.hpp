@@ -57,6 +57,10 @@ struct ChainSample {
 struct ChainSamples {
   /// [region][parameter]: ln kbar, n, ln cbar, m.
   std::array<std::array<std::vector<ChainSample>, 4>, kRegionCount> pooled;
+  /// The same for each step's own estimate (with_chain_error without the chain's SDs): its error,
+  /// its standard error from its fit (at a shared m with that m's own variance through the
+  /// slope), and the slope through which m's chain SD reaches it.
+  std::array<std::array<std::vector<ChainSample>, 4>, kRegionCount> steps;
   /// [region][0 kbar, 1 cbar]: ln(right / left), whose truth is 0.
   std::array<std::array<std::vector<ChainSample>, 2>, kRegionCount> feet;
 };
@@ -90,9 +94,12 @@ double round_up_to(double value, double step);
 /// The config's tables as measured: per region and parameter, sd_for_unit_rms rounded up to
 /// 0.5 (kbar and cbar, in 100 ln) or 0.005 (n and m). m's comes first: where the steps share an m
 /// the others take its rounded SD through their slopes (samples without a shared m have none).
+/// A step's own SD is what it takes, beside the rounded chain SD, to bring the steps' z to an
+/// RMS of 1: sqrt(total^2 - chain^2) of the total sd_for_unit_rms finds, rounded up the same way.
 /// Where a region has no samples the value is nullopt.
 struct MeasuredChainSds {
   std::array<std::array<std::optional<double>, kRegionCount>, 4> chain;  ///< [parameter][region]
+  std::array<std::array<std::optional<double>, kRegionCount>, 4> step;   ///< [parameter][region]
   std::array<std::array<std::optional<double>, kRegionCount>, 2> pair;   ///< [kbar, cbar][region]
 };
 MeasuredChainSds measure_chain_sds(const ChainSamples& samples);

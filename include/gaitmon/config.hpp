@@ -123,12 +123,19 @@ struct AsymmetrySettings {
 /// The error the measurement chain gives every step of a region alike, per region (indexed by
 /// index_of(Region)), as the SD of the pooled mean's error on the scale the fit pools on: 100 ln
 /// for kbar and cbar, as it is for n and m. analyse_session adds it to the pooled mean's standard
-/// error, which otherwise holds only how the steps scatter.
+/// error, which otherwise holds only how the steps scatter. The *_step_sd are the error each
+/// step's own fit makes beyond its Jacobian's and the shared one, different at every step (the
+/// footprint's, slow within a step, which the residuals do not show): with_chain_error adds them
+/// to a step's standard errors against the tissue; a pool's between-step variance holds them.
 struct ChainSds {
   std::array<double, kRegionCount> kbar_chain_sd_pct{};
   std::array<double, kRegionCount> n_chain_sd{};
   std::array<double, kRegionCount> cbar_chain_sd_pct{};
   std::array<double, kRegionCount> m_chain_sd{};
+  std::array<double, kRegionCount> kbar_step_sd_pct{};
+  std::array<double, kRegionCount> n_step_sd{};
+  std::array<double, kRegionCount> cbar_step_sd_pct{};
+  std::array<double, kRegionCount> m_step_sd{};
 };
 
 /// [pooling] for steps fitted each at its own m, [pooling.m_per_session] for steps fitted at one

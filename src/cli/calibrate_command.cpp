@@ -77,10 +77,18 @@ struct TableKey {
   bool percent;  ///< 100 ln (kbar, cbar), else as it is (n, m)
 };
 
+// The three kinds of table: the chain's shared SD and each step's own in [pooling], the pair's in
+// [asymmetry].
+enum class Table { Chain, Step, Pair };
+
 constexpr TableKey kChainKeys[] = {{"kbar_chain_sd_pct", "ln kbar %", 0, true},
                                    {"n_chain_sd", "n", 1, false},
                                    {"cbar_chain_sd_pct", "ln cbar %", 2, true},
                                    {"m_chain_sd", "m", 3, false}};
+constexpr TableKey kStepKeys[] = {{"kbar_step_sd_pct", "ln kbar %", 0, true},
+                                  {"n_step_sd", "n", 1, false},
+                                  {"cbar_step_sd_pct", "ln cbar %", 2, true},
+                                  {"m_step_sd", "m", 3, false}};
 constexpr TableKey kPairKeys[] = {{"kbar_pair_sd_pct", "ln kbar %", 0, true},
                                   {"cbar_pair_sd_pct", "ln cbar %", 1, true}};
 
@@ -114,16 +122,18 @@ double real(const std::string& text) {
   return value;
 }
 
-double config_value(const Config& config, bool shared_m, bool pair, std::size_t parameter,
+double config_value(const Config& config, bool shared_m, Table table, std::size_t parameter,
                     std::size_t region) {
-  if (pair) {
+  if (table == Table::Pair) {
     const PairSds& sds = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
     return (parameter == 0 ? sds.kbar_pair_sd_pct : sds.cbar_pair_sd_pct)[region];
   }
   const ChainSds& sds = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
-  const std::array<const std::array<double, kRegionCount>*, 4> columns = {
+  const std::array<const std::array<double, kRegionCount>*, 4> chain = {
       &sds.kbar_chain_sd_pct, &sds.n_chain_sd, &sds.cbar_chain_sd_pct, &sds.m_chain_sd};
-  return (*columns[parameter])[region];
+  const std::array<const std::array<double, kRegionCount>*, 4> step = {
+      &sds.kbar_step_sd_pct, &sds.n_step_sd, &sds.cbar_step_sd_pct, &sds.m_step_sd};
+  return (*(table == Table::Step ? step : chain)[parameter])[region];
 }
 
 // What one mode (each step at its own m, or one m per session) measured, beside the config's.
@@ -145,24 +155,41 @@ struct Cell {
   double rms_without = std::nan("");
 };
 
-std::span<const TableKey> keys_of(bool pair) {
-  return pair ? std::span<const TableKey>(kPairKeys) : std::span<const TableKey>(kChainKeys);
+std::span<const TableKey> keys_of(Table table) {
+  switch (table) {
+    case Table::Chain:
+      return kChainKeys;
+    case Table::Step:
+      return kStepKeys;
+    case Table::Pair:
+      break;
+  }
+  return kPairKeys;
 }
 
-Cell cell_of(const Config& config, const ModeReport& mode, bool pair, const TableKey& k,
+Cell cell_of(const Config& config, const ModeReport& mode, Table table, const TableKey& k,
              std::size_t region) {
+  const std::size_t p = k.parameter;
+  const bool pair = table == Table::Pair;
   Cell c;
-  c.samples =
-      pair ? &mode.samples->feet[region][k.parameter] : &mode.samples->pooled[region][k.parameter];
-  c.measured =
-      pair ? mode.measured.pair[k.parameter][region] : mode.measured.chain[k.parameter][region];
-  c.config = config_value(config, mode.shared_m, pair, k.parameter, region);
+  c.samples = pair                   ? &mode.samples->feet[region][p]
+              : table == Table::Step ? &mode.samples->steps[region][p]
+                                     : &mode.samples->pooled[region][p];
+  c.measured = pair                   ? mode.measured.pair[p][region]
+               : table == Table::Step ? mode.measured.step[p][region]
+                                      : mode.measured.chain[p][region];
+  c.config = config_value(config, mode.shared_m, table, p, region);
   // m's SD reaches the others through their slopes on a shared m (0 where m is each step's own).
   const double m_sd = pair ? 0.0 : mode.measured.chain[3][region].value_or(0.0);
-  const double config_m_sd = pair ? 0.0 : config_value(config, mode.shared_m, false, 3, region);
+  const double config_m_sd =
+      pair ? 0.0 : config_value(config, mode.shared_m, Table::Chain, 3, region);
+  // A step errs by the chain's SD and its own.
+  const double chain = table == Table::Step ? mode.measured.chain[p][region].value_or(0.0) : 0.0;
+  const double config_chain =
+      table == Table::Step ? config_value(config, mode.shared_m, Table::Chain, p, region) : 0.0;
   const double scale = k.percent ? 0.01 : 1.0;
-  if (c.measured) c.rms_measured = rms_z(*c.samples, *c.measured * scale, m_sd);
-  c.rms_config = rms_z(*c.samples, c.config * scale, config_m_sd);
+  if (c.measured) c.rms_measured = rms_z(*c.samples, std::hypot(chain, *c.measured) * scale, m_sd);
+  c.rms_config = rms_z(*c.samples, std::hypot(config_chain, c.config) * scale, config_m_sd);
   c.rms_without = rms_z(*c.samples, 0.0);
   return c;
 }
@@ -176,23 +203,38 @@ std::string rms_text(double rms) {
   return std::isnan(rms) ? "-" : fmt::format("{:.2f}", rms);
 }
 
-void print_table(const Config& config, const ModeReport& mode, bool pair) {
-  fmt::print("\n[{}{}] ({}): {}\n", pair ? "asymmetry" : "pooling",
+void print_table(const Config& config, const ModeReport& mode, Table table) {
+  const char* what = "";
+  switch (table) {
+    case Table::Chain:
+      what =
+          "the SD of the pooled means' error against the truth; after it the config's in "
+          "brackets, then the RMS of z with the SD measured / the config's / none";
+      break;
+    case Table::Step:
+      what =
+          "the SD of each step's own error beyond its Jacobian's and the chain's; after it the "
+          "config's in brackets, then the RMS of the steps' z with it and the chain's SD measured "
+          "/ the config's / neither";
+      break;
+    case Table::Pair:
+      what =
+          "the SD of the feet's difference, whose truth is none; after it the config's in "
+          "brackets, then the RMS of z with the SD measured / the config's / none";
+      break;
+  }
+  fmt::print("\n[{}{}] ({}): {}\n", table == Table::Pair ? "asymmetry" : "pooling",
              mode.shared_m ? ".m_per_session" : "",
-             mode.shared_m ? "one m per region over the session" : "each step at its own m",
-             pair ? "the SD of the feet's difference, whose truth is none; after it the "
-                    "config's in brackets, then the RMS of z with the SD measured / the config's / "
-                    "none"
-                  : "the SD of the pooled means' error against the truth; after it the config's in "
-                    "brackets, then the RMS of z with the SD measured / the config's / none");
-  fmt::print("{:<18} {:>5}", "region", pair ? "pairs" : "pools");
-  for (const TableKey& k : keys_of(pair)) fmt::print("  {:<28}", k.label);
+             mode.shared_m ? "one m per region over the session" : "each step at its own m", what);
+  fmt::print("{:<18} {:>5}", "region",
+             table == Table::Pair ? "pairs" : (table == Table::Step ? "steps" : "pools"));
+  for (const TableKey& k : keys_of(table)) fmt::print("  {:<28}", k.label);
   fmt::print("\n");
   for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
     fmt::print("{:<18} {:>5}", region_name(kRegions[ri]),
-               cell_of(config, mode, pair, keys_of(pair)[0], ri).samples->size());
-    for (const TableKey& k : keys_of(pair)) {
-      const Cell c = cell_of(config, mode, pair, k, ri);
+               cell_of(config, mode, table, keys_of(table)[0], ri).samples->size());
+    for (const TableKey& k : keys_of(table)) {
+      const Cell c = cell_of(config, mode, table, k, ri);
       fmt::print("  {:<28}", fmt::format("{} ({}) {}/{}/{}", sd_text(c.measured, k.percent),
                                          sd_text(c.config, k.percent), rms_text(c.rms_measured),
                                          rms_text(c.rms_config), rms_text(c.rms_without)));
@@ -202,10 +244,11 @@ void print_table(const Config& config, const ModeReport& mode, bool pair) {
 }
 
 // One config table as TOML, the config's value where nothing was measured (said above it).
-std::string toml_line(const Config& config, const ModeReport& mode, bool pair, const TableKey& k) {
+std::string toml_line(const Config& config, const ModeReport& mode, Table table,
+                      const TableKey& k) {
   std::vector<std::string> entries, kept;
   for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
-    const Cell c = cell_of(config, mode, pair, k, ri);
+    const Cell c = cell_of(config, mode, table, k, ri);
     if (!c.measured) kept.emplace_back(region_name(kRegions[ri]));
     entries.push_back(fmt::format("{} = {}", region_name(kRegions[ri]),
                                   sd_text(c.measured.value_or(c.config), k.percent)));
@@ -238,14 +281,18 @@ std::string toml_text(const Config& config, const CalibrationDesign& design,
                       std::span<const ModeReport> modes) {
   std::string text = fmt::format(
       "# Measured by gaitmon calibrate on\n# {}:\n# the SD per region that brings the z of the "
-      "pooled means against the truth, and of the\n# feet's difference, to an RMS of 1, rounded "
-      "up. To use them, replace the keys of the same\n# tables in the config.\n",
+      "pooled means against the truth, of each step's\n# own estimate and of the feet's "
+      "difference to an RMS of 1, rounded up. To use them, replace\n# the keys of the same "
+      "tables in the config.\n",
       design_text(design));
   for (const bool pair : {true, false}) {
     for (const ModeReport& mode : modes) {
       text += fmt::format("\n[{}{}]\n", pair ? "asymmetry" : "pooling",
                           mode.shared_m ? ".m_per_session" : "");
-      for (const TableKey& k : keys_of(pair)) text += toml_line(config, mode, pair, k);
+      for (const Table table :
+           pair ? std::vector{Table::Pair} : std::vector{Table::Chain, Table::Step}) {
+        for (const TableKey& k : keys_of(table)) text += toml_line(config, mode, table, k);
+      }
     }
   }
   return text;
@@ -254,12 +301,12 @@ std::string toml_text(const Config& config, const CalibrationDesign& design,
 nlohmann::json mode_json(const Config& config, const ModeReport& mode) {
   const auto number = [](double v) { return std::isnan(v) ? nlohmann::json() : nlohmann::json(v); };
   nlohmann::json out;
-  for (const bool pair : {false, true}) {
-    nlohmann::json& table = out[pair ? "asymmetry" : "pooling"];
+  for (const Table kind : {Table::Chain, Table::Step, Table::Pair}) {
+    nlohmann::json& table = out[kind == Table::Pair ? "asymmetry" : "pooling"];
     for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
       nlohmann::json& region = table[std::string(region_name(kRegions[ri]))];
-      for (const TableKey& k : keys_of(pair)) {
-        const Cell c = cell_of(config, mode, pair, k, ri);
+      for (const TableKey& k : keys_of(kind)) {
+        const Cell c = cell_of(config, mode, kind, k, ri);
         region[k.key] = {{"samples", c.samples->size()},
                          {"measured", c.measured ? nlohmann::json(*c.measured) : nlohmann::json()},
                          {"config", c.config},
@@ -336,8 +383,8 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
   const std::array<ModeReport, 2> modes = {
       ModeReport{false, &samples.per_step, measure_chain_sds(samples.per_step)},
       ModeReport{true, &samples.m_per_session, measure_chain_sds(samples.m_per_session)}};
-  for (const bool pair : {false, true})
-    for (const ModeReport& mode : modes) print_table(config, mode, pair);
+  for (const Table table : {Table::Chain, Table::Step, Table::Pair})
+    for (const ModeReport& mode : modes) print_table(config, mode, table);
   if (!outputs) return;
   std::filesystem::create_directories(args.out_dir);
   nlohmann::json json = {{"design",
@@ -357,8 +404,10 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
   json["note"] =
       "per table and region: the SD that brings the RMS of z to 1, rounded up (measured; null "
       "where there were no samples), the config's, and the RMS of z with each and with none; "
-      "kbar and cbar in 100 ln, n and m as they are. At one m per session m's measured SD also "
-      "enters the others' z through their slopes on it";
+      "kbar and cbar in 100 ln, n and m as they are. The *_step_sd are each step's own error "
+      "beyond its Jacobian's, whose z takes the chain's SD of the same kind (measured or the "
+      "config's) with it. At one m per session m's measured SD also enters the others' z "
+      "through their slopes on it";
   outputs->add("calibration.json", json_file_text(json));
   outputs->add("calibration.toml", toml_text(config, design, modes));
   for (const auto& path : outputs->commit()) fmt::print("wrote {}\n", path.string());

@@ -241,9 +241,11 @@ TEST(AnalyzeCommand, WritesEachStepsPooledEstimatesAndThePoolPerRegion) {
 }
 
 // Each step's standard errors with the chain's shared error, worked here from the shipped
-// [pooling] SDs of the heel (kbar 4 %, n 0.02, cbar 13.5 %, m 0.06): on the log scale for kbar
-// and cbar, as the fit's covariance is. With --m-per-session the shared m's standard error and
-// [pooling.m_per_session]'s SD of m (0.06) make se_m_total, and reach cbar through its slope.
+// [pooling] SDs of the heel (kbar 4 %, n 0.02, cbar 13.5 %, m 0.06; no step SDs) and of met3_5
+// (chain 4.5 %, 0.03, 13 %, 0.08 and the step's own 7.5 %, 0.045, 25 %, 0.16): on the log scale
+// for kbar and cbar, as the fit's covariance is. With --m-per-session the shared m's standard
+// error and [pooling.m_per_session]'s SD of m (0.06) make se_m_total, and reach cbar through its
+// slope.
 TEST(AnalyzeCommand, WritesEachStepsStandardErrorsWithTheChainsSharedError) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
@@ -258,7 +260,7 @@ TEST(AnalyzeCommand, WritesEachStepsStandardErrorsWithTheChainsSharedError) {
   const auto near = [](double got, double expected, const std::string& line) {
     EXPECT_NEAR(got, expected, 0.006 * expected) << line;
   };
-  int heel = 0;
+  int heel = 0, met3_5 = 0;
   for (std::size_t i = 1; i < lines.size(); ++i) {
     const auto f = fields(lines[i]);
     if (f[3] != "ok") {
@@ -269,15 +271,28 @@ TEST(AnalyzeCommand, WritesEachStepsStandardErrorsWithTheChainsSharedError) {
       if (f[total + k].empty()) continue;  // a parameter the step does not determine
       EXPECT_GE(std::stod(f[total + k]), std::stod(f[15 + k]) * (1 - 5e-3)) << lines[i];
     }
+    const double kbar = std::stod(f[11]), cbar = std::stod(f[13]);
+    const auto root_sum_square = [](double a, double b, double c) {
+      return std::sqrt(a * a + b * b + c * c);
+    };
+    if (f[2] == "met3_5" && !f[total].empty() && !f[total + 3].empty()) {
+      ++met3_5;
+      near(std::stod(f[total]), kbar * root_sum_square(std::stod(f[15]) / kbar, 0.045, 0.075),
+           lines[i]);
+      near(std::stod(f[total + 1]), root_sum_square(std::stod(f[16]), 0.03, 0.045), lines[i]);
+      near(std::stod(f[total + 2]), cbar * root_sum_square(std::stod(f[17]) / cbar, 0.13, 0.25),
+           lines[i]);
+      near(std::stod(f[total + 3]), root_sum_square(std::stod(f[18]), 0.08, 0.16), lines[i]);
+    }
     if (f[2] != "heel") continue;
     ++heel;
-    const double kbar = std::stod(f[11]), cbar = std::stod(f[13]);
     near(std::stod(f[total]), kbar * std::hypot(std::stod(f[15]) / kbar, 0.04), lines[i]);
     near(std::stod(f[total + 1]), std::hypot(std::stod(f[16]), 0.02), lines[i]);
     near(std::stod(f[total + 2]), cbar * std::hypot(std::stod(f[17]) / cbar, 0.135), lines[i]);
     near(std::stod(f[total + 3]), std::hypot(std::stod(f[18]), 0.06), lines[i]);
   }
   EXPECT_GE(heel, 6);
+  EXPECT_GE(met3_5, 6);
 
   int status = -1;
   const fs::path out = a.dir / "m-per-session-total";

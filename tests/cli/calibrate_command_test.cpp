@@ -58,7 +58,8 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
                      "body mass 50-90 kg"),
             std::string::npos)
       << out;
-  for (const char* table : {"\n[pooling] (each step at its own m)",
+  for (const char* table : {"\n[pooling] (each step at its own m): the SD of the pooled",
+                            "\n[pooling] (each step at its own m): the SD of each step's own",
                             "\n[pooling.m_per_session] (one m per region over the session)",
                             "\n[asymmetry] (each step at its own m)",
                             "\n[asymmetry.m_per_session] (one m per region over the session)"}) {
@@ -74,6 +75,11 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
   // gives more (the heel's pooled kbar errs by more than its steps scatter: README).
   EXPECT_LE(heel.at("rms_z_measured").get<double>(), 1.0);
   EXPECT_GT(heel.at("rms_z_without").get<double>(), 1.0);
+  // Each step's own: a sample per step, and with the chain's SD and its own at most 1.
+  const auto& met = json.at("per_step").at("pooling").at("met3_5").at("kbar_step_sd_pct");
+  EXPECT_GT(met.at("samples").get<int>(), 20);
+  ASSERT_FALSE(met.at("measured").is_null());
+  EXPECT_LE(met.at("rms_z_measured").get<double>(), 1.0);
 
   // calibration.toml in place of the config's [asymmetry] and [pooling] tables.
   const auto config_dir = dir / "config";
@@ -99,6 +105,10 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
         {"n_chain_sd", &chain.n_chain_sd},
         {"cbar_chain_sd_pct", &chain.cbar_chain_sd_pct},
         {"m_chain_sd", &chain.m_chain_sd},
+        {"kbar_step_sd_pct", &chain.kbar_step_sd_pct},
+        {"n_step_sd", &chain.n_step_sd},
+        {"cbar_step_sd_pct", &chain.cbar_step_sd_pct},
+        {"m_step_sd", &chain.m_step_sd},
         {"kbar_pair_sd_pct", &pair.kbar_pair_sd_pct},
         {"cbar_pair_sd_pct", &pair.cbar_pair_sd_pct}};
     for (const auto& [key, values] : tables) {
