@@ -271,7 +271,7 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
     estimates.resize(kept);
     estimated_steps.resize(kept);
   }
-  r.pooling = pool_steps(estimates, material_bounds(config.fit_bounds));
+  r.pooling = pool_region_steps(estimates, region, config);
   const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
@@ -322,6 +322,17 @@ MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool share
   const std::size_t ri = index_of(region);
   return {chain.kbar_step_sd_pct[ri] / 100.0, chain.n_step_sd[ri],
           chain.cbar_step_sd_pct[ri] / 100.0, chain.m_step_sd[ri]};
+}
+
+PooledEstimates pool_region_steps(std::span<const MaterialEstimate> estimates, Region region,
+                                  const Config& config) {
+  std::vector<MaterialEstimate> own(estimates.begin(), estimates.end());
+  for (MaterialEstimate& e : own) {
+    const bool shared_m = e.slope_on_shared_m.has_value();
+    const MaterialVector sd = step_sd(config.pooling, region, shared_m);
+    for (std::size_t p = 0; p < (shared_m ? 3 : 4); ++p) e.covariance[p][p] += sd[p] * sd[p];
+  }
+  return pool_steps(own, material_bounds(config.fit_bounds));
 }
 
 std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimates& pooling,

@@ -744,7 +744,7 @@ struct Monitor::Impl {
         out.status = "not_pooled:pooling needs the default fit (identifiable, P declared)";
         continue;
       }
-      const PooledEstimates pooled = pool_steps(estimates, material_bounds(config.fit_bounds));
+      const PooledEstimates pooled = pool_region_steps(estimates, kRegions[i], config);
       const std::optional<MaterialEstimate> mean =
           pooled_mean_with_chain_error(pooled, chain_sd(config.pooling, kRegions[i], false));
       if (!mean) {

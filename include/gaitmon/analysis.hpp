@@ -153,8 +153,8 @@ struct RegionSessionAnalysis {
   double aspect = 0.0;  ///< median of the steps' aspects (Appendix I's if none)
   EllipsoidParams declared;
   RegionFit session_fit;  ///< one parameter set for every stance with contact
-  /// The per-step fits pooled across the steps (pooling.hpp), over the steps fitted Ok whose four
-  /// parameters the data determine; `pooling.steps` holds their posteriors in step order.
+  /// The per-step fits pooled across the steps (pool_region_steps), over the steps fitted Ok whose
+  /// four parameters the data determine; `pooling.steps` holds their posteriors in step order.
   PooledEstimates pooling;
   /// Aligned with analyse_session's `steps`: each step's pooled kbar, n, cbar, m, or nothing
   /// where the step was not pooled (no contact, a failed fit, or too few steps to pool). Their
@@ -192,6 +192,14 @@ MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shar
 
 /// The same for the error each step's own fit makes beyond its Jacobian's (ChainSds' *_step_sd).
 MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool shared_m);
+
+/// A region's steps' own estimates (material_estimate) pooled across the steps (pool_steps within
+/// the fit's bounds), each step's variances first taking its own error beyond its Jacobian's
+/// (step_sd): the pool weighs the steps by their errors against the tissue, and a posterior leans
+/// on its step no more than that error allows. At a shared m on kbar, n and cbar only: m's
+/// variance there is the session's, one for every step.
+PooledEstimates pool_region_steps(std::span<const MaterialEstimate> estimates, Region region,
+                                  const Config& config);
 
 /// The pooled mean of `pooling` with `chain_sd` added (with_shared_error): the region's tissue
 /// over the pooled steps, carrying the error every step shares, which pooling cannot average

@@ -126,7 +126,7 @@ struct AsymmetrySettings {
 /// error, which otherwise holds only how the steps scatter. The *_step_sd are the error each
 /// step's own fit makes beyond its Jacobian's and the shared one, different at every step (the
 /// footprint's, slow within a step, which the residuals do not show): with_chain_error adds them
-/// to a step's standard errors against the tissue; a pool's between-step variance holds them.
+/// to a step's standard errors against the tissue, pool_region_steps to its variances in the pool.
 struct ChainSds {
   std::array<double, kRegionCount> kbar_chain_sd_pct{};
   std::array<double, kRegionCount> n_chain_sd{};
