@@ -1,7 +1,9 @@
-// The per-step analysis of one foot-step (warm ellipse cache, 8 region fits; target 2 ms) and
-// `gaitmon analyze` on a 10-minute two-foot simulated session (target 3 s).
+// The per-step analysis of one foot-step (warm ellipse cache, 8 region fits; target 2 ms),
+// `gaitmon analyze` on a 10-minute two-foot simulated session (target 3 s), and the live monitor's
+// pools of every region over its window of steps (GAITMON_TISSUE, at most ten a second).
 #include <benchmark/benchmark.h>
 
+#include <array>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -9,6 +11,7 @@
 
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
+#include "gaitmon/pooling.hpp"
 #include "gaitmon/simulator.hpp"
 #include "test_support.hpp"
 
@@ -57,6 +60,39 @@ void BM_AnalyseStep(benchmark::State& state) {
   state.counters["steps_cycled"] = static_cast<double>(steps.size());
 }
 BENCHMARK(BM_AnalyseStep)->Unit(benchmark::kMillisecond)->Repetitions(5);
+
+// What the monitor's tissue thread does for one report: every region's steps pooled over a full
+// window ([monitor] tissue_window_steps of the 10-minute walk's steps, both feet).
+void BM_PoolEveryRegionOverTheTissueWindow(benchmark::State& state) {
+  const gaitmon::InsoleLayout layout(config().insole(gaitmon::InsoleSize::S37_38), config().sensor);
+  gaitmon::ContactEllipseCache cache;
+  std::vector<gaitmon::StepAnalysis> window;
+  const auto capacity = static_cast<std::size_t>(config().monitor.tissue_window_steps);
+  gaitmon::segment_session(simulated(600.0), config(), [&](gaitmon::Step&& step) {
+    if (step.status == gaitmon::StepStatus::Ok && window.size() < capacity)
+      window.push_back(gaitmon::analyse_step(step, layout, config(), {}, &cache));
+  });
+  std::array<std::vector<gaitmon::MaterialEstimate>, gaitmon::kRegionCount> estimates;
+  for (const gaitmon::StepAnalysis& step : window) {
+    for (std::size_t i = 0; i < gaitmon::kRegionCount; ++i) {
+      if (const auto e = gaitmon::material_estimate(step.regions[i].fit))
+        estimates[i].push_back(*e);
+    }
+  }
+  int pooled = 0;
+  for (auto _ : state) {
+    pooled = 0;
+    for (std::size_t i = 0; i < gaitmon::kRegionCount; ++i) {
+      const gaitmon::PooledEstimates p =
+          gaitmon::pool_region_steps(estimates[i], gaitmon::kRegions[i], config());
+      pooled += p.pooled ? 1 : 0;
+      benchmark::DoNotOptimize(p.mean);
+    }
+  }
+  state.counters["steps"] = static_cast<double>(window.size());
+  state.counters["regions_pooled"] = pooled;
+}
+BENCHMARK(BM_PoolEveryRegionOverTheTissueWindow)->Unit(benchmark::kMillisecond)->Repetitions(5);
 
 /// The gaitmon executable of the same build: tests/ sits beside it.
 fs::path gaitmon_executable() {
