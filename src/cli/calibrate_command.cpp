@@ -277,14 +277,42 @@ std::string design_text(const CalibrationDesign& d) {
       d.noise_sd_bits, d.max_bias_bits, d.placement_sd_mm);
 }
 
+// The step SDs whose measured value is not the config's. The pools weighed each step with the
+// config's (pool_region_steps), and the chain's SDs are measured on those pools, so the tables
+// hold together only where the two agree.
+int step_sds_measured_otherwise(const Config& config, std::span<const ModeReport> modes) {
+  int otherwise = 0;
+  for (const ModeReport& mode : modes) {
+    for (const TableKey& k : keys_of(Table::Step)) {
+      for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+        const Cell c = cell_of(config, mode, Table::Step, k, ri);
+        if (c.measured && std::abs(*c.measured - c.config) > 1e-9) ++otherwise;
+      }
+    }
+  }
+  return otherwise;
+}
+
+std::string step_sd_note(int otherwise) {
+  if (otherwise == 0) {
+    return "the pools weighed each step with the config's step SDs (*_step_sd), which are what "
+           "these sessions measure";
+  }
+  return fmt::format(
+      "the pools weighed each step with the config's step SDs (*_step_sd), and {} of them "
+      "measure otherwise here. The chain's SDs above hold for the config's; a config that takes "
+      "other step SDs needs its chain's SDs measured again with them, until nothing moves",
+      otherwise);
+}
+
 std::string toml_text(const Config& config, const CalibrationDesign& design,
                       std::span<const ModeReport> modes) {
   std::string text = fmt::format(
       "# Measured by gaitmon calibrate on\n# {}:\n# the SD per region that brings the z of the "
       "pooled means against the truth, of each step's\n# own estimate and of the feet's "
       "difference to an RMS of 1, rounded up. To use them, replace\n# the keys of the same "
-      "tables in the config.\n",
-      design_text(design));
+      "tables in the config.\n# Note: {}.\n",
+      design_text(design), step_sd_note(step_sds_measured_otherwise(config, modes)));
   for (const bool pair : {true, false}) {
     for (const ModeReport& mode : modes) {
       text += fmt::format("\n[{}{}]\n", pair ? "asymmetry" : "pooling",
@@ -385,6 +413,8 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
       ModeReport{true, &samples.m_per_session, measure_chain_sds(samples.m_per_session)}};
   for (const Table table : {Table::Chain, Table::Step, Table::Pair})
     for (const ModeReport& mode : modes) print_table(config, mode, table);
+  const int otherwise = step_sds_measured_otherwise(config, modes);
+  fmt::print("\ncalibrate: {}\n", step_sd_note(otherwise));
   if (!outputs) return;
   std::filesystem::create_directories(args.out_dir);
   nlohmann::json json = {{"design",
@@ -398,6 +428,7 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
                            {"max_bias_bits", design.max_bias_bits},
                            {"placement_sd_mm", design.placement_sd_mm}}},
                          {"config", config.source.string()},
+                         {"step_sds_measured_otherwise", otherwise},
                          {"per_step", mode_json(config, modes[0])},
                          {"m_per_session", mode_json(config, modes[1])}};
   for (InsoleSize s : design.sizes) json["design"]["sizes"].push_back(insole_size_name(s));

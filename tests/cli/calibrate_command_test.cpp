@@ -81,6 +81,26 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
   ASSERT_FALSE(met.at("measured").is_null());
   EXPECT_LE(met.at("rms_z_measured").get<double>(), 1.0);
 
+  // The pools weighed each step with the config's step SDs: the command says how many of them
+  // these sessions measure otherwise (four sessions cannot reproduce the shipped tables' designs).
+  int otherwise = 0;
+  for (const char* mode : {"per_step", "m_per_session"}) {
+    for (const auto& [region, keys] : json.at(mode).at("pooling").items()) {
+      for (const auto& [key, entry] : keys.items()) {
+        if (key.find("_step_sd") == std::string::npos || entry.at("measured").is_null()) continue;
+        if (entry.at("measured").get<double>() != entry.at("config").get<double>()) ++otherwise;
+      }
+    }
+  }
+  EXPECT_GT(otherwise, 0);
+  EXPECT_EQ(json.at("step_sds_measured_otherwise").get<int>(), otherwise);
+  const std::string note = fmt::format(
+      "the pools weighed each step with the config's step SDs (*_step_sd), and {} of them "
+      "measure otherwise here. The chain's SDs above hold for the config's;",
+      otherwise);
+  EXPECT_NE(out.find("\ncalibrate: " + note), std::string::npos) << out;
+  EXPECT_NE(read_all(dir / "out" / "calibration.toml").find("# Note: " + note), std::string::npos);
+
   // calibration.toml in place of the config's [asymmetry] and [pooling] tables.
   const auto config_dir = dir / "config";
   fs::create_directories(config_dir);
