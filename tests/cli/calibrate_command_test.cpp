@@ -96,7 +96,7 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
   EXPECT_EQ(json.at("step_sds_measured_otherwise").get<int>(), otherwise);
   const std::string note = fmt::format(
       "the pools weighed each step with the config's step SDs (*_step_sd), and {} of them "
-      "measure otherwise here. The chain's SDs above hold for the config's;",
+      "measure otherwise here. The chain's SDs here hold for the config's;",
       otherwise);
   EXPECT_NE(out.find("\ncalibrate: " + note), std::string::npos) << out;
   EXPECT_NE(read_all(dir / "out" / "calibration.toml").find("# Note: " + note), std::string::npos);
