@@ -301,7 +301,8 @@ std::string step_sd_note(int otherwise) {
   return fmt::format(
       "the pools weighed each step with the config's step SDs (*_step_sd), and {} of them "
       "measure otherwise here. The chain's SDs here hold for the config's; a config that takes "
-      "other step SDs needs its chain's SDs measured again with them, until nothing moves",
+      "other step SDs needs its chain's SDs measured again with them, until nothing moves but "
+      "a pair of entries that trade a rounding step back and forth (take the larger of each)",
       otherwise);
 }
 
