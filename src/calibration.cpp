@@ -9,12 +9,15 @@
 #include <filesystem>
 #include <span>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/simulator.hpp"
 #include "parallel_for.hpp"
+#include "toml_reader.hpp"
 
 namespace gaitmon {
 namespace {
@@ -173,6 +176,116 @@ void CalibrationDesign::check() const {
     fail(fmt::format("body mass must be 0 < min <= max <= 300 kg, got {} to {}", min_body_mass_kg,
                      max_body_mass_kg));
   }
+}
+
+namespace {
+
+// `key` = [first, last] of two numbers within [low, high], first <= last.
+std::pair<double, double> read_range(detail::TableReader& table, std::string_view key, double low,
+                                     double high) {
+  const toml::array& range = table.array(key);
+  if (range.size() != 2) {
+    table.fail(key, fmt::format("expected [first, last], got {} value(s)", range.size()));
+  }
+  std::array<double, 2> values{};
+  for (std::size_t i = 0; i < 2; ++i) {
+    const toml::node& element = *range.get(i);
+    const std::optional<double> value = element.value<double>();
+    if (!value || !std::isfinite(*value) || *value < low || *value > high) {
+      detail::fail_element(table.file(), table.key_path(key), element,
+                           fmt::format("expected a number in [{}, {}]", low, high));
+    }
+    values[i] = *value;
+  }
+  if (values[0] > values[1]) {
+    table.fail(key, fmt::format("the first ({}) is after the last ({})", values[0], values[1]));
+  }
+  return {values[0], values[1]};
+}
+
+double read_number_in(detail::TableReader& table, std::string_view key, double low, double high) {
+  const double value = table.number(key);
+  if (value < low || value > high) {
+    table.fail(key, fmt::format("must be in [{}, {}], got {}", low, high, value));
+  }
+  return value;
+}
+
+CalibrationDesignEntry read_design(detail::TableReader table) {
+  CalibrationDesignEntry entry;
+  entry.pooling = entry.asymmetry = false;
+  const toml::array& tables = table.array("tables");
+  if (tables.empty()) table.fail("tables", R"(expected "pooling", "asymmetry" or both)");
+  for (const toml::node& element : tables) {
+    const std::optional<std::string> name = element.value<std::string>();
+    bool* measures = !name                  ? nullptr
+                     : *name == "pooling"   ? &entry.pooling
+                     : *name == "asymmetry" ? &entry.asymmetry
+                                            : nullptr;
+    if (measures == nullptr) {
+      detail::fail_element(table.file(), table.key_path("tables"), element,
+                           R"(expected "pooling" or "asymmetry")");
+    }
+    if (*measures) detail::fail_element(table.file(), table.key_path("tables"), element, "twice");
+    *measures = true;
+  }
+  CalibrationDesign& design = entry.design;
+  const toml::array& sizes = table.array("sizes");
+  if (sizes.empty()) table.fail("sizes", "expected at least one insole size");
+  for (const toml::node& element : sizes) {
+    const std::optional<std::string> name = element.value<std::string>();
+    const std::optional<InsoleSize> size = name ? parse_insole_size(*name) : std::nullopt;
+    if (!size) {
+      detail::fail_element(table.file(), table.key_path("sizes"), element,
+                           "expected an insole size such as \"41-42\"");
+    }
+    design.sizes.push_back(*size);
+  }
+  const auto [first, last] = read_range(table, "seeds", 0.0, 1e15);
+  if (first != std::floor(first) || last != std::floor(last)) {
+    table.fail("seeds", "expected whole numbers");
+  }
+  design.first_seed = static_cast<std::uint64_t>(first);
+  design.last_seed = static_cast<std::uint64_t>(last);
+  design.duration_s = read_number_in(table, "duration_s", 5.0, 3600.0);
+  std::tie(design.min_body_mass_kg, design.max_body_mass_kg) =
+      read_range(table, "body_mass_kg", 1.0, 300.0);
+  if (table.has("noise_sd_bits")) {
+    design.noise_sd_bits = read_number_in(table, "noise_sd_bits", 0.0, 50.0);
+  }
+  if (table.has("max_bias_bits")) {
+    design.max_bias_bits = detail::integer_in(table, "max_bias_bits", 0, 50);
+  }
+  if (table.has("placement_sd_mm")) {
+    design.placement_sd_mm = read_number_in(table, "placement_sd_mm", 0.0, 10.0);
+  }
+  try {
+    design.check();
+  } catch (const std::invalid_argument& e) {
+    table.fail_here(e.what());
+  }
+  table.finish();
+  return entry;
+}
+
+}  // namespace
+
+std::vector<CalibrationDesignEntry> load_calibration_designs(const fs::path& path) {
+  const std::string file = path.string();
+  const toml::table doc = detail::parse_document(path, file, "(file)");
+  detail::TableReader root(doc, file, "");
+  const toml::array& designs = root.array("design");
+  if (designs.empty()) root.fail("design", "expected at least one [[design]]");
+  std::vector<CalibrationDesignEntry> out;
+  for (std::size_t i = 0; i < designs.size(); ++i) {
+    const toml::table* table = designs.get(i)->as_table();
+    if (table == nullptr) {
+      detail::fail_element(file, "design", *designs.get(i), "expected a [[design]] table");
+    }
+    out.push_back(read_design(detail::TableReader(*table, file, fmt::format("design[{}]", i + 1))));
+  }
+  root.finish();
+  return out;
 }
 
 CalibrationSamples collect_chain_samples(const Config& config, const CalibrationDesign& design,

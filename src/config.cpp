@@ -27,165 +27,20 @@
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/error.hpp"
 #include "gaitmon/pooling.hpp"
+#include "toml_reader.hpp"
 
 namespace gaitmon {
 namespace {
 
 namespace fs = std::filesystem;
-
-// "37-38" is a valid bare key, but quoting it reads as a name rather than a subtraction and
-// matches how the files write it.
-std::string key_text(std::string_view key) {
-  const bool bare = !key.empty() && std::all_of(key.begin(), key.end(), [](char c) {
-    return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_';
-  });
-  return bare ? std::string(key) : fmt::format("\"{}\"", key);
-}
-
-std::string child_path(const std::string& parent, std::string_view key) {
-  return parent.empty() ? key_text(key) : parent + "." + key_text(key);
-}
-
-std::string_view type_text(const toml::node& node) {
-  switch (node.type()) {
-    case toml::node_type::table:
-      return "a table";
-    case toml::node_type::array:
-      return "an array";
-    case toml::node_type::string:
-      return "a string";
-    case toml::node_type::integer:
-      return "an integer";
-    case toml::node_type::floating_point:
-      return "a floating-point number";
-    case toml::node_type::boolean:
-      return "a boolean";
-    case toml::node_type::date:
-    case toml::node_type::time:
-    case toml::node_type::date_time:
-      return "a date or time";
-    case toml::node_type::none:
-      break;
-  }
-  return "nothing";
-}
-
-std::string expected(std::string_view what, const toml::node& node) {
-  return fmt::format("expected {}, got {}", what, type_text(node));
-}
-
-// Appended to reasons so that a person can find the value in a long file.
-std::string at_line(const toml::node& node) {
-  const auto line = node.source().begin.line;
-  return line > 0 ? fmt::format(" (line {})", line) : std::string();
-}
-
-// Reads one TOML table and remembers which keys were read, so that finish() can refuse all
-// others: supporting a new key or section is one more read call, and a misspelt key is never
-// silently ignored.
-class TableReader {
- public:
-  TableReader(const toml::table& table, std::string file, std::string path)
-      : table_(&table), file_(std::move(file)), path_(std::move(path)) {}
-
-  const std::string& file() const { return file_; }
-  std::string key_path(std::string_view key) const { return child_path(path_, key); }
-
-  [[noreturn]] void fail(std::string_view key, const std::string& reason) const {
-    const toml::node* node = table_->get(key);
-    throw ConfigError(file_, key_path(key), node == nullptr ? reason : reason + at_line(*node));
-  }
-  [[noreturn]] void fail_here(const std::string& reason) const {
-    throw ConfigError(file_, path_, reason + at_line(*table_));
-  }
-
-  std::vector<std::string> keys() const {
-    std::vector<std::string> out;
-    for (auto&& [key, value] : *table_) out.emplace_back(key.str());
-    return out;
-  }
-
-  const toml::node& node(std::string_view key) {
-    const toml::node* found = table_->get(key);
-    if (found == nullptr) fail(key, "missing");
-    read_.emplace(key);
-    return *found;
-  }
-
-  double number(std::string_view key) {
-    const toml::node& n = node(key);
-    double value = 0.0;
-    if (const auto* i = n.as_integer()) {
-      value = static_cast<double>(i->get());
-    } else if (const auto* f = n.as_floating_point()) {
-      value = f->get();
-    } else {
-      fail(key, expected("a number", n));
-    }
-    if (!std::isfinite(value)) fail(key, "must be a finite number");
-    return value;
-  }
-
-  std::int64_t integer(std::string_view key) {
-    const toml::node& n = node(key);
-    const auto* i = n.as_integer();
-    if (i == nullptr) fail(key, expected("an integer", n));
-    return i->get();
-  }
-
-  std::string string(std::string_view key) {
-    const toml::node& n = node(key);
-    const auto* s = n.as_string();
-    if (s == nullptr) fail(key, expected("a string", n));
-    return s->get();
-  }
-
-  const toml::array& array(std::string_view key) {
-    const toml::node& n = node(key);
-    const auto* a = n.as_array();
-    if (a == nullptr) fail(key, expected("an array", n));
-    return *a;
-  }
-
-  TableReader table(std::string_view key) {
-    const toml::node& n = node(key);
-    const auto* t = n.as_table();
-    if (t == nullptr) fail(key, expected("a table", n));
-    return TableReader(*t, file_, key_path(key));
-  }
-
-  void finish() const {
-    for (auto&& [key, value] : *table_) {
-      if (!read_.contains(key.str())) fail(key.str(), "unknown key");
-    }
-  }
-
- private:
-  const toml::table* table_;
-  std::string file_;
-  std::string path_;
-  std::set<std::string, std::less<>> read_;
-};
-
-double number_above(TableReader& table, std::string_view key, double floor) {
-  const double value = table.number(key);
-  if (!(value > floor)) table.fail(key, fmt::format("must be > {}, got {}", floor, value));
-  return value;
-}
-
-double number_at_least(TableReader& table, std::string_view key, double floor) {
-  const double value = table.number(key);
-  if (!(value >= floor)) table.fail(key, fmt::format("must be >= {}, got {}", floor, value));
-  return value;
-}
-
-int integer_in(TableReader& table, std::string_view key, int low, int high) {
-  const std::int64_t value = table.integer(key);
-  if (value < low || value > high) {
-    table.fail(key, fmt::format("must be in [{}, {}], got {}", low, high, value));
-  }
-  return static_cast<int>(value);
-}
+using detail::at_line;
+using detail::expected;
+using detail::fail_element;
+using detail::integer_in;
+using detail::number_above;
+using detail::number_at_least;
+using detail::parse_document;
+using detail::TableReader;
 
 // Tables keyed by size or region names: a name gaitmon does not know is reported as such
 // rather than as a generic unknown key, with the names it does know.
@@ -217,27 +72,6 @@ TableReader sizes_table(TableReader& root) {
       sizes, [](std::string_view name) { return parse_insole_size(name).has_value(); },
       joined_size_names());
   return sizes;
-}
-
-toml::table parse_document(const fs::path& path, const std::string& unreadable_file,
-                           const std::string& unreadable_key) {
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) {
-    throw ConfigError(unreadable_file, unreadable_key,
-                      fmt::format("cannot read {}: {}", path.string(),
-                                  fs::exists(path, ec) ? "not a regular file" : "no such file"));
-  }
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (!in) throw ConfigError(unreadable_file, unreadable_key, "cannot read " + path.string());
-  try {
-    return toml::parse(text.str(), path.string());
-  } catch (const toml::parse_error& e) {
-    throw ConfigError(path.string(), "(syntax)",
-                      fmt::format("line {}, column {}: {}", e.source().begin.line,
-                                  e.source().begin.column, e.description()));
-  }
 }
 
 // An insole is about 100 mm wide with up to 9 cells a row: a cell or a spacing beyond 50 mm is
@@ -333,11 +167,6 @@ std::string span_problem(const RowSpan& span) {
     return fmt::format("sensor numbers must be <= {}, got {}", kMaxSensorsPerRow, span.last);
   }
   return {};
-}
-
-[[noreturn]] void fail_element(const std::string& file, const std::string& key,
-                               const toml::node& element, const std::string& reason) {
-  throw ConfigError(file, key, reason + at_line(element));
 }
 
 // Region spans of one size, checked so that InsoleLayout's invariant holds: every sensor of

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "gaitmon/config.hpp"
+#include "gaitmon/error.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -239,22 +240,18 @@ void expect_shipped(const std::string& table, const std::array<double, kRegionCo
   }
 }
 
-// The shipped tables are what `gaitmon calibrate` measures on the designs that the config's
-// comments and the README name (README, "Measuring the chain's SDs"), each entry the larger of two:
+// The shipped tables are what `gaitmon calibrate --designs config/calibration_designs.toml`
+// measures (README, "Measuring the chain's SDs"), each entry the larger of two designs:
 // - [pooling] and [pooling.m_per_session], the chain's and the steps' own: 120 sessions of 30 s,
-// six sizes, 50-90 kg, seeds 1-20
-//   (the command's defaults), and 60 sessions of 30 s of 60-kg walkers, sizes 37-38, 41-42 and
-//   45-46, seeds 1-20;
+//   six sizes, 50-90 kg, seeds 1-20 (the command's defaults), and 60 sessions of 30 s of 60-kg
+//   walkers, sizes 37-38, 41-42 and 45-46, seeds 1-20;
 // - [asymmetry] and [asymmetry.m_per_session]: 90 sessions of 60 s of 60-kg walkers, sizes 37-38,
 //   41-42 and 45-46, seeds 1-30, and 90 sessions of 60 s, six sizes, 50-90 kg, seeds 1-15.
-// A change of the fit or the chain that moves them fails here: measure again with the command
-// and update config/gaitmon.toml and the README.
+// The designs file is checked to hold those. A change of the fit or the chain that moves the
+// tables fails here: measure again with the command and update config/gaitmon.toml and the README.
 TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
-  if (test::kSanitized) {
-    GTEST_SKIP() << "360 simulated sessions take too long under the sanitizers; the measurement's "
-                    "code runs under them in EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne";
-  }
-  const Config config = load_config(default_config_path());
+  const std::vector<CalibrationDesignEntry> designs =
+      load_calibration_designs(test::source_dir() / "config" / "calibration_designs.toml");
   CalibrationDesign all;
   all.sizes = {kInsoleSizes.begin(), kInsoleSizes.end()};
   CalibrationDesign walkers_60kg;
@@ -266,22 +263,50 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
   CalibrationDesign feet_all = all;
   feet_all.last_seed = 15;
   feet_all.duration_s = 60.0;
+  const struct {
+    const CalibrationDesign* design;
+    bool pooling;
+  } named[] = {{&all, true}, {&walkers_60kg, true}, {&feet_60kg, false}, {&feet_all, false}};
+  ASSERT_EQ(designs.size(), 4U);
+  for (std::size_t i = 0; i < designs.size(); ++i) {
+    const CalibrationDesign& d = designs[i].design;
+    const CalibrationDesign& n = *named[i].design;
+    SCOPED_TRACE(fmt::format("design {}", i + 1));
+    EXPECT_EQ(d.sizes, n.sizes);
+    EXPECT_EQ(d.first_seed, n.first_seed);
+    EXPECT_EQ(d.last_seed, n.last_seed);
+    EXPECT_EQ(d.duration_s, n.duration_s);
+    EXPECT_EQ(d.min_body_mass_kg, n.min_body_mass_kg);
+    EXPECT_EQ(d.max_body_mass_kg, n.max_body_mass_kg);
+    EXPECT_EQ(d.noise_sd_bits, n.noise_sd_bits);
+    EXPECT_EQ(d.max_bias_bits, n.max_bias_bits);
+    EXPECT_EQ(d.placement_sd_mm, n.placement_sd_mm);
+    EXPECT_EQ(designs[i].pooling, named[i].pooling);
+    EXPECT_EQ(designs[i].asymmetry, !named[i].pooling);
+  }
+  if (test::kSanitized) {
+    GTEST_SKIP() << "360 simulated sessions take too long under the sanitizers; the measurement's "
+                    "code runs under them in EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne";
+  }
 
+  const Config config = load_config(default_config_path());
   const auto scratch = test::scratch_dir("calibration-designs");
-  const CalibrationSamples pooled[] = {collect_chain_samples(config, all, scratch),
-                                       collect_chain_samples(config, walkers_60kg, scratch)};
-  const CalibrationSamples feet[] = {collect_chain_samples(config, feet_60kg, scratch),
-                                     collect_chain_samples(config, feet_all, scratch)};
+  std::vector<CalibrationSamples> samples;
+  for (const CalibrationDesignEntry& entry : designs) {
+    samples.push_back(collect_chain_samples(config, entry.design, scratch));
+  }
   const char* kChainNames[] = {"kbar_chain_sd_pct", "n_chain_sd", "cbar_chain_sd_pct",
                                "m_chain_sd"};
   const char* kStepNames[] = {"kbar_step_sd_pct", "n_step_sd", "cbar_step_sd_pct", "m_step_sd"};
   const char* kPairNames[] = {"kbar_pair_sd_pct", "cbar_pair_sd_pct"};
   for (const bool shared_m : {false, true}) {
-    const auto in_mode = [&](const CalibrationSamples& s) {
-      return measure_chain_sds(shared_m ? s.m_per_session : s.per_step);
-    };
-    const MeasuredChainSds p[] = {in_mode(pooled[0]), in_mode(pooled[1])};
-    const MeasuredChainSds f[] = {in_mode(feet[0]), in_mode(feet[1])};
+    std::vector<MeasuredChainSds> pooling, asymmetry;
+    for (std::size_t i = 0; i < designs.size(); ++i) {
+      const MeasuredChainSds sds =
+          measure_chain_sds(shared_m ? samples[i].m_per_session : samples[i].per_step);
+      if (designs[i].pooling) pooling.push_back(sds);
+      if (designs[i].asymmetry) asymmetry.push_back(sds);
+    }
     const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
     const std::array<const std::array<double, kRegionCount>*, 4> chain_shipped = {
         &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
@@ -289,16 +314,72 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
         &chain.kbar_step_sd_pct, &chain.n_step_sd, &chain.cbar_step_sd_pct, &chain.m_step_sd};
     for (std::size_t k = 0; k < 4; ++k) {
       expect_shipped(table_key(shared_m, "pooling", kChainNames[k]), *chain_shipped[k],
-                     larger_of({&p[0].chain[k], &p[1].chain[k]}));
+                     larger_of({&pooling[0].chain[k], &pooling[1].chain[k]}));
       expect_shipped(table_key(shared_m, "pooling", kStepNames[k]), *step_shipped[k],
-                     larger_of({&p[0].step[k], &p[1].step[k]}));
+                     larger_of({&pooling[0].step[k], &pooling[1].step[k]}));
     }
     const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
     const std::array<const std::array<double, kRegionCount>*, 2> pair_shipped = {
         &pair.kbar_pair_sd_pct, &pair.cbar_pair_sd_pct};
     for (std::size_t k = 0; k < 2; ++k) {
       expect_shipped(table_key(shared_m, "asymmetry", kPairNames[k]), *pair_shipped[k],
-                     larger_of({&f[0].pair[k], &f[1].pair[k]}));
+                     larger_of({&asymmetry[0].pair[k], &asymmetry[1].pair[k]}));
+    }
+  }
+}
+
+// A designs file with a mistake names the file, the key and its line, and says why.
+TEST(Calibration, ADesignsFileWithAMistakeNamesTheFileTheKeyAndTheLine) {
+  const std::string good =
+      "[[design]]\ntables = [\"pooling\"]\nsizes = [\"41-42\"]\nseeds = [1, 2]\n"
+      "duration_s = 10\nbody_mass_kg = [60, 60]\n";
+  const auto dir = test::scratch_dir("calibration-designs-file");
+  const auto ok = load_calibration_designs(test::write_text(dir / "good.toml", good));
+  ASSERT_EQ(ok.size(), 1U);
+  EXPECT_TRUE(ok[0].pooling);
+  EXPECT_FALSE(ok[0].asymmetry);
+  EXPECT_EQ(ok[0].design.sizes, std::vector<InsoleSize>{InsoleSize::S41_42});
+  EXPECT_EQ(ok[0].design.last_seed, 2U);
+  EXPECT_EQ(ok[0].design.noise_sd_bits, CalibrationDesign{}.noise_sd_bits);
+
+  const struct {
+    const char* name;
+    std::string text;
+    const char* key;
+    const char* reason;
+  } cases[] = {
+      {"no design", "title = 1\n", "design", "missing"},
+      {"unknown key", good + "noise = 1\n", "design[1].noise", "unknown key (line 7)"},
+      {"a table's name", "[[design]]\ntables = [\"pool\"]\n", "design[1].tables",
+       R"(expected "pooling" or "asymmetry" (line 2))"},
+      {"a table twice", "[[design]]\ntables = [\"pooling\", \"pooling\"]\n", "design[1].tables",
+       "twice"},
+      {"a size", "[[design]]\ntables = [\"pooling\"]\nsizes = [\"40-41\"]\n", "design[1].sizes",
+       "expected an insole size such as \"41-42\" (line 3)"},
+      {"seeds reversed",
+       "[[design]]\ntables = [\"pooling\"]\nsizes = [\"41-42\"]\nseeds = [5, 1]\n",
+       "design[1].seeds", "the first (5) is after the last (1) (line 4)"},
+      {"one seed", "[[design]]\ntables = [\"pooling\"]\nsizes = [\"41-42\"]\nseeds = [5]\n",
+       "design[1].seeds", "expected [first, last], got 1 value(s)"},
+      {"a short session",
+       "[[design]]\ntables = [\"asymmetry\"]\nsizes = [\"41-42\"]\nseeds = [1, 2]\n"
+       "duration_s = 2\n",
+       "design[1].duration_s", "must be in [5, 3600], got 2 (line 5)"},
+      {"a second design missing its mass",
+       good + "[[design]]\ntables = [\"asymmetry\"]\n"
+              "sizes = [\"41-42\"]\nseeds = [1, 2]\nduration_s = 10\n",
+       "design[2].body_mass_kg", "missing"},
+      {"bad syntax", "[[design]\n", "(syntax)", "line 1"},
+  };
+  for (const auto& c : cases) {
+    const auto path = test::write_text(dir / "bad.toml", c.text);
+    try {
+      load_calibration_designs(path);
+      ADD_FAILURE() << c.name << ": no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.file(), path.string()) << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
+      EXPECT_NE(e.reason().find(c.reason), std::string::npos) << c.name << ": " << e.what();
     }
   }
 }

@@ -43,6 +43,21 @@ struct CalibrationDesign {
   void check() const;
 };
 
+/// A design of a designs file (config/calibration_designs.toml) and which of the config's tables
+/// it measures: several designs measure a table together, each entry the largest they measure.
+struct CalibrationDesignEntry {
+  CalibrationDesign design;
+  bool pooling = true;    ///< [pooling] and [pooling.m_per_session]
+  bool asymmetry = true;  ///< [asymmetry] and [asymmetry.m_per_session]
+};
+
+/// Reads a designs file: an array of [[design]] tables, each with `tables` (["pooling"],
+/// ["asymmetry"] or both), `sizes`, `seeds` = [first, last], `duration_s`, `body_mass_kg` = [min,
+/// max] and optionally `noise_sd_bits`, `max_bias_bits`, `placement_sd_mm` (the simulator's
+/// defaults otherwise), in the ranges `gaitmon calibrate` takes. Throws ConfigError naming the
+/// file, the key and its line.
+std::vector<CalibrationDesignEntry> load_calibration_designs(const std::filesystem::path& path);
+
 /// One pooled mean's (or one difference of the feet's) error against the truth, on the scale it
 /// is pooled on (ln kbar, n, ln cbar, m), with its standard error from the steps alone, and, at a
 /// shared m, how it moves with that m (through which m's own chain SD reaches it).

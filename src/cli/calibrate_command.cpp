@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <chrono>
@@ -67,6 +68,9 @@ struct CalibrateArgs {
   std::string seeds = "1-20";
   std::string body_mass = "50-90";
   std::filesystem::path out_dir;
+  std::filesystem::path designs_file;
+  bool settle = false;
+  std::size_t max_rounds = 10;
 };
 
 // One table of the config: its key, the parameter's index in the samples, and its unit.
@@ -122,18 +126,25 @@ double real(const std::string& text) {
   return value;
 }
 
-double config_value(const Config& config, bool shared_m, Table table, std::size_t parameter,
-                    std::size_t region) {
+// One entry of the config's tables, on the config's scale (100 ln for kbar and cbar).
+template <typename C>
+auto& config_entry(C& config, bool shared_m, Table table, std::size_t parameter,
+                   std::size_t region) {
   if (table == Table::Pair) {
-    const PairSds& sds = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    auto& sds = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
     return (parameter == 0 ? sds.kbar_pair_sd_pct : sds.cbar_pair_sd_pct)[region];
   }
-  const ChainSds& sds = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
-  const std::array<const std::array<double, kRegionCount>*, 4> chain = {
-      &sds.kbar_chain_sd_pct, &sds.n_chain_sd, &sds.cbar_chain_sd_pct, &sds.m_chain_sd};
-  const std::array<const std::array<double, kRegionCount>*, 4> step = {
-      &sds.kbar_step_sd_pct, &sds.n_step_sd, &sds.cbar_step_sd_pct, &sds.m_step_sd};
+  auto& sds = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+  const std::array chain = {&sds.kbar_chain_sd_pct, &sds.n_chain_sd, &sds.cbar_chain_sd_pct,
+                            &sds.m_chain_sd};
+  const std::array step = {&sds.kbar_step_sd_pct, &sds.n_step_sd, &sds.cbar_step_sd_pct,
+                           &sds.m_step_sd};
   return (*(table == Table::Step ? step : chain)[parameter])[region];
+}
+
+double config_value(const Config& config, bool shared_m, Table table, std::size_t parameter,
+                    std::size_t region) {
+  return config_entry(config, shared_m, table, parameter, region);
 }
 
 // What one mode (each step at its own m, or one m per session) measured, beside the config's.
@@ -141,6 +152,21 @@ struct ModeReport {
   bool shared_m = false;
   const ChainSamples* samples = nullptr;
   MeasuredChainSds measured;
+};
+
+// One design's latest round: its sessions' samples and what they measure in each mode (whose
+// `samples` point into this run's, so a run stays where it is once measured).
+struct DesignRun {
+  CalibrationDesignEntry entry;
+  CalibrationSamples samples;
+  std::array<ModeReport, 2> modes;
+
+  bool measures(Table table) const {
+    return table == Table::Pair ? entry.asymmetry : entry.pooling;
+  }
+  // The entry as this design measured it, if it measures that table and had samples for it.
+  std::optional<double> measured(bool shared_m, Table table, std::size_t parameter,
+                                 std::size_t region) const;
 };
 
 // One entry of a table: a region's samples of one parameter, its SD as measured and as the
@@ -167,6 +193,19 @@ std::span<const TableKey> keys_of(Table table) {
   return kPairKeys;
 }
 
+template <typename M>
+auto& measured_entry(M& measured, Table table, std::size_t parameter, std::size_t region) {
+  switch (table) {
+    case Table::Chain:
+      return measured.chain[parameter][region];
+    case Table::Step:
+      return measured.step[parameter][region];
+    case Table::Pair:
+      break;
+  }
+  return measured.pair[parameter][region];
+}
+
 Cell cell_of(const Config& config, const ModeReport& mode, Table table, const TableKey& k,
              std::size_t region) {
   const std::size_t p = k.parameter;
@@ -175,9 +214,7 @@ Cell cell_of(const Config& config, const ModeReport& mode, Table table, const Ta
   c.samples = pair                   ? &mode.samples->feet[region][p]
               : table == Table::Step ? &mode.samples->steps[region][p]
                                      : &mode.samples->pooled[region][p];
-  c.measured = pair                   ? mode.measured.pair[p][region]
-               : table == Table::Step ? mode.measured.step[p][region]
-                                      : mode.measured.chain[p][region];
+  c.measured = measured_entry(mode.measured, table, p, region);
   c.config = config_value(config, mode.shared_m, table, p, region);
   // m's SD reaches the others through their slopes on a shared m (0 where m is each step's own).
   const double m_sd = pair ? 0.0 : mode.measured.chain[3][region].value_or(0.0);
@@ -192,6 +229,12 @@ Cell cell_of(const Config& config, const ModeReport& mode, Table table, const Ta
   c.rms_config = rms_z(*c.samples, std::hypot(config_chain, c.config) * scale, config_m_sd);
   c.rms_without = rms_z(*c.samples, 0.0);
   return c;
+}
+
+std::optional<double> DesignRun::measured(bool shared_m, Table table, std::size_t parameter,
+                                          std::size_t region) const {
+  if (!measures(table)) return std::nullopt;
+  return measured_entry(modes[shared_m].measured, table, parameter, region);
 }
 
 std::string sd_text(std::optional<double> sd, bool percent) {
@@ -243,15 +286,18 @@ void print_table(const Config& config, const ModeReport& mode, Table table) {
   }
 }
 
-// One config table as TOML, the config's value where nothing was measured (said above it).
-std::string toml_line(const Config& config, const ModeReport& mode, Table table,
-                      const TableKey& k) {
+// One config table as TOML from `written`, saying above it where no design measured a region.
+std::string toml_line(const Config& config, const Config& written, std::span<const DesignRun> runs,
+                      bool shared_m, Table table, const TableKey& k) {
   std::vector<std::string> entries, kept;
   for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
-    const Cell c = cell_of(config, mode, table, k, ri);
-    if (!c.measured) kept.emplace_back(region_name(kRegions[ri]));
-    entries.push_back(fmt::format("{} = {}", region_name(kRegions[ri]),
-                                  sd_text(c.measured.value_or(c.config), k.percent)));
+    const bool measured = std::any_of(runs.begin(), runs.end(), [&](const DesignRun& run) {
+      return run.measured(shared_m, table, k.parameter, ri).has_value();
+    });
+    if (!measured) kept.emplace_back(region_name(kRegions[ri]));
+    entries.push_back(
+        fmt::format("{} = {}", region_name(kRegions[ri]),
+                    sd_text(config_value(written, shared_m, table, k.parameter, ri), k.percent)));
   }
   std::string text;
   if (!kept.empty()) {
@@ -277,20 +323,43 @@ std::string design_text(const CalibrationDesign& d) {
       d.noise_sd_bits, d.max_bias_bits, d.placement_sd_mm);
 }
 
-// The step SDs whose measured value is not the config's. The pools weighed each step with the
-// config's (pool_region_steps), and the chain's SDs are measured on those pools, so the tables
-// hold together only where the two agree.
-int step_sds_measured_otherwise(const Config& config, std::span<const ModeReport> modes) {
-  int otherwise = 0;
-  for (const ModeReport& mode : modes) {
-    for (const TableKey& k : keys_of(Table::Step)) {
-      for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
-        const Cell c = cell_of(config, mode, Table::Step, k, ri);
-        if (c.measured && std::abs(*c.measured - c.config) > 1e-9) ++otherwise;
+// Calls `f(shared_m, table, key, region)` for every entry of the config's tables.
+template <typename F>
+void for_each_entry(F f) {
+  for (const bool shared_m : {false, true}) {
+    for (const Table table : {Table::Chain, Table::Step, Table::Pair}) {
+      for (const TableKey& k : keys_of(table)) {
+        for (std::size_t ri = 0; ri < kRegionCount; ++ri) f(shared_m, table, k, ri);
       }
     }
   }
-  return otherwise;
+}
+
+int entries_apart(const Config& a, const Config& b, std::optional<Table> only = std::nullopt) {
+  int apart = 0;
+  for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
+    if (only && table != *only) return;
+    if (std::abs(config_value(a, shared_m, table, k.parameter, ri) -
+                 config_value(b, shared_m, table, k.parameter, ri)) > 1e-9) {
+      ++apart;
+    }
+  });
+  return apart;
+}
+
+// `config` with, per entry, the largest the designs that measure its table measured (its own
+// where none did).
+Config with_measured(Config config, std::span<const DesignRun> runs) {
+  for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
+    std::optional<double> largest;
+    for (const DesignRun& run : runs) {
+      if (const auto m = run.measured(shared_m, table, k.parameter, ri)) {
+        largest = std::max(largest.value_or(*m), *m);
+      }
+    }
+    if (largest) config_entry(config, shared_m, table, k.parameter, ri) = *largest;
+  });
+  return config;
 }
 
 std::string step_sd_note(int otherwise) {
@@ -301,36 +370,91 @@ std::string step_sd_note(int otherwise) {
   return fmt::format(
       "the pools weighed each step with the config's step SDs (*_step_sd), and {} of them "
       "measure otherwise here. The chain's SDs here hold for the config's; a config that takes "
-      "other step SDs needs its chain's SDs measured again with them, until nothing moves but "
-      "a pair of entries that trade a rounding step back and forth (take the larger of each)",
+      "other step SDs needs its chain's SDs measured again with them, until nothing moves "
+      "(--settle does so)",
       otherwise);
 }
 
-std::string toml_text(const Config& config, const CalibrationDesign& design,
-                      std::span<const ModeReport> modes) {
-  std::string text = fmt::format(
-      "# Measured by gaitmon calibrate on\n# {}:\n# the SD per region that brings the z of the "
-      "pooled means against the truth, of each step's\n# own estimate and of the feet's "
-      "difference to an RMS of 1, rounded up. To use them, replace\n# the keys of the same "
-      "tables in the config.\n# Note: {}.\n",
-      design_text(design), step_sd_note(step_sds_measured_otherwise(config, modes)));
-  for (const bool pair : {true, false}) {
-    for (const ModeReport& mode : modes) {
-      text += fmt::format("\n[{}{}]\n", pair ? "asymmetry" : "pooling",
-                          mode.shared_m ? ".m_per_session" : "");
-      for (const Table table :
-           pair ? std::vector{Table::Pair} : std::vector{Table::Chain, Table::Step}) {
-        for (const TableKey& k : keys_of(table)) text += toml_line(config, mode, table, k);
+// How --settle ended: the rounds measured the tables again with what the round before measured.
+enum class Settled { NotAsked, NothingMoved, Cycle, MaxRounds };
+
+struct Settling {
+  Settled outcome = Settled::NotAsked;
+  std::vector<int> moved;      ///< per round: entries it measured otherwise than it pooled with
+  std::size_t cycle_from = 0;  ///< Cycle: the round whose tables the last one measured again
+  int trading = 0;             ///< Cycle: entries that differ between the cycle's rounds
+};
+
+std::string note_of(const Settling& settling, int step_sds_otherwise) {
+  const std::size_t rounds = settling.moved.size();
+  switch (settling.outcome) {
+    case Settled::NotAsked:
+      return step_sd_note(step_sds_otherwise);
+    case Settled::NothingMoved:
+      return fmt::format(
+          "round {} measured the tables it pooled with: its pools weighed each step with the "
+          "step SDs (*_step_sd) written here, so the chain's SDs hold for them",
+          rounds);
+    case Settled::Cycle:
+      return fmt::format(
+          "measured again with its own tables, round {} came back to the tables that round {} "
+          "pooled with, {} entries trading a rounding step back and forth; written is the larger "
+          "of each entry over those rounds",
+          rounds, settling.cycle_from, settling.trading);
+    case Settled::MaxRounds:
+      break;
+  }
+  return fmt::format(
+      "measured again with its own tables for {} rounds (--max-rounds), and the last still moved "
+      "{} entries: put these tables in the config's place and measure again",
+      rounds, settling.moved.back());
+}
+
+std::string tables_of(const DesignRun& run) {
+  std::vector<std::string> tables;
+  if (run.entry.pooling) tables.emplace_back("[pooling]");
+  if (run.entry.asymmetry) tables.emplace_back("[asymmetry]");
+  return fmt::format("{}", fmt::join(tables, " and "));
+}
+
+// The config's four tables as written, under a header that names the designs and the note.
+std::string toml_text(const Config& config, const Config& written, std::span<const DesignRun> runs,
+                      const std::string& note) {
+  std::string text = "# Measured by gaitmon calibrate on\n";
+  if (runs.size() == 1) {
+    text += fmt::format("# {}:\n", design_text(runs[0].entry.design));
+  } else {
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      text += fmt::format("# design {} ({}): {}\n", i + 1, tables_of(runs[i]),
+                          design_text(runs[i].entry.design));
+    }
+    text += "# each entry the largest of the designs that measure its table;\n";
+  }
+  text += fmt::format(
+      "# the SD per region that brings the z of the pooled means against the truth, of each "
+      "step's\n# own estimate and of the feet's difference to an RMS of 1, rounded up. To use "
+      "them, replace\n# the keys of the same tables in the config.\n# Note: {}.\n",
+      note);
+  for (const Table kind : {Table::Pair, Table::Chain}) {
+    for (const bool shared_m : {false, true}) {
+      text += fmt::format("\n[{}{}]\n", kind == Table::Pair ? "asymmetry" : "pooling",
+                          shared_m ? ".m_per_session" : "");
+      for (const Table table : kind == Table::Pair ? std::vector{Table::Pair}
+                                                   : std::vector{Table::Chain, Table::Step}) {
+        for (const TableKey& k : keys_of(table)) {
+          text += toml_line(config, written, runs, shared_m, table, k);
+        }
       }
     }
   }
   return text;
 }
 
-nlohmann::json mode_json(const Config& config, const ModeReport& mode) {
+nlohmann::json mode_json(const Config& config, const DesignRun& run, const ModeReport& mode) {
   const auto number = [](double v) { return std::isnan(v) ? nlohmann::json() : nlohmann::json(v); };
-  nlohmann::json out;
+  nlohmann::json out = nlohmann::json::object();
   for (const Table kind : {Table::Chain, Table::Step, Table::Pair}) {
+    if (!run.measures(kind)) continue;
     nlohmann::json& table = out[kind == Table::Pair ? "asymmetry" : "pooling"];
     for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
       nlohmann::json& region = table[std::string(region_name(kRegions[ri]))];
@@ -348,44 +472,45 @@ nlohmann::json mode_json(const Config& config, const ModeReport& mode) {
   return out;
 }
 
-void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
-  const Config config = load_global_config(global);
-  CalibrationDesign& design = args.design;
-  design.sizes.clear();
-  for (const std::string& s : args.sizes) design.sizes.push_back(*parse_insole_size(s));
-  std::tie(design.first_seed, design.last_seed) =
-      parse_range<std::uint64_t>(args.seeds, "--seeds", whole);
-  std::tie(design.min_body_mass_kg, design.max_body_mass_kg) =
-      parse_range<double>(args.body_mass, "--body-mass", real);
-  try {
-    design.check();
-  } catch (const std::invalid_argument& e) {
-    throw CLI::ValidationError(e.what());
-  }
-  if (!args.out_dir.empty()) check_output_dir(args.out_dir, "--out");
-  std::optional<OutputSet> outputs;
-  if (!args.out_dir.empty()) {
-    outputs.emplace(args.out_dir,
-                    std::initializer_list<std::string_view>{"calibration.json", "calibration.toml"},
-                    std::filesystem::path());
-  }
+nlohmann::json design_json(const Config& config, const DesignRun& run) {
+  const CalibrationDesign& design = run.entry.design;
+  nlohmann::json out = {{"sessions", design.session_count()},
+                        {"duration_s", design.duration_s},
+                        {"first_seed", design.first_seed},
+                        {"last_seed", design.last_seed},
+                        {"min_body_mass_kg", design.min_body_mass_kg},
+                        {"max_body_mass_kg", design.max_body_mass_kg},
+                        {"noise_sd_bits", design.noise_sd_bits},
+                        {"max_bias_bits", design.max_bias_bits},
+                        {"placement_sd_mm", design.placement_sd_mm},
+                        {"sizes", nlohmann::json::array()},
+                        {"tables", nlohmann::json::array()},
+                        {"per_step", mode_json(config, run, run.modes[0])},
+                        {"m_per_session", mode_json(config, run, run.modes[1])}};
+  for (InsoleSize s : design.sizes) out["sizes"].push_back(insole_size_name(s));
+  if (run.entry.pooling) out["tables"].push_back("pooling");
+  if (run.entry.asymmetry) out["tables"].push_back("asymmetry");
+  return out;
+}
 
-  // The sessions are written, segmented from their files and removed one by one.
-  std::string pattern =
-      (std::filesystem::temp_directory_path() / "gaitmon-calibrate-XXXXXX").string();
-  if (mkdtemp(pattern.data()) == nullptr) {
-    throw std::runtime_error(
-        fmt::format("cannot make a scratch folder {}: {}", pattern, std::strerror(errno)));
-  }
-  const std::filesystem::path scratch(pattern);
-  fmt::print("calibrate: {}\n", design_text(design));
-  std::fflush(stdout);
-  const auto start = std::chrono::steady_clock::now();
-  CalibrationSamples samples;
+nlohmann::json written_json(const Config& written) {
+  nlohmann::json out;
+  for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
+    out[shared_m ? "m_per_session" : "per_step"][table == Table::Pair ? "asymmetry" : "pooling"]
+       [std::string(region_name(kRegions[ri]))][k.key] =
+           config_value(written, shared_m, table, k.parameter, ri);
+  });
+  return out;
+}
+
+// Simulates and analyses the design's sessions with `config`'s tables in the pools; a stop signal
+// removes the scratch folder and ends the process as the signal would.
+CalibrationSamples collect_or_stop(const Config& config, const CalibrationDesign& design,
+                                   const std::filesystem::path& scratch, const std::string& label) {
   try {
     const StopSignals stop_signals;
-    ProgressBar progress("calibrate");
-    samples = collect_chain_samples(config, design, scratch, [&](double fraction) {
+    ProgressBar progress(label);
+    return collect_chain_samples(config, design, scratch, [&](double fraction) {
       if (g_stop_signal != 0) throw Stopped{};
       progress.update(fraction);
     });
@@ -403,45 +528,163 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
     std::filesystem::remove_all(scratch);
     throw;
   }
-  std::filesystem::remove_all(scratch);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  fmt::print("simulated and analysed in {:.1f} s (each at its own m and at one m per session)\n",
-             seconds);
+}
 
-  const std::array<ModeReport, 2> modes = {
-      ModeReport{false, &samples.per_step, measure_chain_sds(samples.per_step)},
-      ModeReport{true, &samples.m_per_session, measure_chain_sds(samples.m_per_session)}};
-  for (const Table table : {Table::Chain, Table::Step, Table::Pair})
-    for (const ModeReport& mode : modes) print_table(config, mode, table);
-  const int otherwise = step_sds_measured_otherwise(config, modes);
-  fmt::print("\ncalibrate: {}\n", step_sd_note(otherwise));
+// The designs of --designs, or the one the design options give.
+std::vector<CalibrationDesignEntry> designs_of(CalibrateArgs& args) {
+  if (!args.designs_file.empty()) return load_calibration_designs(args.designs_file);
+  CalibrationDesign& design = args.design;
+  design.sizes.clear();
+  for (const std::string& s : args.sizes) design.sizes.push_back(*parse_insole_size(s));
+  std::tie(design.first_seed, design.last_seed) =
+      parse_range<std::uint64_t>(args.seeds, "--seeds", whole);
+  std::tie(design.min_body_mass_kg, design.max_body_mass_kg) =
+      parse_range<double>(args.body_mass, "--body-mass", real);
+  try {
+    design.check();
+  } catch (const std::invalid_argument& e) {
+    throw CLI::ValidationError(e.what());
+  }
+  return {CalibrationDesignEntry{design}};
+}
+
+void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
+  const Config config = load_global_config(global);
+  std::vector<DesignRun> runs;
+  for (CalibrationDesignEntry& entry : designs_of(args)) runs.push_back({std::move(entry), {}, {}});
+  if (!args.out_dir.empty()) check_output_dir(args.out_dir, "--out");
+  std::optional<OutputSet> outputs;
+  if (!args.out_dir.empty()) {
+    outputs.emplace(args.out_dir,
+                    std::initializer_list<std::string_view>{"calibration.json", "calibration.toml"},
+                    std::filesystem::path());
+  }
+
+  // The sessions are written, segmented from their files and removed one by one.
+  std::string pattern =
+      (std::filesystem::temp_directory_path() / "gaitmon-calibrate-XXXXXX").string();
+  if (mkdtemp(pattern.data()) == nullptr) {
+    throw std::runtime_error(
+        fmt::format("cannot make a scratch folder {}: {}", pattern, std::strerror(errno)));
+  }
+  const std::filesystem::path scratch(pattern);
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    if (runs.size() == 1) {
+      fmt::print("calibrate: {}\n", design_text(runs[i].entry.design));
+    } else {
+      fmt::print("calibrate: design {} of {} ({}): {}\n", i + 1, runs.size(), tables_of(runs[i]),
+                 design_text(runs[i].entry.design));
+    }
+  }
+  std::fflush(stdout);
+
+  // Each round pools with the tables the round before measured (the first with the config's),
+  // until they measure themselves again, come back to an earlier round's or --max-rounds ends.
+  Settling settling;
+  if (args.settle) settling.outcome = Settled::MaxRounds;
+  const std::size_t max_rounds = args.settle ? args.max_rounds : 1;
+  std::vector<Config> pooled_with = {config};
+  Config written;
+  for (std::size_t round = 1; round <= max_rounds; ++round) {
+    const auto start = std::chrono::steady_clock::now();
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      std::string label = args.settle ? fmt::format("calibrate round {}", round) : "calibrate";
+      if (runs.size() > 1) label += fmt::format(", design {}/{}", i + 1, runs.size());
+      DesignRun& run = runs[i];
+      run.samples = collect_or_stop(pooled_with.back(), run.entry.design, scratch, label);
+      run.modes = {
+          ModeReport{false, &run.samples.per_step, measure_chain_sds(run.samples.per_step)},
+          ModeReport{true, &run.samples.m_per_session,
+                     measure_chain_sds(run.samples.m_per_session)}};
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    written = with_measured(pooled_with.back(), runs);
+    const int moved = entries_apart(written, pooled_with.back());
+    if (!args.settle) {
+      fmt::print(
+          "simulated and analysed in {:.1f} s (each at its own m and at one m per session)\n",
+          seconds);
+      break;
+    }
+    settling.moved.push_back(moved);
+    fmt::print("round {}: simulated and analysed in {:.1f} s; {} of the tables' entries moved\n",
+               round, seconds, moved);
+    std::fflush(stdout);
+    if (moved == 0) {
+      settling.outcome = Settled::NothingMoved;
+      break;
+    }
+    const auto again = std::find_if(pooled_with.begin(), pooled_with.end(), [&](const Config& c) {
+      return entries_apart(c, written) == 0;
+    });
+    if (again != pooled_with.end()) {
+      settling.outcome = Settled::Cycle;
+      settling.cycle_from = static_cast<std::size_t>(again - pooled_with.begin()) + 1;
+      Config smaller = written;
+      for (auto c = again; c != pooled_with.end(); ++c) {
+        for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
+          const double other = config_value(*c, shared_m, table, k.parameter, ri);
+          double& larger = config_entry(written, shared_m, table, k.parameter, ri);
+          double& least = config_entry(smaller, shared_m, table, k.parameter, ri);
+          larger = std::max(larger, other);
+          least = std::min(least, other);
+        });
+      }
+      settling.trading = entries_apart(written, smaller);
+      break;
+    }
+    pooled_with.push_back(written);
+  }
+  std::filesystem::remove_all(scratch);
+
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    if (runs.size() > 1) {
+      fmt::print("\ndesign {} of {} ({}):\n", i + 1, runs.size(), tables_of(runs[i]));
+    }
+    for (const Table table : {Table::Chain, Table::Step, Table::Pair}) {
+      if (!runs[i].measures(table)) continue;
+      for (const ModeReport& mode : runs[i].modes) print_table(config, mode, table);
+    }
+  }
+  // The pools of the last round weighed each step with these step SDs.
+  const int otherwise = entries_apart(written, pooled_with.back(), Table::Step);
+  const std::string note = note_of(settling, otherwise);
+  const std::string toml = toml_text(config, written, runs, note);
+  if (runs.size() > 1 || settling.outcome == Settled::Cycle) {
+    fmt::print("\nThe tables written (the larger of each entry {}):\n{}",
+               runs.size() > 1 ? "over the designs that measure it" : "over the cycle's rounds",
+               toml.substr(toml.find("\n[")));
+  }
+  fmt::print("\ncalibrate: {}\n", note);
   if (!outputs) return;
   std::filesystem::create_directories(args.out_dir);
-  nlohmann::json json = {{"design",
-                          {{"sessions", design.session_count()},
-                           {"duration_s", design.duration_s},
-                           {"first_seed", design.first_seed},
-                           {"last_seed", design.last_seed},
-                           {"min_body_mass_kg", design.min_body_mass_kg},
-                           {"max_body_mass_kg", design.max_body_mass_kg},
-                           {"noise_sd_bits", design.noise_sd_bits},
-                           {"max_bias_bits", design.max_bias_bits},
-                           {"placement_sd_mm", design.placement_sd_mm}}},
+  nlohmann::json json = {{"designs", nlohmann::json::array()},
                          {"config", config.source.string()},
                          {"step_sds_measured_otherwise", otherwise},
-                         {"per_step", mode_json(config, modes[0])},
-                         {"m_per_session", mode_json(config, modes[1])}};
-  for (InsoleSize s : design.sizes) json["design"]["sizes"].push_back(insole_size_name(s));
+                         {"written", written_json(written)}};
+  for (const DesignRun& run : runs) json["designs"].push_back(design_json(config, run));
+  if (args.settle) {
+    static constexpr const char* kOutcomes[] = {"", "nothing_moved", "cycle", "max_rounds"};
+    json["settle"] = {{"rounds", settling.moved.size()},
+                      {"moved", settling.moved},
+                      {"outcome", kOutcomes[static_cast<int>(settling.outcome)]},
+                      {"note", note}};
+    if (settling.outcome == Settled::Cycle)
+      json["settle"]["cycle_from_round"] = settling.cycle_from;
+  }
   json["note"] =
-      "per table and region: the SD that brings the RMS of z to 1, rounded up (measured; null "
-      "where there were no samples), the config's, and the RMS of z with each and with none; "
-      "kbar and cbar in 100 ln, n and m as they are. The *_step_sd are each step's own error "
-      "beyond its Jacobian's, whose z takes the chain's SD of the same kind (measured or the "
-      "config's) with it. At one m per session m's measured SD also enters the others' z "
-      "through their slopes on it";
+      "per design, table and region: the SD that brings the RMS of z to 1, rounded up "
+      "(measured; null where there were no samples), the config's, and the RMS of z with each "
+      "and with none; kbar and cbar in 100 ln, n and m as they are; a design has the tables it "
+      "measures. The *_step_sd are each step's own error beyond its Jacobian's, whose z takes "
+      "the chain's SD of the same kind (measured or the config's) with it. At one m per session "
+      "m's measured SD also enters the others' z through their slopes on it. `written` is what "
+      "calibration.toml holds: per entry the largest the designs measured (over a cycle's "
+      "rounds with --settle), the config's where none did. With --settle the samples are the "
+      "last round's, and `config` is the config's as given";
   outputs->add("calibration.json", json_file_text(json));
-  outputs->add("calibration.toml", toml_text(config, design, modes));
+  outputs->add("calibration.toml", toml);
   for (const auto& path : outputs->commit()) fmt::print("wrote {}\n", path.string());
 }
 
@@ -455,7 +698,8 @@ void add_calibrate_command(CLI::App& app, const GlobalOptions& global) {
       "Measure the measurement chain's shared error on simulated sessions: the SDs of [pooling] "
       "and [asymmetry] of the config that bring the z of the pooled means against the truth, and "
       "of the feet's difference, to an RMS of 1; prints them beside the config's and, with --out, "
-      "writes DIR/calibration.json and DIR/calibration.toml");
+      "writes DIR/calibration.json and DIR/calibration.toml. --designs runs several designs, "
+      "--settle measures again until the tables measure themselves");
   sub->add_option("--sizes", args->sizes, "Insole sizes, comma-separated (each with every seed)")
       ->delimiter(',')
       ->check(CLI::IsMember(insole_size_names()))
@@ -478,6 +722,23 @@ void add_calibrate_command(CLI::App& app, const GlobalOptions& global) {
   sub->add_option("--placement-sd", args->design.placement_sd_mm,
                   "Step-to-step SD of where the foot lands on the insole, mm")
       ->check(number_in(0.0, 10.0))
+      ->capture_default_str();
+  auto* designs = sub->add_option(
+      "--designs", args->designs_file,
+      "A designs file (config/calibration_designs.toml: the shipped tables' four) in place of "
+      "the options above: each table's entries the largest of the designs that measure it");
+  designs->check(CLI::ExistingFile);
+  for (const char* option : {"--sizes", "--seeds", "--duration", "--body-mass", "--noise",
+                             "--max-bias", "--placement-sd"}) {
+    designs->excludes(sub->get_option(option));
+  }
+  auto* settle = sub->add_flag(
+      "--settle", args->settle,
+      "Measure again with the tables just measured in the pools, round after round, until they "
+      "measure themselves (or come back to an earlier round's: then the larger of each entry)");
+  sub->add_option("--max-rounds", args->max_rounds, "The most rounds --settle runs")
+      ->check(CLI::Range(2, 50))
+      ->needs(settle)
       ->capture_default_str();
   sub->add_option("--out,-o", args->out_dir,
                   "Folder for calibration.json and calibration.toml (nothing written without it)");
