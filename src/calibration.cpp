@@ -203,14 +203,6 @@ std::pair<double, double> read_range(detail::TableReader& table, std::string_vie
   return {values[0], values[1]};
 }
 
-double read_number_in(detail::TableReader& table, std::string_view key, double low, double high) {
-  const double value = table.number(key);
-  if (value < low || value > high) {
-    table.fail(key, fmt::format("must be in [{}, {}], got {}", low, high, value));
-  }
-  return value;
-}
-
 CalibrationDesignEntry read_design(detail::TableReader table) {
   CalibrationDesignEntry entry;
   entry.pooling = entry.asymmetry = false;
@@ -247,17 +239,17 @@ CalibrationDesignEntry read_design(detail::TableReader table) {
   }
   design.first_seed = static_cast<std::uint64_t>(first);
   design.last_seed = static_cast<std::uint64_t>(last);
-  design.duration_s = read_number_in(table, "duration_s", 5.0, 3600.0);
+  design.duration_s = detail::number_in(table, "duration_s", 5.0, 3600.0);
   std::tie(design.min_body_mass_kg, design.max_body_mass_kg) =
       read_range(table, "body_mass_kg", 1.0, 300.0);
   if (table.has("noise_sd_bits")) {
-    design.noise_sd_bits = read_number_in(table, "noise_sd_bits", 0.0, 50.0);
+    design.noise_sd_bits = detail::number_in(table, "noise_sd_bits", 0.0, 50.0);
   }
   if (table.has("max_bias_bits")) {
     design.max_bias_bits = detail::integer_in(table, "max_bias_bits", 0, 50);
   }
   if (table.has("placement_sd_mm")) {
-    design.placement_sd_mm = read_number_in(table, "placement_sd_mm", 0.0, 10.0);
+    design.placement_sd_mm = detail::number_in(table, "placement_sd_mm", 0.0, 10.0);
   }
   try {
     design.check();

@@ -39,6 +39,7 @@ using detail::fail_element;
 using detail::integer_in;
 using detail::number_above;
 using detail::number_at_least;
+using detail::number_in;
 using detail::parse_document;
 using detail::TableReader;
 
@@ -563,11 +564,7 @@ void read_ring(TableReader table, RingSettings& ring) {
 void read_monitor(TableReader table, MonitorSettings& monitor) {
   monitor.workers = integer_in(table, "workers", 1, 64);
   monitor.max_step_backlog = integer_in(table, "max_step_backlog", 1, 100000);
-  monitor.status_period_s = table.number("status_period_s");
-  if (!(monitor.status_period_s >= 0.01 && monitor.status_period_s <= 3600.0)) {
-    table.fail("status_period_s",
-               fmt::format("must be in [0.01, 3600], got {}", monitor.status_period_s));
-  }
+  monitor.status_period_s = number_in(table, "status_period_s", 0.01, 3600.0);
   monitor.publish_frames = read_boolean(table, "publish_frames");
   monitor.tissue_window_steps =
       integer_in(table, "tissue_window_steps", static_cast<int>(kMinPoolingSteps), 100000);

@@ -77,6 +77,14 @@ double number_at_least(TableReader& table, std::string_view key, double floor) {
   return value;
 }
 
+double number_in(TableReader& table, std::string_view key, double low, double high) {
+  const double value = table.number(key);
+  if (!(value >= low && value <= high)) {
+    table.fail(key, fmt::format("must be in [{}, {}], got {}", low, high, value));
+  }
+  return value;
+}
+
 int integer_in(TableReader& table, std::string_view key, int low, int high) {
   const std::int64_t value = table.integer(key);
   if (value < low || value > high) {

@@ -120,6 +120,7 @@ class TableReader {
                                const toml::node& element, const std::string& reason);
 double number_above(TableReader& table, std::string_view key, double floor);
 double number_at_least(TableReader& table, std::string_view key, double floor);
+double number_in(TableReader& table, std::string_view key, double low, double high);
 int integer_in(TableReader& table, std::string_view key, int low, int high);
 
 /// The TOML document at `path`; ConfigError naming `unreadable_file` and `unreadable_key` (where

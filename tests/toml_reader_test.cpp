@@ -61,6 +61,9 @@ TEST(TomlReader, RefusesAMissingKeyAWrongTypeAndAValueOutOfRange) {
   EXPECT_EQ(refusal([&] { number_above(root, "a", 1.0); }), "a: must be > 1, got 1 (line 1)");
   EXPECT_EQ(refusal([&] { number_at_least(root, "a", 2.0); }), "a: must be >= 2, got 1 (line 1)");
   EXPECT_EQ(refusal([&] { integer_in(root, "c", 0, 5); }), "c: must be in [0, 5], got 7 (line 3)");
+  EXPECT_EQ(refusal([&] { number_in(root, "c", 0.5, 6.5); }),
+            "c: must be in [0.5, 6.5], got 7 (line 3)");
+  EXPECT_DOUBLE_EQ(number_in(root, "c", 7.0, 7.0), 7.0);
   TableReader t = root.table("t");
   EXPECT_EQ(refusal([&] { t.integer("d"); }), "t.d: expected an integer, got a boolean (line 5)");
   EXPECT_EQ(refusal([&] { root.table("a"); }), "a: expected a table, got an integer (line 1)");
