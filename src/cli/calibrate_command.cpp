@@ -335,16 +335,25 @@ void for_each_entry(F f) {
   }
 }
 
-int entries_apart(const Config& a, const Config& b, std::optional<Table> only = std::nullopt) {
-  int apart = 0;
+// The entries whose value differs from `from` to `to`, as "[table] region key FROM -> TO".
+std::vector<std::string> entries_moved(const Config& from, const Config& to,
+                                       std::optional<Table> only = std::nullopt) {
+  std::vector<std::string> moved;
   for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
     if (only && table != *only) return;
-    if (std::abs(config_value(a, shared_m, table, k.parameter, ri) -
-                 config_value(b, shared_m, table, k.parameter, ri)) > 1e-9) {
-      ++apart;
-    }
+    const double a = config_value(from, shared_m, table, k.parameter, ri);
+    const double b = config_value(to, shared_m, table, k.parameter, ri);
+    if (std::abs(a - b) <= 1e-9) return;
+    moved.push_back(fmt::format("[{}{}] {} {} {} -> {}",
+                                table == Table::Pair ? "asymmetry" : "pooling",
+                                shared_m ? ".m_per_session" : "", region_name(kRegions[ri]), k.key,
+                                sd_text(a, k.percent), sd_text(b, k.percent)));
   });
-  return apart;
+  return moved;
+}
+
+int entries_apart(const Config& a, const Config& b, std::optional<Table> only = std::nullopt) {
+  return static_cast<int>(entries_moved(a, b, only).size());
 }
 
 // `config` with, per entry, the largest the designs that measure its table measured (its own
@@ -600,7 +609,8 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     written = with_measured(pooled_with.back(), runs);
-    const int moved = entries_apart(written, pooled_with.back());
+    const std::vector<std::string> moved_entries = entries_moved(pooled_with.back(), written);
+    const int moved = static_cast<int>(moved_entries.size());
     if (!args.settle) {
       fmt::print(
           "simulated and analysed in {:.1f} s (each at its own m and at one m per session)\n",
@@ -608,8 +618,10 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
       break;
     }
     settling.moved.push_back(moved);
-    fmt::print("round {}: simulated and analysed in {:.1f} s; {} of the tables' entries moved\n",
-               round, seconds, moved);
+    // A few entries are named: they are the ones that may trade a rounding step back and forth.
+    fmt::print("round {}: simulated and analysed in {:.1f} s; {} of the tables' entries moved{}\n",
+               round, seconds, moved,
+               moved > 0 && moved <= 6 ? fmt::format(": {}", fmt::join(moved_entries, "; ")) : "");
     std::fflush(stdout);
     if (moved == 0) {
       settling.outcome = Settled::NothingMoved;
