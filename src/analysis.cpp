@@ -343,9 +343,11 @@ std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimat
 }
 
 std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region region,
-                                               const PoolingSettings& pooling) {
+                                               const PoolingSettings& pooling,
+                                               const FitBounds& bounds) {
   std::optional<MaterialEstimate> estimate = material_estimate(fit);
   if (!estimate) return std::nullopt;
+  *estimate = within_m_range(*estimate, material_bounds(bounds));
   const bool shared_m = estimate->slope_on_shared_m.has_value();
   if (shared_m) {
     // The shared m's own variance reaches this step's kbar, n and cbar through their slopes, as

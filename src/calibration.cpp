@@ -34,11 +34,12 @@ MaterialVector scaled_truth(const SimulationTruth& truth, std::size_t region) {
 
 // Each step's own estimates, as with_chain_error takes them before the chain's SDs.
 void add_steps(std::span<const StepAnalysis> steps, const SimulationTruth& truth,
-               ChainSamples& out) {
+               const MaterialBounds& bounds, ChainSamples& out) {
   for (const StepAnalysis& step : steps) {
     for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
-      const std::optional<MaterialEstimate> e = material_estimate(step.regions[ri].fit);
+      std::optional<MaterialEstimate> e = material_estimate(step.regions[ri].fit);
       if (!e) continue;
+      *e = within_m_range(*e, bounds);
       const MaterialVector t = scaled_truth(truth, ri);
       const double m_variance = e->covariance[3][3];
       for (std::size_t p = 0; p < 4; ++p) {
@@ -129,8 +130,9 @@ SessionSamples run_session(const Config& config, const CalibrationDesign& design
   std::vector<StepAnalysis> at_shared_m = steps;
   fit_damping_exponent_per_session(at_shared_m, config, {});
   SessionSamples samples;
-  add_steps(steps, truth, samples.per_step);
-  add_steps(at_shared_m, truth, samples.m_per_session);
+  const MaterialBounds bounds = material_bounds(config.fit_bounds);
+  add_steps(steps, truth, bounds, samples.per_step);
+  add_steps(at_shared_m, truth, bounds, samples.m_per_session);
   add_session(analyse_in_order(std::move(steps), config, options.size), truth, samples.per_step);
   add_session(analyse_in_order(std::move(at_shared_m), config, options.size), truth,
               samples.m_per_session);

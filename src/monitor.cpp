@@ -65,7 +65,7 @@ std::string region_status(const RegionFit& fit) {
   return status;
 }
 
-FitReport fit_report(const StepAnalysis& analysis, const PoolingSettings& pooling, bool& failed) {
+FitReport fit_report(const StepAnalysis& analysis, const Config& config, bool& failed) {
   FitReport report;
   report.foot = analysis.foot;
   report.step = analysis.step;
@@ -88,7 +88,8 @@ FitReport fit_report(const StepAnalysis& analysis, const PoolingSettings& poolin
     out.se_n = f.n.se;
     out.se_cbar = f.cbar_ns_per_mm3.se;
     out.se_m = f.m.se;
-    if (const std::optional<MaterialParams> total = with_chain_error(f, r.region, pooling)) {
+    if (const std::optional<MaterialParams> total =
+            with_chain_error(f, r.region, config.pooling, config.fit_bounds)) {
       out.se_kbar_total = total->kbar_n_per_mm3.se;
       out.se_n_total = total->n.se;
       out.se_cbar_total = total->cbar_ns_per_mm3.se;
@@ -612,7 +613,7 @@ struct Monitor::Impl {
           ready->report = fit_report(extended     ? *extended
                                      : at_running ? *at_running
                                                   : *analysis,
-                                     config.pooling, ready->failed);
+                                     config, ready->failed);
           if (extended) {
             ready->report.effects_inside = inside->joined;
             ready->report.effects_utime = inside->utime;

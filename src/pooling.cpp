@@ -208,6 +208,22 @@ std::optional<MaterialEstimate> material_estimate(const RegionFit& fit) {
   return e;
 }
 
+MaterialEstimate within_m_range(MaterialEstimate estimate, const MaterialBounds& bounds) {
+  const double range = bounds.upper[3] - bounds.lower[3];
+  const double v = estimate.covariance[3][3];
+  const double largest = range * range / 3.0;
+  if (estimate.slope_on_shared_m || !(v > largest)) return estimate;
+  // cov - c c^T (v - largest) / v^2, c = cov[.][3]: the Schur complement on m plus the slopes
+  // c / v times m's new variance, so positive semi-definite as the covariance was.
+  const MaterialVector c = {estimate.covariance[0][3], estimate.covariance[1][3],
+                            estimate.covariance[2][3], v};
+  const double shrink = (v - largest) / (v * v);
+  for (std::size_t a = 0; a < 4; ++a)
+    for (std::size_t b = 0; b < 4; ++b) estimate.covariance[a][b] -= c[a] * c[b] * shrink;
+  estimate.covariance[3][3] = largest;
+  return estimate;
+}
+
 MaterialEstimate with_shared_error(MaterialEstimate estimate, const MaterialVector& sd) {
   for (std::size_t i = 0; i < sd.size(); ++i) {
     if (!(std::isfinite(sd[i]) && sd[i] >= 0.0)) {

@@ -674,7 +674,9 @@ TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
   (*fit.material_covariance)[1][1] = 0.02 * 0.02;
   (*fit.material_covariance)[2][2] = 0.4 * 0.4;
   (*fit.material_covariance)[3][3] = 0.1 * 0.1;
-  const std::optional<MaterialParams> own = with_chain_error(fit, Region::Met1_2, pooling);
+  FitBounds bounds;
+  bounds.m = {0.82, 1.38};  // m's variance 0.01 is within the range's 0.56^2 / 3
+  const std::optional<MaterialParams> own = with_chain_error(fit, Region::Met1_2, pooling, bounds);
   ASSERT_TRUE(own.has_value());
   EXPECT_DOUBLE_EQ(own->kbar_n_per_mm3.value, 0.2);
   EXPECT_NEAR(own->kbar_n_per_mm3.se, 0.2 * std::sqrt(0.05 * 0.05 + 0.05 * 0.05 + 0.08 * 0.08),
@@ -684,11 +686,29 @@ TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
               1e-15);
   EXPECT_NEAR(own->m.se, std::sqrt(0.1 * 0.1 + 0.07 * 0.07 + 0.12 * 0.12), 1e-15);
 
+  // m undetermined by the step (SE 0.5, ln cbar's covariance with it 0.15): m's variance is held
+  // at the range's 0.56^2 / 3, and ln cbar's share through its slope 0.15 / 0.25 = 0.6 shrinks
+  // with it, from 0.6^2 0.25 to 0.6^2 0.56^2 / 3; kbar and n, uncorrelated with m, keep theirs.
+  (*fit.material_covariance)[3][3] = 0.5 * 0.5;
+  (*fit.material_covariance)[2][3] = (*fit.material_covariance)[3][2] = 0.15;
+  const std::optional<MaterialParams> wide = with_chain_error(fit, Region::Met1_2, pooling, bounds);
+  ASSERT_TRUE(wide.has_value());
+  const double m_range_variance = 0.56 * 0.56 / 3.0;
+  EXPECT_NEAR(wide->m.se, std::sqrt(m_range_variance + 0.07 * 0.07 + 0.12 * 0.12), 1e-12);
+  EXPECT_NEAR(wide->cbar_ns_per_mm3.se,
+              0.05 * std::sqrt(0.4 * 0.4 - 0.6 * 0.6 * 0.25 + 0.6 * 0.6 * m_range_variance +
+                               0.12 * 0.12 + 0.2 * 0.2),
+              1e-12);
+  EXPECT_NEAR(wide->kbar_n_per_mm3.se, own->kbar_n_per_mm3.se, 1e-15);
+  EXPECT_NEAR(wide->n.se, own->n.se, 1e-15);
+  (*fit.material_covariance)[2][3] = (*fit.material_covariance)[3][2] = 0.0;
+
   // The same step fitted at a shared m of SE 0.05 (m's row and column zero).
   (*fit.material_covariance)[3][3] = 0.0;
   fit.m = {1.2, 0.05, false, false};
   fit.material_slope_on_m = std::array<double, 3>{0.3, 0.1, 0.8};
-  const std::optional<MaterialParams> shared = with_chain_error(fit, Region::Met1_2, pooling);
+  const std::optional<MaterialParams> shared =
+      with_chain_error(fit, Region::Met1_2, pooling, bounds);
   ASSERT_TRUE(shared.has_value());
   const double m_variance = 0.05 * 0.05 + 0.15 * 0.15;
   EXPECT_NEAR(shared->kbar_n_per_mm3.se,
@@ -702,7 +722,7 @@ TEST(WithChainError, AddsTheChainsSharedErrorToEachStandardError) {
   EXPECT_NEAR(shared->m.se, std::sqrt(m_variance + 0.04 * 0.04), 1e-15);
 
   fit.material_covariance.reset();
-  EXPECT_FALSE(with_chain_error(fit, Region::Met1_2, pooling).has_value());
+  EXPECT_FALSE(with_chain_error(fit, Region::Met1_2, pooling, bounds).has_value());
 }
 
 // kbar, n, cbar and m of a fit or of MaterialParams, in that order.
@@ -729,8 +749,9 @@ std::array<double, 4> z_against(const std::array<const Estimate*, 4>& e,
 // SDs did not come from (sizes 37-38, 41-42, 45-46; seeds 301, 302; 10 s). So does that of the
 // pooled posteriors (pooled_per_step), which lean on the pooled mean and carry its chain SD.
 // Measured, ln kbar / n / ln cbar / m over the 510 region-steps of each:
-// - each step at its own m: with the chain and the step's own 0.87 / 0.85 / 0.72 / 0.71, the
-//   fit's own 1.57 / 1.55 / 1.07 / 1.13; pooled 0.89 / 0.85 / 0.74 / 0.75;
+// - each step at its own m: with the chain and the step's own 0.87 / 0.85 / 0.89 / 0.88 (0.72 /
+//   0.71 for cbar and m before m's variance was held within its range, stop 63), the fit's own
+//   1.57 / 1.55 / 1.07 / 1.13; pooled 0.89 / 0.85 / 0.74 / 0.75;
 // - at one m per session: with the chain and the step's own 0.87 / 0.85 / 0.86 / 0.84, the fit's
 //   own 1.52 / 1.52 / 9.31 / 2.62 (cbar's and m's leave out that m's error, which every step
 //   shares); pooled 0.83 / 0.81 / 0.87 / 0.86 over 459.
@@ -747,7 +768,9 @@ TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgains
   const char* names[] = {"ln kbar", "n", "ln cbar", "m"};
   for (const bool shared_m : {false, true}) {
     std::array<std::vector<double>, 4> z_own, z_total, z_pooled, z_mets, z_mets_chain,
-        z_mets_pooled, z_mets_pooled_chain;
+        z_mets_pooled, z_mets_pooled_chain, z_midfoot, z_midfoot_unbounded;
+    FitBounds unbounded_m = config.fit_bounds;
+    unbounded_m.m = {-1e6, 1e6};
     Config chain_only_config = config;
     PoolingSettings& chain_only = chain_only_config.pooling;
     for (ChainSds* sds : {&chain_only.per_step, &chain_only.m_per_session}) {
@@ -770,20 +793,30 @@ TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgains
           const RegionSessionAnalysis& r = walk.session.regions[index_of(region)];
           for (std::size_t si = 0; si < walk.steps.size(); ++si) {
             const RegionFit& f = walk.steps[si].at(region).fit;
-            const std::optional<MaterialParams> total = with_chain_error(f, region, config.pooling);
+            const std::optional<MaterialParams> total =
+                with_chain_error(f, region, config.pooling, config.fit_bounds);
             if (!total) continue;
             const auto fitted = material_of(f);
             const auto with = material_of(*total);
+            const MaterialParams bounded = material_params(
+                within_m_range(*material_estimate(f), material_bounds(config.fit_bounds)));
             for (std::size_t k = 0; k < 4; ++k) {
               EXPECT_EQ(with[k]->value, fitted[k]->value);
-              EXPECT_GE(with[k]->se, fitted[k]->se);
+              EXPECT_GE(with[k]->se, material_of(bounded)[k]->se);
+            }
+            if (region == Region::MidfootPosterior || region == Region::MidfootAnterior) {
+              add(z_midfoot, z_against(with, truth));
+              add(z_midfoot_unbounded,
+                  z_against(material_of(*with_chain_error(f, region, config.pooling, unbounded_m)),
+                            truth));
             }
             add(z_own, z_against(fitted, truth));
             add(z_total, z_against(with, truth));
             if (region == Region::Met1_2 || region == Region::Met3_5) {
               add(z_mets, z_against(with, truth));
-              add(z_mets_chain,
-                  z_against(material_of(*with_chain_error(f, region, chain_only)), truth));
+              add(z_mets_chain, z_against(material_of(*with_chain_error(f, region, chain_only,
+                                                                        config.fit_bounds)),
+                                          truth));
             }
             if (r.pooled_per_step[si])
               add(z_pooled, z_against(material_of(*r.pooled_per_step[si]), truth));
@@ -833,6 +866,19 @@ TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgains
       if (!shared_m) {
         EXPECT_LT(root_mean_square(z_mets[k]), 1.2) << names[k];
         EXPECT_GT(root_mean_square(z_mets_chain[k]), root_mean_square(z_mets[k]) + 0.1) << names[k];
+      }
+    }
+    // One step mostly leaves the midfoot's m undetermined, and the Jacobian's variance of m, with
+    // cbar's through its slope, then says more than an m held in its range can err: m's variance
+    // held at the range's (within_m_range) takes their z from far under 1 toward it.
+    for (std::size_t k = 2; k < 4; ++k) {
+      std::printf("%s, %-7s the midfoot's per-step z: RMS %.2f (m's variance unbounded %.2f)\n",
+                  shared_m ? "one m per session" : "each step's own m", names[k],
+                  root_mean_square(z_midfoot[k]), root_mean_square(z_midfoot_unbounded[k]));
+      if (!shared_m) {
+        EXPECT_GT(root_mean_square(z_midfoot[k]), 0.6) << names[k];
+        EXPECT_LT(root_mean_square(z_midfoot[k]), 1.2) << names[k];
+        EXPECT_LT(root_mean_square(z_midfoot_unbounded[k]), 0.5) << names[k];
       }
     }
     // What the chain adds is needed: kbar's own SEs are too small at every m, and at one m per

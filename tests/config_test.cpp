@@ -909,8 +909,8 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
   using PerRegion = std::array<double, kRegionCount>;
-  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.5, 6.5, 5.5, 4.5, 11.0, 102.5, 15.0}));
-  EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.07, 0.0, 0.075}));
+  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.5, 6.5, 5.5, 4.5, 13.0, 102.5, 15.0}));
+  EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.065, 0.0, 0.075}));
   EXPECT_EQ(p.per_step.cbar_chain_sd_pct, (PerRegion{13.5, 0.0, 16.0, 11.5, 12.0, 0.0, 0.0, 0.0}));
   EXPECT_EQ(p.per_step.m_chain_sd, (PerRegion{0.06, 0.0, 0.045, 0.065, 0.075, 0.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.kbar_chain_sd_pct,
@@ -921,9 +921,9 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
             (PerRegion{3.0, 14.5, 17.5, 0.0, 2.5, 0.0, 227.5, 17.5}));
   EXPECT_EQ(p.m_per_session.m_chain_sd,
             (PerRegion{0.06, 0.1, 0.145, 0.145, 0.16, 0.0, 0.215, 0.08}));
-  EXPECT_EQ(p.per_step.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 10.5, 7.5, 13.5, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 10.5, 7.5, 15.0, 0.0, 0.0}));
   EXPECT_EQ(p.per_step.n_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.07, 0.045, 0.0, 0.0, 0.0}));
-  EXPECT_EQ(p.per_step.cbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 18.5, 25.0, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.cbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 18.5, 25.0, 114.5, 20.0, 0.0}));
   EXPECT_EQ(p.per_step.m_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.145, 0.16, 0.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 9.5, 6.0, 18.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.n_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.065, 0.035, 0.0, 0.0, 0.0}));

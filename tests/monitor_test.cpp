@@ -121,7 +121,9 @@ void expect_close(double actual, double expected, const std::string& what) {
 // What GAITMON_FIT's se_*_total should be for `fit` of `region`, worked from the config's chain
 // and step SDs: ln kbar's and ln cbar's variances are (se / value)^2; at a declared (running) m
 // its own variance and [pooling.m_per_session]'s chain SD of m reach the others through their
-// slopes. Zeros where the fit has no covariance of its four parameters.
+// slopes. At the step's own m a variance v of m beyond the range's, range^2 / 3, is held there,
+// and each other's share of it, c^2 / v with c its covariance with m, shrinks to c^2 range^2 /
+// (3 v^2). Zeros where the fit has no covariance of its four parameters.
 std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, const Config& config) {
   if (!fit.material_covariance) return {0.0, 0.0, 0.0, 0.0};
   const bool shared = !fit.m.free;
@@ -131,17 +133,26 @@ std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, con
       fit.m.se * fit.m.se + (shared ? chain.m_chain_sd[ri] * chain.m_chain_sd[ri] : 0.0);
   const std::array<double, 3> slope =
       shared ? *fit.material_slope_on_m : std::array<double, 3>{0.0, 0.0, 0.0};
-  const auto total = [&](double relative_se, double sd, double step, double g) {
-    return std::sqrt(relative_se * relative_se + sd * sd + step * step + g * g * m_variance);
+  const double range = config.fit_bounds.m.upper - config.fit_bounds.m.lower;
+  const double held = range * range / 3.0;
+  const double v = fit.m.se * fit.m.se;
+  const bool hold = !shared && v > held;
+  const MaterialCovariance& c = *fit.material_covariance;
+  const auto less = [&](std::size_t p) {
+    return hold ? c[p][3] * c[p][3] * (v - held) / (v * v) : 0.0;
+  };
+  const auto total = [&](double relative_se, double sd, double step, double g, double minus) {
+    return std::sqrt(relative_se * relative_se - minus + sd * sd + step * step +
+                     g * g * m_variance);
   };
   const double kbar = fit.kbar_n_per_mm3.value, cbar = fit.cbar_ns_per_mm3.value;
   return {kbar * total(fit.kbar_n_per_mm3.se / kbar, chain.kbar_chain_sd_pct[ri] / 100,
-                       chain.kbar_step_sd_pct[ri] / 100, slope[0]),
-          total(fit.n.se, chain.n_chain_sd[ri], chain.n_step_sd[ri], slope[1]),
+                       chain.kbar_step_sd_pct[ri] / 100, slope[0], less(0)),
+          total(fit.n.se, chain.n_chain_sd[ri], chain.n_step_sd[ri], slope[1], less(1)),
           cbar * total(fit.cbar_ns_per_mm3.se / cbar, chain.cbar_chain_sd_pct[ri] / 100,
-                       chain.cbar_step_sd_pct[ri] / 100, slope[2]),
+                       chain.cbar_step_sd_pct[ri] / 100, slope[2], less(2)),
           shared ? std::hypot(std::sqrt(m_variance), chain.m_step_sd[ri])
-                 : std::sqrt(fit.m.se * fit.m.se + chain.m_chain_sd[ri] * chain.m_chain_sd[ri] +
+                 : std::sqrt((hold ? held : v) + chain.m_chain_sd[ri] * chain.m_chain_sd[ri] +
                              chain.m_step_sd[ri] * chain.m_step_sd[ri])};
 }
 

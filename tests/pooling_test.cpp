@@ -1,9 +1,11 @@
 // Partial pooling of per-step fits: a hand-computed case, a large random-effects draw, misuse,
-// and through the whole chain on simulated sessions whose tissue is fixed or varies by step.
+// and through the whole chain on simulated sessions whose tissue is fixed or varies by step; and
+// a step's m held within its range (within_m_range).
 #include "gaitmon/pooling.hpp"
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -166,6 +168,75 @@ TEST(Pooling, ASharedErrorInASharedMMovesTheOthersThroughTheSlope) {
   EXPECT_NEAR(with.covariance[3][3], 0.0025 + m2, 1e-15);
   EXPECT_NEAR(with.covariance[2][3], 2.0 * m2, 1e-15);
   EXPECT_NEAR(with.covariance[0][2], 0.2 * m2, 1e-15);
+}
+
+// The bound within_m_range holds m's variance to: with the truth anywhere in [lo, hi] (uniform),
+// the mean squared error of an estimate x in the range is ((x - lo)^3 + (hi - x)^3) / (3 range),
+// largest at either end, range^2 / 3. Checked by quadrature (midpoint rule) over the truth.
+TEST(WithinMRange, TheRangesBoundIsTheLargestRmsErrorOfAnEstimateInIt) {
+  const double lo = 0.82;
+  const double hi = 1.38;
+  const double range = hi - lo;
+  double largest = 0.0;
+  for (int i = 0; i <= 56; ++i) {
+    const double x = lo + range * i / 56.0;
+    constexpr int kNodes = 20000;
+    double sum = 0.0;
+    for (int k = 0; k < kNodes; ++k) {
+      const double truth = lo + range * (k + 0.5) / kNodes;
+      sum += (x - truth) * (x - truth);
+    }
+    const double mse = sum / kNodes;
+    EXPECT_NEAR(mse, (std::pow(x - lo, 3) + std::pow(hi - x, 3)) / (3.0 * range), 1e-9);
+    largest = std::max(largest, mse);
+  }
+  EXPECT_NEAR(largest, range * range / 3.0, 1e-9);
+}
+
+// m's variance above the range's is held at range^2 / 3; what the others know given m (the Schur
+// complement) and their slopes on m stay, so their share of m's variance shrinks with it and the
+// covariance stays positive semi-definite. Within the range, or at a shared m, nothing changes.
+TEST(WithinMRange, HoldsMsVarianceAndKeepsTheOthersGivenMAndTheirSlopes) {
+  MaterialBounds bounds = kWide;
+  bounds.lower[3] = 0.82;
+  bounds.upper[3] = 1.38;
+  const double largest = 0.56 * 0.56 / 3.0;
+  MaterialEstimate e;
+  e.value = {std::log(0.2), 0.3, std::log(0.01), 1.38};
+  e.covariance = diagonal(0.0009, 0.0004, 0.3, 0.6);
+  e.covariance[0][1] = e.covariance[1][0] = 0.0003;
+  e.covariance[0][3] = e.covariance[3][0] = 0.004;
+  e.covariance[2][3] = e.covariance[3][2] = 0.35;
+  e.covariance[1][3] = e.covariance[3][1] = -0.002;
+  const MaterialEstimate held = within_m_range(e, bounds);
+  EXPECT_EQ(held.value, e.value);
+  EXPECT_NEAR(held.covariance[3][3], largest, 1e-15);
+  const auto& a = e.covariance;
+  const auto& b = held.covariance;
+  for (std::size_t p = 0; p < 3; ++p) {
+    EXPECT_NEAR(b[p][3] / b[3][3], a[p][3] / a[3][3], 1e-12) << p;
+    EXPECT_EQ(b[3][p], b[p][3]) << p;
+    for (std::size_t q = 0; q < 3; ++q) {
+      EXPECT_NEAR(b[p][q] - b[p][3] * b[q][3] / b[3][3], a[p][q] - a[p][3] * a[q][3] / a[3][3],
+                  1e-12)
+          << p << q;
+    }
+  }
+  // ln cbar, with a slope of 0.35 / 0.6 on m, keeps 0.3 - 0.35^2 / 0.6 given m.
+  EXPECT_NEAR(b[2][2], 0.3 - 0.35 * 0.35 / 0.6 + std::pow(0.35 / 0.6, 2) * largest, 1e-12);
+  Eigen::Matrix4d m;
+  for (std::size_t p = 0; p < 4; ++p)
+    for (std::size_t q = 0; q < 4; ++q)
+      m(static_cast<Eigen::Index>(p), static_cast<Eigen::Index>(q)) = b[p][q];
+  EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(m).eigenvalues().minCoeff(), 0.0);
+
+  MaterialEstimate within = e;
+  within.covariance[3][3] = 0.1;
+  within.covariance[2][3] = within.covariance[3][2] = 0.1;
+  EXPECT_EQ(within_m_range(within, bounds).covariance, within.covariance);
+  MaterialEstimate shared = e;
+  shared.slope_on_shared_m = MaterialVector{0.1, -0.2, 2.0, 1.0};
+  EXPECT_EQ(within_m_range(shared, bounds).covariance, shared.covariance);
 }
 
 // Steps fitted at one shared m, of variance s2, that agree (T = 0) with unequal diagonal

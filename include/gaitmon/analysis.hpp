@@ -211,11 +211,13 @@ std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimat
 /// against the session's other steps: its fit's covariance (material_estimate) with the
 /// measurement chain's error that every step of the region shares (with_shared_error, chain_sd;
 /// at a shared m that m's whole error reaches kbar, n and cbar through their slopes) and the
-/// step's own beyond its Jacobian's (step_sd, on each parameter's variance). The fit's own
-/// standard errors describe how the steps scatter and miss both (README, "How honest the
-/// standard errors are"). Nothing where the fit has no material estimate.
+/// step's own beyond its Jacobian's (step_sd, on each parameter's variance). At the step's own m
+/// its variance is first held within the range of m that `bounds` give (within_m_range). The
+/// fit's own standard errors describe how the steps scatter and miss both (README, "How honest
+/// the standard errors are"). Nothing where the fit has no material estimate.
 std::optional<MaterialParams> with_chain_error(const RegionFit& fit, Region region,
-                                               const PoolingSettings& pooling);
+                                               const PoolingSettings& pooling,
+                                               const FitBounds& bounds);
 
 /// The session-level fit per region (fit_region_session over the series of every step with
 /// contact in that region), the spread of the per-step fits and their pooling across steps (both

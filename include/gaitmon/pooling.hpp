@@ -86,6 +86,17 @@ PooledEstimates pool_steps(std::span<const MaterialEstimate> steps, const Materi
 /// slope_on_shared_m is set.
 std::optional<MaterialEstimate> material_estimate(const RegionFit& fit);
 
+/// `estimate` of a step at its own m with m's variance at most range^2 / 3, range = bounds.upper[3]
+/// - bounds.lower[3] (the fit's range of m), and kbar, n and cbar following m through their
+/// slopes on it: their covariance given m is kept, and m's share of theirs shrinks with m's.
+/// The fit holds m in its range, so against a truth anywhere in it the RMS error of any estimate
+/// is at most range / sqrt 3 (a truth uniform over the range, the estimate at an end); where one
+/// step leaves m undetermined the Jacobian's variance measures how flat the fit is along m, which
+/// is what leaves m at a bound, not how far a bounded m can err (README, "How honest the standard
+/// errors are"). Unchanged where m's variance is within it, and at a shared m
+/// (slope_on_shared_m set), whose variance is the session's.
+MaterialEstimate within_m_range(MaterialEstimate estimate, const MaterialBounds& bounds);
+
 /// `estimate` with sd[i]^2 added to its covariance's diagonal: an error of SD sd[i] in each
 /// parameter that every step shares (the measurement chain's, config [pooling]). The errors are
 /// taken as independent of each other, which the standard errors do not depend on. At a shared m

@@ -164,8 +164,9 @@ std::string pooled_columns(const std::optional<MaterialParams>& p) {
 
 // The step's own standard errors with the chain's shared error (with_chain_error), empty where
 // the fit has no material estimate.
-std::string total_se_columns(const RegionFit& fit, Region region, const PoolingSettings& pooling) {
-  const std::optional<MaterialParams> p = with_chain_error(fit, region, pooling);
+std::string total_se_columns(const RegionFit& fit, Region region, const Config& config) {
+  const std::optional<MaterialParams> p =
+      with_chain_error(fit, region, config.pooling, config.fit_bounds);
   if (!p) return ",,,";
   return fmt::format("{:.3g},{:.3g},{:.3g},{:.3g}", p->kbar_n_per_mm3.se, p->n.se,
                      p->cbar_ns_per_mm3.se, p->m.se);
@@ -173,7 +174,7 @@ std::string total_se_columns(const RegionFit& fit, Region region, const PoolingS
 
 // `analyses` in the order analyse_session was given them.
 std::string regions_csv(const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
-                        const PoolingSettings& pooling) {
+                        const Config& config) {
   std::string out =
       "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
       "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct,aspect_a_over_b,"
@@ -186,7 +187,7 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
       const RegionFit& f = r.fit;
       const std::string pooled_and_total =
           pooled_columns(session.regions[index_of(r.region)].pooled_per_step[si]) + "," +
-          total_se_columns(f, r.region, pooling);
+          total_se_columns(f, r.region, config);
       fmt::format_to(std::back_inserter(out), "{},{},{},{},{},{:.3f},{:.2f},", foot_name(s.foot),
                      s.step, region_name(r.region), status_text(f), r.frames, r.peak_force_n,
                      r.peak_area_mm2);
@@ -733,7 +734,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
 
   std::filesystem::create_directories(args.out_dir);
   outputs.add("steps.csv", steps_csv(steps));
-  outputs.add("regions.csv", regions_csv(analyses, session, config.pooling));
+  outputs.add("regions.csv", regions_csv(analyses, session, config));
   outputs.add("session.json",
               session_json(args, header, config, settings, steps, analyses, session, extended));
   if (args.report) {
