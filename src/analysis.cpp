@@ -327,12 +327,14 @@ MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool share
 PooledEstimates pool_region_steps(std::span<const MaterialEstimate> estimates, Region region,
                                   const Config& config) {
   std::vector<MaterialEstimate> own(estimates.begin(), estimates.end());
+  const MaterialBounds bounds = material_bounds(config.fit_bounds);
   for (MaterialEstimate& e : own) {
+    e = within_m_range(e, bounds);
     const bool shared_m = e.slope_on_shared_m.has_value();
     const MaterialVector sd = step_sd(config.pooling, region, shared_m);
     for (std::size_t p = 0; p < (shared_m ? 3 : 4); ++p) e.covariance[p][p] += sd[p] * sd[p];
   }
-  return pool_steps(own, material_bounds(config.fit_bounds));
+  return pool_steps(own, bounds);
 }
 
 std::optional<MaterialEstimate> pooled_mean_with_chain_error(const PooledEstimates& pooling,

@@ -640,6 +640,37 @@ TEST(PoolRegionSteps, WeighsEachStepWithItsOwnErrorBeyondItsJacobian) {
   }
 }
 
+// A step whose fit left m undetermined (variance 1) enters the pool with m's variance held at the
+// range's, 0.56^2 / 3, not the Jacobian's: with two steps of variance 0.05 beside it and no
+// between-step spread the pooled m is the mean weighted by 3 / 0.56^2, 20 and 20, worked here (the
+// heel has no steps' own SDs at each step's own m).
+TEST(PoolRegionSteps, HoldsEachStepsMWithinItsRangeBeforeItPools) {
+  const Config config = load_config(default_config_path());
+  const std::size_t ri = index_of(Region::Heel);
+  ASSERT_EQ(config.pooling.per_step.m_step_sd[ri], 0.0);
+  ASSERT_EQ(config.fit_bounds.m.lower, 0.82);
+  ASSERT_EQ(config.fit_bounds.m.upper, 1.38);
+  const double m[] = {1.3, 1.1, 1.0};
+  const double m_variance[] = {1.0, 0.05, 0.05};
+  std::vector<MaterialEstimate> steps;
+  for (std::size_t i = 0; i < 3; ++i) {
+    MaterialEstimate e;
+    e.value = {std::log(0.15), 0.3, std::log(0.01), m[i]};
+    e.covariance[0][0] = e.covariance[1][1] = e.covariance[2][2] = 0.01;
+    e.covariance[3][3] = m_variance[i];
+    steps.push_back(e);
+  }
+  const PooledEstimates pooled = pool_region_steps(steps, Region::Heel, config);
+  ASSERT_TRUE(pooled.pooled) << pooled.not_pooled;
+  ASSERT_EQ(pooled.between_step[3][3], 0.0);
+  const double held = 3.0 / (0.56 * 0.56);
+  EXPECT_NEAR(pooled.mean[3], (held * 1.3 + 20.0 * 1.1 + 20.0 * 1.0) / (held + 40.0), 1e-12);
+  EXPECT_NEAR(pooled.mean_covariance[3][3], 1.0 / (held + 40.0), 1e-12);
+  // With the Jacobian's variance the first step would hardly count.
+  const PooledEstimates as_given = pool_steps(steps, material_bounds(config.fit_bounds));
+  EXPECT_NEAR(as_given.mean[3], (1.3 + 20.0 * 1.1 + 20.0 * 1.0) / 41.0, 1e-12);
+}
+
 // with_chain_error against the delta method worked here: ln kbar's variance is (se_kbar / kbar)^2,
 // the chain's SD and the step's own add to each parameter's, and at a shared m that m's own
 // variance and its chain SD (not the step's own) reach the others through their slopes on it.

@@ -909,10 +909,11 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
   using PerRegion = std::array<double, kRegionCount>;
-  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.5, 6.5, 5.5, 4.5, 13.0, 102.5, 15.0}));
+  EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.5, 6.5, 5.5, 4.5, 10.5, 102.5, 18.5}));
   EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.065, 0.0, 0.075}));
-  EXPECT_EQ(p.per_step.cbar_chain_sd_pct, (PerRegion{13.5, 0.0, 16.0, 11.5, 12.0, 0.0, 0.0, 0.0}));
-  EXPECT_EQ(p.per_step.m_chain_sd, (PerRegion{0.06, 0.0, 0.045, 0.065, 0.075, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.cbar_chain_sd_pct,
+            (PerRegion{13.0, 21.0, 21.5, 12.0, 12.0, 25.0, 227.0, 29.5}));
+  EXPECT_EQ(p.per_step.m_chain_sd, (PerRegion{0.06, 0.085, 0.075, 0.07, 0.07, 0.165, 0.24, 0.155}));
   EXPECT_EQ(p.m_per_session.kbar_chain_sd_pct,
             (PerRegion{4.0, 6.5, 6.5, 6.0, 4.5, 9.0, 93.5, 17.5}));
   EXPECT_EQ(p.m_per_session.n_chain_sd,
@@ -921,9 +922,9 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
             (PerRegion{3.0, 14.5, 17.5, 0.0, 2.5, 0.0, 227.5, 17.5}));
   EXPECT_EQ(p.m_per_session.m_chain_sd,
             (PerRegion{0.06, 0.1, 0.145, 0.145, 0.16, 0.0, 0.215, 0.08}));
-  EXPECT_EQ(p.per_step.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 10.5, 7.5, 15.0, 0.0, 0.0}));
+  EXPECT_EQ(p.per_step.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 10.5, 7.5, 17.0, 0.0, 0.0}));
   EXPECT_EQ(p.per_step.n_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.07, 0.045, 0.0, 0.0, 0.0}));
-  EXPECT_EQ(p.per_step.cbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 18.5, 25.0, 114.5, 20.0, 0.0}));
+  EXPECT_EQ(p.per_step.cbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 18.5, 25.0, 111.5, 0.0, 0.0}));
   EXPECT_EQ(p.per_step.m_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.145, 0.16, 0.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.kbar_step_sd_pct, (PerRegion{0.0, 0.0, 0.0, 9.5, 6.0, 18.0, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.n_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.065, 0.035, 0.0, 0.0, 0.0}));
@@ -940,7 +941,7 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
        "pooling.m_per_session.cbar_chain_sd_pct.toe2", "must be in [0, 1000], got 1227.5"},
       {"PoolingSharedMMissing", kMain, erase_from_to("[pooling.m_per_session]", "[wire]"),
        "pooling.m_per_session", "missing"},
-      {"PoolingRegionMissing", kMain, replace("m_chain_sd", ", toes3_5 = 0.0", ""),
+      {"PoolingRegionMissing", kMain, replace("m_chain_sd", ", toes3_5 = 0.155", ""),
        "pooling.m_chain_sd.toes3_5", "missing"},
       {"PoolingTableMissing", kMain, erase_from_to("cbar_chain_sd_pct", "m_chain_sd"),
        "pooling.cbar_chain_sd_pct", "missing"},

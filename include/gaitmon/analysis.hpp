@@ -194,8 +194,9 @@ MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shar
 MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool shared_m);
 
 /// A region's steps' own estimates (material_estimate) pooled across the steps (pool_steps within
-/// the fit's bounds), each step's variances first taking its own error beyond its Jacobian's
-/// (step_sd): the pool weighs the steps by their errors against the tissue, and a posterior leans
+/// the fit's bounds), each step's m first held within its range (within_m_range) and its
+/// variances then taking its own error beyond its Jacobian's (step_sd): the pool weighs the steps
+/// by their errors against the tissue, and a posterior leans
 /// on its step no more than that error allows. At a shared m on kbar, n and cbar only: m's
 /// variance there is the session's, one for every step.
 PooledEstimates pool_region_steps(std::span<const MaterialEstimate> estimates, Region region,

@@ -73,8 +73,9 @@ struct ChainSamples {
   /// [region][parameter]: ln kbar, n, ln cbar, m.
   std::array<std::array<std::vector<ChainSample>, 4>, kRegionCount> pooled;
   /// The same for each step's own estimate (with_chain_error without the chain's SDs): its error,
-  /// its standard error from its fit (at a shared m with that m's own variance through the
-  /// slope), and the slope through which m's chain SD reaches it.
+  /// its standard error from its fit (at its own m held within m's range, within_m_range; at a
+  /// shared m with that m's own variance through the slope), and the slope through which m's
+  /// chain SD reaches it.
   std::array<std::array<std::vector<ChainSample>, 4>, kRegionCount> steps;
   /// [region][0 kbar, 1 cbar]: ln(right / left), whose truth is 0.
   std::array<std::array<std::vector<ChainSample>, 2>, kRegionCount> feet;
