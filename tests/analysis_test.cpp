@@ -780,9 +780,9 @@ std::array<double, 4> z_against(const std::array<const Estimate*, 4>& e,
 // SDs did not come from (sizes 37-38, 41-42, 45-46; seeds 301, 302; 10 s). So does that of the
 // pooled posteriors (pooled_per_step), which lean on the pooled mean and carry its chain SD.
 // Measured, ln kbar / n / ln cbar / m over the 510 region-steps of each:
-// - each step at its own m: with the chain and the step's own 0.87 / 0.85 / 0.89 / 0.88 (0.72 /
+// - each step at its own m: with the chain and the step's own 0.87 / 0.85 / 0.89 / 0.87 (0.72 /
 //   0.71 for cbar and m before m's variance was held within its range, stop 63), the fit's own
-//   1.57 / 1.55 / 1.07 / 1.13; pooled 0.89 / 0.85 / 0.74 / 0.75;
+//   1.57 / 1.55 / 1.07 / 1.13; pooled 0.90 / 0.86 / 0.93 / 0.93 (0.89 / 0.85 / 0.74 / 0.75);
 // - at one m per session: with the chain and the step's own 0.87 / 0.85 / 0.86 / 0.84, the fit's
 //   own 1.52 / 1.52 / 9.31 / 2.62 (cbar's and m's leave out that m's error, which every step
 //   shares); pooled 0.83 / 0.81 / 0.87 / 0.86 over 459.
@@ -790,7 +790,7 @@ std::array<double, 4> z_against(const std::array<const Estimate*, 4>& e,
 // ([pooling] *_step_sd) take their kbar and n from 1.41 / 1.39 to 0.95 / 0.95 at each step's own
 // m (at one m per session from 1.23 / 1.25 to 0.92 / 0.93). The pool weighs each step with them
 // too (pool_region_steps), which takes the metatarsals' pooled posteriors at each step's own m
-// from 1.56 / 1.49 / 1.33 / 1.46 to 1.01 / 0.99 / 0.98 / 0.97 (204 region-steps).
+// from 1.57 / 1.50 / 1.34 / 1.48 to 1.01 / 0.99 / 0.97 / 0.98 (204 region-steps).
 TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgainstTheTissue) {
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-step-total-se");
