@@ -1,15 +1,21 @@
 // The chain's SDs measured on simulated sessions: the solver on cases with a closed form, the
 // design's sessions, the whole measurement on a few sessions under the sanitizers, and the shipped
-// [pooling] and [asymmetry] tables reproduced from the designs the config and README name.
+// [pooling] and [asymmetry] tables reproduced from the designs the config and README name and
+// shown as they are in the README.
 #include "gaitmon/calibration.hpp"
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -237,6 +243,80 @@ void expect_shipped(const std::string& table, const std::array<double, kRegionCo
   std::printf("  (shipped/measured)\n");
   for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
     EXPECT_NEAR(shipped[ri], expected[ri], 1e-9) << table << " " << region_name(kRegions[ri]);
+  }
+}
+
+// One of the README's tables of the shipped SDs: the `occurrence`-th (from 0) whose header starts
+// with `header`, each row's label and the first number of each region's cell (what follows it in
+// brackets is an earlier stop's value). Empty where the table is not there as expected.
+std::vector<std::array<double, kRegionCount>> readme_table(const std::string& readme,
+                                                           const std::string& header,
+                                                           int occurrence,
+                                                           const std::vector<std::string>& labels) {
+  std::istringstream in(readme);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) {
+    lines.push_back(line.substr(std::min(line.find_first_not_of(' '), line.size())));
+  }
+  std::size_t at = 0;
+  for (int seen = -1; at < lines.size(); ++at) {
+    if (lines[at].starts_with(header) && ++seen == occurrence) break;
+  }
+  if (at + 1 + labels.size() >= lines.size()) return {};
+  std::vector<std::array<double, kRegionCount>> rows;
+  for (std::size_t k = 0; k < labels.size(); ++k) {
+    std::vector<std::string> cells;
+    std::istringstream row(lines[at + 2 + k]);
+    for (std::string cell; std::getline(row, cell, '|');) cells.push_back(cell);
+    if (cells.size() != kRegionCount + 2 || cells[1] != " " + labels[k] + " ") return {};
+    std::array<double, kRegionCount> values{};
+    for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+      const char* text = cells[ri + 2].c_str();
+      char* end = nullptr;
+      values[ri] = std::strtod(text, &end);
+      if (end == text) return {};
+    }
+    rows.push_back(values);
+  }
+  return rows;
+}
+
+// The README shows the shipped [pooling] and [asymmetry] chain SDs as tables ("How honest the
+// standard errors are", "Left against right"); a change of the config's tables that leaves them
+// behind fails here.
+TEST(Calibration, TheReadmesTablesOfTheShippedSdsAreTheConfigs) {
+  std::ifstream file(test::source_dir() / "README.md");
+  ASSERT_TRUE(file) << "no README.md in " << test::source_dir();
+  const std::string readme{std::istreambuf_iterator<char>(file), {}};
+  const Config config = load_config(default_config_path());
+  const std::string kChainHeader = "| | heel | midfoot posterior | midfoot anterior | met1_2 |";
+  const std::vector<std::string> kChainLabels = {"kbar (%)", "n", "cbar (%)", "m"};
+  for (const bool shared_m : {false, true}) {
+    SCOPED_TRACE(table_key(shared_m, "pooling", "*_chain_sd"));
+    const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+    const auto rows = readme_table(readme, kChainHeader, shared_m ? 1 : 0, kChainLabels);
+    ASSERT_EQ(rows.size(), 4U) << "the README's table of the chain's SDs is not where expected";
+    const std::array<const std::array<double, kRegionCount>*, 4> shipped = {
+        &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
+    for (std::size_t k = 0; k < 4; ++k) {
+      for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+        EXPECT_EQ(rows[k][ri], (*shipped[k])[ri])
+            << kChainLabels[k] << " " << region_name(kRegions[ri]);
+      }
+    }
+  }
+  for (const bool shared_m : {false, true}) {
+    SCOPED_TRACE(table_key(shared_m, "asymmetry", "*_pair_sd_pct"));
+    const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    const auto rows = readme_table(
+        readme,
+        shared_m ? "| SD of 100 ln(right / left), at one m |" : "| SD of 100 ln(right / left) |", 0,
+        {"kbar", "cbar"});
+    ASSERT_EQ(rows.size(), 2U) << "the README's table of the pair's SDs is not where expected";
+    for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+      EXPECT_EQ(rows[0][ri], pair.kbar_pair_sd_pct[ri]) << "kbar " << region_name(kRegions[ri]);
+      EXPECT_EQ(rows[1][ri], pair.cbar_pair_sd_pct[ri]) << "cbar " << region_name(kRegions[ri]);
+    }
   }
 }
 
