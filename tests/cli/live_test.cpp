@@ -6,7 +6,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 
-#include <CLI/CLI.hpp>
+#include <CLI/Error.hpp>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
