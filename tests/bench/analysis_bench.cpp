@@ -1,4 +1,5 @@
-// The per-step analysis of one foot-step (warm ellipse cache, 8 region fits; target 2 ms),
+// The per-step analysis of one foot-step (warm ellipse cache, 8 region fits; target 2 ms), on
+// the centre raster with the footprint and on the coverage raster with footprint-mean,
 // `gaitmon analyze` on a 10-minute two-foot simulated session (target 3 s), and the live monitor's
 // pools of every region over its window of steps (GAITMON_TISSUE, at most ten a second).
 #include <benchmark/benchmark.h>
@@ -29,26 +30,30 @@ const gaitmon::Config& config() {
   return c;
 }
 
-fs::path simulated(double duration_s) {
-  const fs::path csv =
-      bench_dir() / ("walk-" + std::to_string(static_cast<int>(duration_s)) + ".csv");
+fs::path simulated(double duration_s,
+                   gaitmon::Rasterisation raster = gaitmon::Rasterisation::CellCentre) {
+  const fs::path csv = bench_dir() / ("walk-" + std::to_string(static_cast<int>(duration_s)) + "-" +
+                                      std::string(gaitmon::rasterisation_name(raster)) + ".csv");
   if (!fs::exists(csv)) {
     gaitmon::SimulationOptions options;
     options.size = gaitmon::InsoleSize::S37_38;
     options.duration_s = duration_s;
     options.seed = 7;
+    options.rasterisation = raster;
     gaitmon::simulate_session(config(), options, csv, fs::path(csv).replace_extension(".json"));
   }
   return csv;
 }
 
-void BM_AnalyseStep(benchmark::State& state) {
+void BM_AnalyseStep(benchmark::State& state, gaitmon::Rasterisation raster,
+                    gaitmon::AreaSource area) {
   std::vector<gaitmon::Step> steps;
-  gaitmon::segment_session(simulated(30.0), config(), [&](gaitmon::Step&& step) {
+  gaitmon::segment_session(simulated(30.0, raster), config(), [&](gaitmon::Step&& step) {
     if (step.status == gaitmon::StepStatus::Ok) steps.push_back(std::move(step));
   });
   const gaitmon::InsoleLayout layout(config().insole(gaitmon::InsoleSize::S37_38), config().sensor);
-  const gaitmon::AnalysisSettings settings;
+  gaitmon::AnalysisSettings settings;
+  settings.area = area;
   gaitmon::ContactEllipseCache cache;
   for (const auto& step : steps) gaitmon::analyse_step(step, layout, config(), settings, &cache);
   std::size_t i = 0;
@@ -59,7 +64,14 @@ void BM_AnalyseStep(benchmark::State& state) {
   }
   state.counters["steps_cycled"] = static_cast<double>(steps.size());
 }
-BENCHMARK(BM_AnalyseStep)->Unit(benchmark::kMillisecond)->Repetitions(5);
+BENCHMARK_CAPTURE(BM_AnalyseStep, centre_raster_footprint, gaitmon::Rasterisation::CellCentre,
+                  gaitmon::AreaSource::Footprint)
+    ->Unit(benchmark::kMillisecond)
+    ->Repetitions(5);
+BENCHMARK_CAPTURE(BM_AnalyseStep, coverage_raster_footprint_mean, gaitmon::Rasterisation::Coverage,
+                  gaitmon::AreaSource::FootprintMean)
+    ->Unit(benchmark::kMillisecond)
+    ->Repetitions(5);
 
 // What the monitor's tissue thread does for one report: every region's steps pooled over a full
 // window ([monitor] tissue_window_steps of the 10-minute walk's steps, both feet).
