@@ -150,15 +150,16 @@ void require_aspect(double aspect) {
 constexpr int kColumns = 8;
 
 /// The clipped paraboloid p = pmax max(0, 1 - u^2 - v^2), u = (x - x0) / rA, v = (y - y0) / rB,
-/// rB = rA / aspect, averaged over each region cell, against the cells' readings: the residuals
-/// and their Jacobian in pmax, x0, y0, rA for ceres::TinySolver.
-class CellMeanCap {
+/// rB = rA / aspect, as each region cell reads it (at its centre or averaged over its area),
+/// against the cells' readings: the residuals and their Jacobian in pmax, x0, y0, rA for
+/// ceres::TinySolver.
+class CellCap {
  public:
   using Scalar = double;
   enum { NUM_RESIDUALS = Eigen::Dynamic, NUM_PARAMETERS = 4 };
 
-  CellMeanCap(std::span<const LoadedCell> cells, CellSize size, double aspect)
-      : cells_(cells), size_(size), aspect_(aspect) {}
+  CellCap(std::span<const LoadedCell> cells, CellSize size, double aspect, CellReading reading)
+      : cells_(cells), size_(size), aspect_(aspect), reading_(reading) {}
 
   int NumResiduals() const { return static_cast<int>(cells_.size()); }
 
@@ -171,7 +172,8 @@ class CellMeanCap {
     if (!(std::abs(rA) > 0.0) || !std::isfinite(rA)) return false;
     const std::size_t n = cells_.size();
     for (std::size_t i = 0; i < n; ++i) {
-      const Mean m = cell_mean(cells_[i], x0, y0, rA, rB);
+      const Reading m = reading_ == CellReading::Mean ? cell_mean(cells_[i], x0, y0, rA, rB)
+                                                      : at_centre(cells_[i], x0, y0, rA, rB);
       residuals[i] = pmax * m.value - cells_[i].load;
       if (jacobian != nullptr) {
         jacobian[i] = m.value;
@@ -184,12 +186,20 @@ class CellMeanCap {
   }
 
  private:
-  /// The cell's mean of max(0, 1 - u^2 - v^2) and its derivatives in x0, y0, rA.
-  struct Mean {
+  /// The cell's reading of max(0, 1 - u^2 - v^2) and its derivatives in x0, y0, rA.
+  struct Reading {
     double value = 0.0, d_x0 = 0.0, d_y0 = 0.0, d_rA = 0.0;
   };
 
-  Mean cell_mean(const LoadedCell& c, double x0, double y0, double rA, double rB) const {
+  static Reading at_centre(const LoadedCell& c, double x0, double y0, double rA, double rB) {
+    const double uc = (c.x_mm - x0) / rA;
+    const double vc = (c.y_mm - y0) / rB;
+    const double s = uc * uc + vc * vc;
+    if (s >= 1.0) return {};
+    return {1.0 - s, 2.0 * uc / rA, 2.0 * vc / rB, 2.0 * s / rA};
+  }
+
+  Reading cell_mean(const LoadedCell& c, double x0, double y0, double rA, double rB) const {
     const double half_u = 0.5 * size_.width_mm / std::abs(rA);
     const double half_v = 0.5 * size_.height_mm / std::abs(rB);
     const double uc = (c.x_mm - x0) / rA;
@@ -209,7 +219,7 @@ class CellMeanCap {
     // Along a column at u the cap is 1 - u^2 - v^2 between v = +-sqrt(1 - u^2), and its integral
     // over the cell's span [va, vb] and those of its derivatives are closed forms; the rim adds
     // nothing to the derivatives, as the cap is zero there.
-    Mean m;
+    Reading m;
     const double v_lo = vc - half_v;
     const double v_hi = vc + half_v;
     for (int a = 0; a < kColumns; ++a) {
@@ -239,6 +249,7 @@ class CellMeanCap {
   std::span<const LoadedCell> cells_;
   CellSize size_;
   double aspect_;
+  CellReading reading_;
 };
 
 /// pmax, x0, y0, rA to start the cell-mean fit from: the four-term fit's cap over the cells at
@@ -323,9 +334,8 @@ std::optional<double> footprint_area_unthresholded_mm2(std::span<const LoadedCel
   return area;
 }
 
-std::optional<double> footprint_area_cell_mean_mm2(std::span<const LoadedCell> region_cells,
-                                                   CellSize size, double aspect,
-                                                   double threshold_bits) {
+std::optional<CellCapFit> fit_cell_cap(std::span<const LoadedCell> region_cells, CellSize size,
+                                       double aspect, double threshold_bits, CellReading reading) {
   require_cell_size(size);
   require_aspect(aspect);
   if (!centroid(region_cells)) return std::nullopt;
@@ -335,22 +345,31 @@ std::optional<double> footprint_area_cell_mean_mm2(std::span<const LoadedCell> r
   }
   if (active.size() < 4) return std::nullopt;
   Eigen::Vector4d x = cell_mean_start(active, size, aspect);
-  const CellMeanCap cap(region_cells, size, aspect);
-  ceres::TinySolver<CellMeanCap> solver;
+  const CellCap cap(region_cells, size, aspect, reading);
+  ceres::TinySolver<CellCap> solver;
   solver.options.max_num_iterations = 100;
   // Millimetre-scale geometry: these stop well below a micrometre of change in the centre and rA.
   solver.options.gradient_tolerance = 1e-10;
   solver.options.parameter_tolerance = 1e-9;
   solver.options.function_tolerance = 1e-10;
   const auto& summary = solver.Solve(cap, &x);
-  if (summary.status == ceres::TinySolver<CellMeanCap>::HIT_MAX_ITERATIONS) return std::nullopt;
+  if (summary.status == ceres::TinySolver<CellCap>::HIT_MAX_ITERATIONS) return std::nullopt;
   if (!x.allFinite() || !(x[0] > 0.0)) return std::nullopt;
   const double area = std::numbers::pi * x[3] * x[3] / aspect;
   const double sensor_area = static_cast<double>(active.size()) * size.width_mm * size.height_mm;
   if (!(area >= kMinAreaOfSensorArea * sensor_area && area <= kMaxAreaOfSensorArea * sensor_area)) {
     return std::nullopt;
   }
-  return area;
+  // TinySolver's cost is half the sum of squares.
+  return CellCapFit{area, 2.0 * summary.final_cost, static_cast<int>(region_cells.size())};
+}
+
+std::optional<double> footprint_area_cell_mean_mm2(std::span<const LoadedCell> region_cells,
+                                                   CellSize size, double aspect,
+                                                   double threshold_bits) {
+  const auto fit = fit_cell_cap(region_cells, size, aspect, threshold_bits, CellReading::Mean);
+  if (!fit) return std::nullopt;
+  return fit->area_mm2;
 }
 
 std::optional<double> shared_aspect(std::span<const Footprint> footprints) {

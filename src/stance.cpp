@@ -240,4 +240,92 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
   return series;
 }
 
+CellReadingEvidence& CellReadingEvidence::operator+=(const CellReadingEvidence& other) {
+  frames += other.frames;
+  mean_better += other.mean_better;
+  cells += other.cells;
+  centre_residual_ss += other.centre_residual_ss;
+  mean_residual_ss += other.mean_residual_ss;
+  return *this;
+}
+
+std::optional<CellReading> CellReadingEvidence::favoured() const {
+  // A reading that is the insole's own fits every large footprint closely and the other only
+  // where noise hides the rim; a split says neither fits (a pressure that is no cap).
+  constexpr int kMinFrames = 10;
+  if (frames < kMinFrames) return std::nullopt;
+  if (4 * mean_better >= 3 * frames && mean_residual_ss < centre_residual_ss) {
+    return CellReading::Mean;
+  }
+  if (4 * (frames - mean_better) >= 3 * frames && centre_residual_ss < mean_residual_ss) {
+    return CellReading::Centre;
+  }
+  return std::nullopt;
+}
+
+CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& layout) {
+  const std::size_t sensors = layout.sensor_count();
+  if (step.sensor_zero_bits.size() != sensors) {
+    throw std::invalid_argument("cell_reading_evidence: the step's zero has " +
+                                std::to_string(step.sensor_zero_bits.size()) +
+                                " sensors, the layout " + std::to_string(sensors));
+  }
+  const CellSize cell{layout.geometry().width_mm, layout.geometry().height_mm};
+  const double threshold_bits = step.adaptive_threshold_bits;
+  const auto zeroed = [&](const Frame& frame, std::size_t i) {
+    return static_cast<double>(frame.bits[i]) - step.sensor_zero_bits[i];
+  };
+  CellReadingEvidence evidence;
+  for (Region region : kRegions) {
+    const auto& members = layout.region_sensors(region);
+    const Frame* peak = nullptr;
+    double peak_bits = 0.0;
+    for (const Frame& frame : step.stance) {
+      if (frame.bits.size() != sensors) {
+        throw std::invalid_argument("cell_reading_evidence: a frame has " +
+                                    std::to_string(frame.bits.size()) + " sensors, the layout " +
+                                    std::to_string(sensors));
+      }
+      double bits = 0.0;
+      int active = 0;
+      for (std::size_t i : members) {
+        const double r = zeroed(frame, i);
+        if (r >= threshold_bits && r > 0.0) {
+          bits += r;
+          ++active;
+        }
+      }
+      if (active >= CellReadingEvidence::kMinEvidenceCells && bits > peak_bits) {
+        peak = &frame;
+        peak_bits = bits;
+      }
+    }
+    if (peak == nullptr) continue;
+    std::vector<LoadedCell> all;
+    std::vector<LoadedCell> loaded;
+    std::vector<CellCentre> unloaded;
+    for (std::size_t i : members) {
+      const Sensor& s = layout.sensor(i);
+      const double r = zeroed(*peak, i);
+      all.push_back({s.grid_x_mm, s.grid_y_mm, r});
+      if (r >= threshold_bits && r > 0.0) {
+        loaded.push_back({s.grid_x_mm, s.grid_y_mm, r});
+      } else {
+        unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
+      }
+    }
+    const auto free = free_footprint(loaded, cell, unloaded);
+    const double aspect = free ? free->aspect : layout.region_box_aspect(region);
+    const auto centre = fit_cell_cap(all, cell, aspect, threshold_bits, CellReading::Centre);
+    const auto mean = fit_cell_cap(all, cell, aspect, threshold_bits, CellReading::Mean);
+    if (!centre || !mean) continue;
+    ++evidence.frames;
+    evidence.mean_better += mean->residual_ss < centre->residual_ss ? 1 : 0;
+    evidence.cells += mean->cells;
+    evidence.centre_residual_ss += centre->residual_ss;
+    evidence.mean_residual_ss += mean->residual_ss;
+  }
+  return evidence;
+}
+
 }  // namespace gaitmon

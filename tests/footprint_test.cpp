@@ -417,6 +417,55 @@ TEST(Footprint, TheCellMeanFitNeedsFourLoadedCells) {
                std::invalid_argument);
 }
 
+// Each reading's cap fits the cells that read so down to their noise (0.5 bits and rounding to
+// whole bits: RMS about 0.58) and recovers the area, and fits the cells that read the other way
+// with at least twice that residual at the simulator's peak readings (100-140 bits): what
+// cell_reading_evidence weighs.
+TEST(Footprint, EachReadingFitsItsOwnCellsToTheirNoiseAndTheOthersWorse) {
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> noise(0.0, 0.5);
+  const CellSize cell{kW, kH};
+  const double threshold = 4.0;
+  double smallest_ratio = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 12; ++k) {
+    const double rA = 15.0 + 0.7 * k;
+    const double rB = rA / 0.6;
+    const double cx = 29.0 + 0.31 * k;
+    const double cy = 44.0 + 0.57 * k;
+    const double truth = kPi * rA * rB;
+    for (const CellReading reading : {CellReading::Centre, CellReading::Mean}) {
+      auto cells = reading == CellReading::Mean ? mean_raster(cx, cy, rA, rB, 120.0, 9, 7)
+                                                : raster(cx, cy, rA, rB, 120.0, 9, 7);
+      if (k == 0) {
+        const auto exact = fit_cell_cap(cells, cell, 0.6, threshold, reading);
+        ASSERT_TRUE(exact.has_value());
+        // The cell mean's rule of eight columns against the test's 200 x 200 points.
+        EXPECT_LT(exact->residual_ss, 0.05)
+            << "exact readings, reading " << static_cast<int>(reading);
+        EXPECT_NEAR(exact->area_mm2 / truth, 1.0, 0.005);
+      }
+      for (LoadedCell& c : cells) c.load = std::round(c.load + noise(rng));
+      const auto own = fit_cell_cap(cells, cell, 0.6, threshold, reading);
+      const CellReading other_reading =
+          reading == CellReading::Mean ? CellReading::Centre : CellReading::Mean;
+      const auto other = fit_cell_cap(cells, cell, 0.6, threshold, other_reading);
+      ASSERT_TRUE(own && other) << k;
+      ASSERT_EQ(own->cells, 63);
+      const double own_rms = std::sqrt(own->residual_ss / own->cells);
+      const double other_rms = std::sqrt(other->residual_ss / other->cells);
+      EXPECT_LT(own_rms, 0.75) << k;
+      EXPECT_GT(other_rms, 2.0 * own_rms) << k;
+      smallest_ratio = std::min(smallest_ratio, other_rms / own_rms);
+      EXPECT_NEAR(own->area_mm2 / truth, 1.0, 0.04) << k;
+      if (reading == CellReading::Mean) {
+        EXPECT_EQ(own->area_mm2, *footprint_area_cell_mean_mm2(cells, cell, 0.6, threshold));
+      }
+    }
+  }
+  std::printf("the other reading's residual RMS over the own one's: at least %.2f\n",
+              smallest_ratio);
+}
+
 TEST(Footprint, OneRowOrTooFewCellsDoNotDetermineIt) {
   EXPECT_FALSE(footprint_area_at_aspect_mm2(sampled_cap(31.0, 0.0, 40.0, 12.0, 60.0, 9, 1),
                                             CellSize{kW, kH}, 40.0 / 12.0)

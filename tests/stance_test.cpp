@@ -1,4 +1,5 @@
-// Per-region force, area and ellipse of a hand-made stance on the shipped 37-38 layout.
+// Per-region force, area and ellipse of a hand-made stance on the shipped 37-38 layout, and what
+// simulated steps say of how their cells read.
 #include "gaitmon/stance.hpp"
 
 #include <gtest/gtest.h>
@@ -9,7 +10,9 @@
 #include <numbers>
 #include <vector>
 
+#include "gaitmon/batch.hpp"
 #include "gaitmon/crosstalk.hpp"
+#include "gaitmon/simulator.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -408,6 +411,80 @@ TEST_F(StanceTest, FootprintsThatDisagreeLeaveTheFrameWithoutOne) {
   EXPECT_GT(*all / *above, 1.5);
   EXPECT_FALSE(series.at(1, Region::Heel).footprint_area_mm2.has_value());
   EXPECT_TRUE(series.at(0, Region::Heel).footprint_area_mm2.has_value());
+}
+
+// The simulator's two rasters are the two ways a cell can read: over a session's steps the
+// evidence names the one each session was made with, by nearly every region-frame. Sizes 35-36
+// and 45-46, whose cells are the smallest and the largest against the contacts.
+TEST_F(StanceTest, TheCellsReadingIsTheOneTheSessionWasRasterisedWith) {
+  const auto dir = test::scratch_dir("stance_cell_reading");
+  for (const InsoleSize size : {InsoleSize::S35_36, InsoleSize::S45_46}) {
+    const InsoleLayout layout(config_.insole(size), config_.sensor);
+    for (const Rasterisation raster : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
+      SimulationOptions options;
+      options.size = size;
+      options.duration_s = 8.0;
+      options.seed = 21;
+      options.rasterisation = raster;
+      const auto csv = dir / (std::string(insole_size_name(size)) + "-" +
+                              std::string(rasterisation_name(raster)) + ".csv");
+      simulate_session(config_, options, csv,
+                       std::filesystem::path(csv).replace_extension(".json"));
+      CellReadingEvidence evidence;
+      segment_session(csv, config_, [&](Step&& step) {
+        if (step.status == StepStatus::Ok) evidence += cell_reading_evidence(step, layout);
+      });
+      const bool mean = raster == Rasterisation::Coverage;
+      std::printf("%s, %s raster: averaging cells fit %d of %d region-frames better\n",
+                  std::string(insole_size_name(size)).c_str(),
+                  std::string(rasterisation_name(raster)).c_str(), evidence.mean_better,
+                  evidence.frames);
+      ASSERT_GE(evidence.frames, 30);
+      EXPECT_EQ(evidence.favoured(), mean ? CellReading::Mean : CellReading::Centre);
+      const int wins = mean ? evidence.mean_better : evidence.frames - evidence.mean_better;
+      EXPECT_GE(wins, 0.9 * evidence.frames);
+    }
+  }
+}
+
+// The reading is favoured only by three quarters of ten frames or more, and only where its summed
+// residual is the smaller too.
+TEST(CellReadingEvidence, FavoursAReadingOnlyByThreeQuartersOfTenFrames) {
+  CellReadingEvidence e;
+  e.frames = 9;
+  e.mean_better = 9;
+  e.centre_residual_ss = 100.0;
+  e.mean_residual_ss = 10.0;
+  EXPECT_FALSE(e.favoured().has_value());
+  e.frames = 12;
+  EXPECT_EQ(e.favoured(), CellReading::Mean);
+  e.mean_better = 8;  // two thirds
+  EXPECT_FALSE(e.favoured().has_value());
+  e.mean_better = 3;  // the centre's 9 of 12, but its summed residual is the larger
+  EXPECT_FALSE(e.favoured().has_value());
+  e.mean_residual_ss = 200.0;
+  EXPECT_EQ(e.favoured(), CellReading::Centre);
+  CellReadingEvidence sum;
+  sum += e;
+  sum += e;
+  EXPECT_EQ(sum.frames, 24);
+  EXPECT_EQ(sum.mean_better, 6);
+  EXPECT_EQ(sum.mean_residual_ss, 400.0);
+}
+
+// One hand-made heel cap read at the cells' centres: one region-frame, which the reading at the
+// centres fits better, too few to favour either; a zero of the wrong size throws.
+TEST_F(StanceTest, OneStepsHeelIsOneRegionFrameOfEvidence) {
+  const auto bits = heel_cap(*layout_, 17.0 / 28.0, 28.0, 150.0);
+  Step step = make_step({bits, bits});
+  const CellReadingEvidence e = cell_reading_evidence(step, *layout_);
+  EXPECT_EQ(e.frames, 1);
+  EXPECT_EQ(e.mean_better, 0);
+  EXPECT_EQ(e.cells, static_cast<int>(layout_->region_sensors(Region::Heel).size()));
+  EXPECT_LT(e.centre_residual_ss, e.mean_residual_ss);
+  EXPECT_FALSE(e.favoured().has_value());
+  step.sensor_zero_bits.resize(3);
+  EXPECT_THROW(cell_reading_evidence(step, *layout_), std::invalid_argument);
 }
 
 TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {

@@ -124,6 +124,27 @@ std::optional<double> footprint_area_cell_mean_mm2(std::span<const LoadedCell> r
                                                    CellSize size, double aspect,
                                                    double threshold_bits);
 
+/// How a cell turns the pressure over it into its reading.
+enum class CellReading {
+  Centre,  ///< the pressure at the cell's centre (the simulator's centre raster)
+  Mean,    ///< the pressure averaged over the cell's area (the coverage raster)
+};
+
+/// The clipped paraboloid's fit to a region's cells as they read it.
+struct CellCapFit {
+  double area_mm2 = 0.0;
+  double residual_ss = 0.0;  ///< the sum of the squared residuals, in the readings' unit squared
+  int cells = 0;             ///< the residuals: every cell of the region
+};
+
+/// The fit of footprint_area_cell_mean_mm2 with each cell read as `reading` says, its residual
+/// sum of squares beside the area: with the same four free parameters over the same cells, the
+/// two readings' sums compare directly, and the smaller says how the insole's cells read
+/// (cell_reading_evidence, stance.hpp). CellReading::Mean gives footprint_area_cell_mean_mm2's
+/// area. nullopt and throws as footprint_area_cell_mean_mm2 does.
+std::optional<CellCapFit> fit_cell_cap(std::span<const LoadedCell> region_cells, CellSize size,
+                                       double aspect, double threshold_bits, CellReading reading);
+
 /// The aspect shared by a stance's footprints of one region: the mean of their log aspects
 /// weighted by their peak squared, or nullopt if there is none. Why: the ellipsoid's contact
 /// keeps the aspect A / B at every depth (eqs 5, 6), and a frame's own curvature ratio, from a

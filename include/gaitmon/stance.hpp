@@ -97,4 +97,28 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             CellMeanFootprint cell_mean = CellMeanFootprint::Skip,
                             const CrosstalkCorrection* crosstalk = nullptr);
 
+/// What steps say of how the insole's cells read the pressure (CellReading), which decides which
+/// footprint fits them (`--area footprint` or `footprint-mean`): both readings' fits
+/// (fit_cell_cap) to the same region-frames, each step's frame of a region's largest summed
+/// reading where at least kMinEvidenceCells cells reach the threshold.
+struct CellReadingEvidence {
+  static constexpr int kMinEvidenceCells = 8;
+  int frames = 0;       ///< region-frames where both readings' fits converged
+  int mean_better = 0;  ///< of them, those the averaging cells fit with the smaller residual
+  int cells = 0;        ///< the residuals summed over the frames (every cell of each region)
+  double centre_residual_ss = 0.0;  ///< summed over the frames, bits^2
+  double mean_residual_ss = 0.0;    ///< summed over the frames, bits^2
+
+  CellReadingEvidence& operator+=(const CellReadingEvidence& other);
+  /// The reading that fits better in at least three quarters of at least 10 frames, with the
+  /// smaller summed residual too; nullopt where the frames do not say (too few, or split).
+  std::optional<CellReading> favoured() const;
+};
+
+/// The evidence of one step, its readings zeroed with the step's zero and its threshold; the
+/// aspect of each frame's fits is that frame's free footprint's (the region's box where it has
+/// none). Throws std::invalid_argument as measure_stance does for a frame or zero of the wrong
+/// size.
+CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& layout);
+
 }  // namespace gaitmon

@@ -25,6 +25,7 @@
 #include "gaitmon/json.hpp"
 #include "gaitmon/pooling.hpp"
 #include "gaitmon/session.hpp"
+#include "gaitmon/stance.hpp"
 #include "output_file.hpp"
 #include "progress.hpp"
 #include "report_html.hpp"
@@ -79,7 +80,8 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
   } else if (seed8) {
     s.fit.smoothing = Smoothing::Seed;
   }
-  if (!args.area.empty()) {
+  // `auto` is resolved once the steps are in (run_analyze), from how the cells read.
+  if (!args.area.empty() && args.area != "auto") {
     s.area = *parse_area_source(args.area);
   } else if (seed8) {
     s.area = AreaSource::Ellipse;
@@ -373,10 +375,30 @@ nlohmann::json m_per_session_json(const RegionSessionAnalysis& r, bool asked) {
            "error, which pooling's se does"}};
 }
 
+std::string_view cell_reading_name(std::optional<CellReading> reading) {
+  if (!reading) return "undetermined";
+  return *reading == CellReading::Mean ? "mean" : "centre";
+}
+
+nlohmann::json cell_reading_json(const CellReadingEvidence& e) {
+  return {{"frames", e.frames},
+          {"mean_better_frames", e.mean_better},
+          {"centre_residual_rms_bits", residual_rms_bits(e.centre_residual_ss, e.cells)},
+          {"mean_residual_rms_bits", residual_rms_bits(e.mean_residual_ss, e.cells)},
+          {"favoured", cell_reading_name(e.favoured())},
+          {"note",
+           "each step's frame of each region's largest summed reading (at least " +
+               std::to_string(CellReadingEvidence::kMinEvidenceCells) +
+               " active cells) fitted with a paraboloid cap read at the cells' centres and "
+               "averaged over them; favoured: the reading with the smaller residual in at least "
+               "three quarters of at least 10 frames"}};
+}
+
 std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, const Config& config,
                          const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                          const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
-                         const std::optional<ExtendedModelFit>& extended) {
+                         const std::optional<ExtendedModelFit>& extended,
+                         const CellReadingEvidence& cells) {
   nlohmann::json j;
   j["session"] = args.session.string();
   j["insole_size"] = insole_size_name(header.insole_size);
@@ -386,6 +408,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                    {"fit", fit_mode_name(settings.fit.mode)},
                    {"smoothing", smoothing_name(settings.fit.smoothing)},
                    {"area", area_source_name(settings.area)},
+                   {"area_auto", args.area == "auto"},
                    {"end_rate", end_rate_name(settings.fit.end_rate)},
                    {"free_scale", settings.fit.free_scale},
                    {"m_per_session", args.m_per_session},
@@ -393,6 +416,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                    {"max_iterations", settings.fit.max_iterations},
                    {"bounds", bounds_json(config.fit_bounds)}};
   j["note"] = declared_note(settings.fit);
+  j["cell_reading"] = cell_reading_json(cells);
   j["nrmse_total_pct_across_steps"] = spread_json(session.nrmse_total_pct);
   nlohmann::json regions = nlohmann::json::object();
   for (const RegionSessionAnalysis& r : session.regions) {
@@ -514,6 +538,7 @@ void print_pooled(const SessionAnalysis& session, bool m_per_session) {
 void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
                    const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                    const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
+                   const CellReadingEvidence& cells,
                    const std::vector<std::filesystem::path>& written) {
   fmt::print(
       "{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{}{}{})\n",
@@ -597,6 +622,10 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
         "the area moves in whole cells and does not determine n, cbar and m there\n",
         fmt::join(on_ellipse, ", "));
   }
+  fmt::print("cells: {}\n", cell_reading_sentence(cells));
+  if (const std::string advice = cell_reading_advice(cells, settings.area); !advice.empty()) {
+    fmt::print("note: {}\n", advice);
+  }
   if (settings.fit.mode == FitMode::Identifiable) {
     fmt::print("note: C and d0 are declared (Appendix I means), kbar and cbar derived from them\n");
   } else {
@@ -637,7 +666,7 @@ std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const In
 void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   const Config config = load_global_config(global);
   if (!args.m_per_session_given) args.m_per_session = config.model.m_per_session;
-  const AnalysisSettings settings = settings_from(args);
+  AnalysisSettings settings = settings_from(args);
   const std::vector<std::string>& names = args.effects_given ? args.effects : config.model.effects;
   if (settings.fit.mode == FitMode::Seed8 || settings.fit.free_scale) {
     for (const std::string& name : names) {
@@ -668,6 +697,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   std::optional<ExtendedModelFit> extended;
   SharedExponents m_per_session;
   SessionAnalysis session;
+  CellReadingEvidence cells;
   {
     ProgressBar progress("analyze");
     auto on_step = [&](Step&& step) {
@@ -684,6 +714,20 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
                                    "right foot ({} steps found, all cut by the recording's ends "
                                    "or a gap, or longer than 60 s)",
                                    info.frames_per_foot[0], info.frames_per_foot[1], steps.size()));
+    }
+    // Per step on every core, summed in step order so that the sums are the same every run.
+    const auto cells_start = std::chrono::steady_clock::now();
+    std::vector<CellReadingEvidence> per_step(ok_steps.size());
+    detail::parallel_for(ok_steps.size(), [&](std::size_t i) {
+      per_step[i] = cell_reading_evidence(ok_steps[i], layout);
+    });
+    for (const CellReadingEvidence& e : per_step) cells += e;
+    spdlog::debug(
+        "weighed how the cells read in {:.2f} s",
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - cells_start).count());
+    if (args.area == "auto") {
+      settings.area =
+          cells.favoured() == CellReading::Mean ? AreaSource::FootprintMean : AreaSource::Footprint;
     }
     // The shares of the time measured on a 60-s session: one effect's fit takes about seven
     // times as long as all the steps' fits, and the session-level fits a twentieth of those.
@@ -735,8 +779,8 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   std::filesystem::create_directories(args.out_dir);
   outputs.add("steps.csv", steps_csv(steps));
   outputs.add("regions.csv", regions_csv(analyses, session, config));
-  outputs.add("session.json",
-              session_json(args, header, config, settings, steps, analyses, session, extended));
+  outputs.add("session.json", session_json(args, header, config, settings, steps, analyses, session,
+                                           extended, cells));
   if (args.report) {
     ReportInput input;
     input.session_name = args.session.filename().string();
@@ -748,10 +792,11 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
     input.analyses = analyses;
     input.session = &session;
     input.extended = extended ? &*extended : nullptr;
+    input.cells = &cells;
     outputs.add("report.html", render_report_html(input));
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
-  print_summary(args, header, settings, steps, analyses, session, written);
+  print_summary(args, header, settings, steps, analyses, session, cells, written);
   if (extended) {
     for (const EffectEstimate& e : extended->effects) {
       std::string params;
@@ -829,8 +874,9 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "area, as real insoles and simulate --rasterisation coverage do, where the "
                   "footprint over-reads and n comes out about twice the truth; slower) or "
                   "ellipse (the seed's contact ellipse of the active cells; the default with "
-                  "--fit seed8)")
-      ->check(CLI::IsMember({"footprint", "footprint-mean", "ellipse"}));
+                  "--fit seed8) or auto (footprint-mean where the readings fit cells that "
+                  "average the pressure better, else footprint; see the summary's cells line)")
+      ->check(CLI::IsMember({"footprint", "footprint-mean", "ellipse", "auto"}));
   sub->add_option("--end-rate", args->end_rate,
                   "Area rate at each contact's first and last frame: two-frame (default: the "
                   "difference to its neighbour, best for single steps) or second-order (three "

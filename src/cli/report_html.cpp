@@ -683,6 +683,40 @@ constexpr std::string_view kStyle =
 
 }  // namespace
 
+double residual_rms_bits(double residual_ss, int cells) {
+  return cells > 0 ? std::sqrt(residual_ss / cells) : 0.0;
+}
+
+std::string cell_reading_sentence(const CellReadingEvidence& e) {
+  if (e.frames == 0) {
+    return fmt::format("no region-frame with {} active cells to tell how the cells read",
+                       CellReadingEvidence::kMinEvidenceCells);
+  }
+  const std::optional<CellReading> favoured = e.favoured();
+  return fmt::format(
+      "a cap read at the cells' centres fits {} of {} region-frames better, averaged over them "
+      "{} (residual RMS {:.2f} against {:.2f} bits): {}",
+      e.frames - e.mean_better, e.frames, e.mean_better,
+      residual_rms_bits(e.centre_residual_ss, e.cells),
+      residual_rms_bits(e.mean_residual_ss, e.cells),
+      !favoured                        ? "undetermined"
+      : *favoured == CellReading::Mean ? "the cells average the pressure (footprint-mean)"
+                                       : "the cells read at their centres (footprint)");
+}
+
+std::string cell_reading_advice(const CellReadingEvidence& e, AreaSource area) {
+  const std::optional<CellReading> favoured = e.favoured();
+  if (favoured == CellReading::Mean && area == AreaSource::Footprint) {
+    return "the footprint over-reads averaging cells and n comes out about twice the truth; "
+           "--area footprint-mean (or auto) fits them";
+  }
+  if (favoured == CellReading::Centre && area == AreaSource::FootprintMean) {
+    return "footprint-mean is biased on cells that read at their centres and n comes out far "
+           "below the truth; --area footprint (or auto) fits them";
+  }
+  return {};
+}
+
 EffectPlacement place_effects(const ExtendedModelFit& fit) {
   EffectPlacement placed;
   for (const EffectEstimate& e : fit.effects) {
@@ -716,6 +750,12 @@ std::string render_report_html(const ReportInput& in) {
           ? ", one m per region over the session"
           : "",
       in.session->nrmse_total_pct.median, in.session->nrmse_total_pct.iqr());
+  if (in.cells != nullptr) {
+    const std::string advice = cell_reading_advice(*in.cells, in.settings->area);
+    fmt::format_to(std::back_inserter(out), "<p>How the cells read: {}.{}</p>",
+                   escape(cell_reading_sentence(*in.cells)),
+                   advice.empty() ? "" : " <strong>Note: " + escape(advice) + ".</strong>");
+  }
   if (fit.mode == FitMode::Seed8) {
     out +=
         "<p class=\"note\"><b>--fit seed8</b>: all eight parameters are free, as in the seed. "

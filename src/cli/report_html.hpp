@@ -10,6 +10,7 @@
 #include "gaitmon/config.hpp"
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/segmentation.hpp"
+#include "gaitmon/stance.hpp"
 
 namespace gaitmon::cli {
 
@@ -34,6 +35,7 @@ struct ReportInput {
   std::span<const StepAnalysis> analyses;  ///< Ok steps, by foot then step
   const SessionAnalysis* session = nullptr;
   const ExtendedModelFit* extended = nullptr;  ///< of --effects; null without
+  const CellReadingEvidence* cells = nullptr;  ///< how the cells read; null leaves it out
 };
 
 /// The effects of an extended model by where they sit: inside each step's tissue fit
@@ -43,6 +45,14 @@ struct EffectPlacement {
   std::vector<std::string> on_top;
 };
 EffectPlacement place_effects(const ExtendedModelFit& fit);
+
+/// How the cells read, in one sentence for the summary and the report: how many region-frames
+/// each reading fits better, the residuals and what they favour.
+std::string cell_reading_sentence(const CellReadingEvidence& evidence);
+/// The advice where the footprint `area` is not the one the cells' reading calls for, else empty.
+std::string cell_reading_advice(const CellReadingEvidence& evidence, AreaSource area);
+/// The residual RMS of `residual_ss` over `cells` residuals (0 without any).
+double residual_rms_bits(double residual_ss, int cells);
 
 /// The whole report as one HTML document.
 std::string render_report_html(const ReportInput& input);

@@ -625,6 +625,52 @@ TEST(AnalyzeCommand, AreaFootprintMeanUsesTheCellMeanFootprint) {
   }
 }
 
+// How the cells read, from the session's own steps: on the centre raster the footprint is the
+// one they call for; on the coverage raster the summary says to take footprint-mean, and
+// `--area auto` takes it. The raster is the simulator's, not the code's guess.
+TEST(AnalyzeCommand, AreaAutoTakesTheFootprintTheCellsReadingCallsFor) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  EXPECT_NE(a.output.find("the cells read at their centres (footprint)"), std::string::npos)
+      << a.output;
+  EXPECT_EQ(a.output.find("or auto) fits them"), std::string::npos) << a.output;
+  const auto centre = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
+  EXPECT_EQ(centre.at("cell_reading").at("favoured"), "centre");
+  EXPECT_GE(centre.at("cell_reading").at("frames").get<int>(), 10);
+  EXPECT_LT(centre.at("cell_reading").at("centre_residual_rms_bits").get<double>(),
+            centre.at("cell_reading").at("mean_residual_rms_bits").get<double>());
+  EXPECT_EQ(centre.at("settings").at("area_auto"), false);
+  EXPECT_NE(read_all(a.dir / "out" / "report.html").find("How the cells read:"), std::string::npos);
+  int status = -1;
+  std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
+                            (a.dir / "auto-centre").string() + " --area auto",
+                        &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(settings_of(a.dir / "auto-centre").at("area"), "footprint");
+  EXPECT_EQ(settings_of(a.dir / "auto-centre").at("area_auto"), true);
+
+  const fs::path coverage = a.dir / "coverage.csv";
+  out = run("simulate --size 37-38 --duration 6 --seed 2 --rasterisation coverage --out " +
+                coverage.string(),
+            &status);
+  ASSERT_EQ(status, 0) << out;
+  out = run("analyze " + coverage.string() + " --out " + (a.dir / "coverage").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("the cells average the pressure (footprint-mean)"), std::string::npos) << out;
+  EXPECT_NE(out.find("note: the footprint over-reads averaging cells"), std::string::npos) << out;
+  EXPECT_EQ(nlohmann::json::parse(read_all(a.dir / "coverage" / "session.json"))
+                .at("cell_reading")
+                .at("favoured"),
+            "mean");
+  out = run("analyze " + coverage.string() + " --out " + (a.dir / "auto-coverage").string() +
+                " --area auto",
+            &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("area footprint-mean"), std::string::npos) << out;
+  EXPECT_EQ(out.find("or auto) fits them"), std::string::npos) << out;
+  EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("area"), "footprint-mean");
+}
+
 TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
