@@ -872,7 +872,7 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "active cells' loads where they determine it, else the contact ellipse), "
                   "footprint-mean (the same for cells that read the mean pressure over their "
                   "area, as real insoles and simulate --rasterisation coverage do, where the "
-                  "footprint over-reads and n comes out about twice the truth; slower) or "
+                  "footprint over-reads and n comes out about twice the truth; slower), "
                   "ellipse (the seed's contact ellipse of the active cells; the default with "
                   "--fit seed8) or auto (footprint-mean where the readings fit cells that "
                   "average the pressure better, else footprint; see the summary's cells line)")
