@@ -42,7 +42,10 @@ struct AnalyzeArgs {
   std::string fit = "identifiable";
   // Empty: the default, which for --fit seed8 is the seed's own input (see settings_from).
   std::string smoothing;
-  std::string area;
+  std::string area;  ///< empty: auto, or the seed's ellipse with --fit seed8
+
+  /// Whether the area is taken from how the session's cells read (resolved in run_analyze).
+  bool area_auto() const { return area == "auto" || (area.empty() && fit != "seed8"); }
   std::string end_rate = "two-frame";
   bool free_scale = false;
   bool m_per_session = false;
@@ -81,9 +84,9 @@ AnalysisSettings settings_from(const AnalyzeArgs& args) {
     s.fit.smoothing = Smoothing::Seed;
   }
   // `auto` is resolved once the steps are in (run_analyze), from how the cells read.
-  if (!args.area.empty() && args.area != "auto") {
+  if (!args.area.empty() && !args.area_auto()) {
     s.area = *parse_area_source(args.area);
-  } else if (seed8) {
+  } else if (!args.area_auto()) {
     s.area = AreaSource::Ellipse;
   }
   s.fit.end_rate = *parse_end_rate(args.end_rate);
@@ -408,7 +411,7 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                    {"fit", fit_mode_name(settings.fit.mode)},
                    {"smoothing", smoothing_name(settings.fit.smoothing)},
                    {"area", area_source_name(settings.area)},
-                   {"area_auto", args.area == "auto"},
+                   {"area_auto", args.area_auto()},
                    {"end_rate", end_rate_name(settings.fit.end_rate)},
                    {"free_scale", settings.fit.free_scale},
                    {"m_per_session", args.m_per_session},
@@ -541,10 +544,11 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
                    const CellReadingEvidence& cells,
                    const std::vector<std::filesystem::path>& written) {
   fmt::print(
-      "{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{}{}{})\n",
+      "{}: insole {}, {} steps, {} analysed (model {}, fit {}, smoothing {}, area {}{}{}{}{})\n",
       args.session.string(), insole_size_name(header.insole_size), steps.size(), analyses.size(),
       model_variant_name(settings.fit.model), fit_mode_name(settings.fit.mode),
       smoothing_name(settings.fit.smoothing), area_source_name(settings.area),
+      args.area_auto() ? " (auto)" : "",
       settings.fit.end_rate == EndRate::TwoFrame ? "" : ", end rate second-order",
       settings.fit.free_scale ? ", free scale" : "", args.m_per_session ? ", m per session" : "");
   fmt::print("{:<19}{:>8}{:>10}{:>12}{:>10}{:>13}{:>10}{:>12}{:>12}\n", "region", "fitted",
@@ -725,7 +729,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
     spdlog::debug(
         "weighed how the cells read in {:.2f} s",
         std::chrono::duration<double>(std::chrono::steady_clock::now() - cells_start).count());
-    if (args.area == "auto") {
+    if (args.area_auto()) {
       settings.area =
           cells.favoured() == CellReading::Mean ? AreaSource::FootprintMean : AreaSource::Footprint;
     }
@@ -788,6 +792,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
     input.sample_rate_hz = header.sample_rate_hz;
     input.config = &config;
     input.settings = &settings;
+    input.area_auto = args.area_auto();
     input.steps = steps;
     input.analyses = analyses;
     input.session = &session;
@@ -868,14 +873,14 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "polynomials; the default with --fit seed8)")
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_option("--area", args->area,
-                  "Contact area given to the fit: footprint (default: a paraboloid fitted to the "
-                  "active cells' loads where they determine it, else the contact ellipse), "
+                  "Contact area given to the fit: auto (default: footprint-mean where the "
+                  "session's readings fit cells that average the pressure better, else "
+                  "footprint; see the summary's cells line), footprint (a paraboloid fitted to "
+                  "the active cells' loads where they determine it, else the contact ellipse), "
                   "footprint-mean (the same for cells that read the mean pressure over their "
-                  "area, as real insoles and simulate --rasterisation coverage do, where the "
-                  "footprint over-reads and n comes out about twice the truth; slower), "
-                  "ellipse (the seed's contact ellipse of the active cells; the default with "
-                  "--fit seed8) or auto (footprint-mean where the readings fit cells that "
-                  "average the pressure better, else footprint; see the summary's cells line)")
+                  "area, as simulate --rasterisation coverage does, where the footprint "
+                  "over-reads and n comes out about twice the truth; slower) or ellipse (the "
+                  "seed's contact ellipse of the active cells; the default with --fit seed8)")
       ->check(CLI::IsMember({"footprint", "footprint-mean", "ellipse", "auto"}));
   sub->add_option("--end-rate", args->end_rate,
                   "Area rate at each contact's first and last frame: two-frame (default: the "

@@ -737,12 +737,12 @@ std::string render_report_html(const ReportInput& in) {
   fmt::format_to(
       std::back_inserter(out),
       "<h1>gaitmon analyze: {}</h1><p>Insole {}, {} Hz; {} steps, {} complete and "
-      "analysed. Model {}, fit {}, smoothing {}, contact area {}{}{}{}. Median total-force "
+      "analysed. Model {}, fit {}, smoothing {}, contact area {}{}{}{}{}. Median total-force "
       "NRMSE {:.1f} % "
       "(IQR {:.1f} %).</p>",
       escape(in.session_name), insole_size_name(in.size), in.sample_rate_hz, in.steps.size(), ok,
       model_variant_name(fit.model), fit_mode_name(fit.mode), smoothing_name(fit.smoothing),
-      area_source_name(in.settings->area),
+      area_source_name(in.settings->area), in.area_auto ? " (auto, from how the cells read)" : "",
       fit.end_rate == EndRate::TwoFrame ? "" : ", second-order area rate at contact ends",
       fit.free_scale ? ", P free" : "",
       std::any_of(in.session->regions.begin(), in.session->regions.end(),

@@ -31,6 +31,7 @@ struct ReportInput {
   double sample_rate_hz = 100.0;
   const Config* config = nullptr;
   const AnalysisSettings* settings = nullptr;
+  bool area_auto = false;  ///< the settings' area was chosen from how the cells read
   std::span<const StepRow> steps;
   std::span<const StepAnalysis> analyses;  ///< Ok steps, by foot then step
   const SessionAnalysis* session = nullptr;

@@ -626,35 +626,41 @@ TEST(AnalyzeCommand, AreaFootprintMeanUsesTheCellMeanFootprint) {
 }
 
 // How the cells read, from the session's own steps: on the centre raster the footprint is the
-// one they call for; on the coverage raster the summary says to take footprint-mean, and
-// `--area auto` takes it. The raster is the simulator's, not the code's guess.
+// one they call for; on the coverage raster footprint-mean, which the default (auto) then takes,
+// and where the footprint is asked for instead the summary says to take footprint-mean. The
+// raster is the simulator's, not the code's guess.
 TEST(AnalyzeCommand, AreaAutoTakesTheFootprintTheCellsReadingCallsFor) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
   EXPECT_NE(a.output.find("the cells read at their centres (footprint)"), std::string::npos)
       << a.output;
+  EXPECT_NE(a.output.find("area footprint (auto)"), std::string::npos) << a.output;
   EXPECT_EQ(a.output.find("or auto) fits them"), std::string::npos) << a.output;
   const auto centre = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
   EXPECT_EQ(centre.at("cell_reading").at("favoured"), "centre");
   EXPECT_GE(centre.at("cell_reading").at("frames").get<int>(), 10);
   EXPECT_LT(centre.at("cell_reading").at("centre_residual_rms_bits").get<double>(),
             centre.at("cell_reading").at("mean_residual_rms_bits").get<double>());
-  EXPECT_EQ(centre.at("settings").at("area_auto"), false);
+  EXPECT_EQ(centre.at("settings").at("area"), "footprint");
+  EXPECT_EQ(centre.at("settings").at("area_auto"), true);
   EXPECT_NE(read_all(a.dir / "out" / "report.html").find("How the cells read:"), std::string::npos);
   int status = -1;
   std::string out = run("analyze " + (a.dir / "s.csv").string() + " --out " +
-                            (a.dir / "auto-centre").string() + " --area auto",
+                            (a.dir / "footprint-centre").string() + " --area footprint",
                         &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_EQ(settings_of(a.dir / "auto-centre").at("area"), "footprint");
-  EXPECT_EQ(settings_of(a.dir / "auto-centre").at("area_auto"), true);
+  EXPECT_NE(out.find("area footprint)"), std::string::npos) << out;
+  EXPECT_EQ(settings_of(a.dir / "footprint-centre").at("area"), "footprint");
+  EXPECT_EQ(settings_of(a.dir / "footprint-centre").at("area_auto"), false);
 
   const fs::path coverage = a.dir / "coverage.csv";
   out = run("simulate --size 37-38 --duration 6 --seed 2 --rasterisation coverage --out " +
                 coverage.string(),
             &status);
   ASSERT_EQ(status, 0) << out;
-  out = run("analyze " + coverage.string() + " --out " + (a.dir / "coverage").string(), &status);
+  out = run("analyze " + coverage.string() + " --out " + (a.dir / "coverage").string() +
+                " --area footprint",
+            &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("the cells average the pressure (footprint-mean)"), std::string::npos) << out;
   EXPECT_NE(out.find("note: the footprint over-reads averaging cells"), std::string::npos) << out;
@@ -662,13 +668,13 @@ TEST(AnalyzeCommand, AreaAutoTakesTheFootprintTheCellsReadingCallsFor) {
                 .at("cell_reading")
                 .at("favoured"),
             "mean");
-  out = run("analyze " + coverage.string() + " --out " + (a.dir / "auto-coverage").string() +
-                " --area auto",
-            &status);
+  out =
+      run("analyze " + coverage.string() + " --out " + (a.dir / "auto-coverage").string(), &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_NE(out.find("area footprint-mean"), std::string::npos) << out;
+  EXPECT_NE(out.find("area footprint-mean (auto)"), std::string::npos) << out;
   EXPECT_EQ(out.find("or auto) fits them"), std::string::npos) << out;
   EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("area"), "footprint-mean");
+  EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("area_auto"), true);
 }
 
 TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {
@@ -757,7 +763,7 @@ TEST(AnalyzeCommand, FreeScaleFitsTheScaleAndIsRefusedWithSeed8) {
                                   (a.dir / "free-scale").string() + " --free-scale",
                               &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_NE(out.find("area footprint, free scale)"), std::string::npos) << out;
+  EXPECT_NE(out.find("area footprint (auto), free scale)"), std::string::npos) << out;
   EXPECT_FALSE(settings_of(a.dir / "out").at("free_scale").get<bool>());
   EXPECT_TRUE(settings_of(a.dir / "free-scale").at("free_scale").get<bool>());
   const auto j = nlohmann::json::parse(read_all(a.dir / "free-scale" / "session.json"));
@@ -795,7 +801,7 @@ TEST(AnalyzeCommand, MPerSessionFitsEveryStepAtOneMPerRegion) {
                                   (a.dir / "m-per-session").string() + " --m-per-session",
                               &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_NE(out.find("area footprint, m per session)"), std::string::npos) << out;
+  EXPECT_NE(out.find("area footprint (auto), m per session)"), std::string::npos) << out;
   EXPECT_NE(out.find("m per session, every step fitted at it: heel "), std::string::npos) << out;
   EXPECT_FALSE(settings_of(a.dir / "out").at("m_per_session").get<bool>());
   EXPECT_TRUE(settings_of(a.dir / "m-per-session").at("m_per_session").get<bool>());

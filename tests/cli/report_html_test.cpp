@@ -128,6 +128,12 @@ TEST(ReportHtml, SummarisesTheSessionAndItsSettings) {
   EXPECT_TRUE(has(html, "C and d0 are <b>declared</b>, not fitted"));
   EXPECT_TRUE(has(html, "with P = &pi;AB from Appendix I."));
   EXPECT_FALSE(has(html, "<b>--fit seed8</b>"));
+  Fixture automatic;
+  ReportInput auto_input = automatic.input();
+  auto_input.area_auto = true;
+  EXPECT_TRUE(has(render_report_html(auto_input),
+                  "smoothing none, contact area footprint (auto, from how the cells read). "
+                  "Median"));
 
   // With --free-scale the note had still said that P comes from Appendix I.
   Fixture free_scale;
