@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "gaitmon/analysis.hpp"
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/error.hpp"
 #include "gaitmon/pooling.hpp"
@@ -420,6 +421,13 @@ void read_model(TableReader table, const std::string& file, ModelSettings& model
   model.effects_window_steps =
       integer_in(table, "effects_window_steps", DiscrepancySettings{}.folds, 100000);
   model.m_per_session = read_boolean(table, "m_per_session");
+  model.area = table.string("area");
+  if (model.area != "auto" && !parse_area_source(model.area)) {
+    table.fail(
+        "area",
+        fmt::format(R"(must be "auto", "footprint", "footprint-mean" or "ellipse", got "{}")",
+                    model.area));
+  }
   // The first running m needs this many steps; a window holds at least as many.
   model.m_window_steps = integer_in(table, "m_window_steps", kFirstSharedMSteps, 100000);
   if (model.m_per_session && !model.effects.empty()) {

@@ -184,6 +184,11 @@ double percentile(std::vector<double>& values, double p) {
 
 }  // namespace
 
+// Region-frames of evidence the monitor weighs before it says how the cells read: about eight
+// steps, four times the least that favours a reading (CellReadingEvidence::favoured), as it says
+// so once and the first steps of a walk may be a person settling into it.
+constexpr int kCellEvidenceFrames = 40;
+
 struct Monitor::Impl {
   struct Ready {
     FitReport report;
@@ -585,6 +590,46 @@ struct Monitor::Impl {
 
   // ---- workers ----
 
+  /// Adds the step to the evidence of how the cells read until it holds kCellEvidenceFrames
+  /// region-frames, then says once whether the area the fits take is the footprint the favoured
+  /// reading calls for: a live fit cannot wait for the session's evidence, as `analyze --area
+  /// auto` does.
+  void weigh_cells(const Job& job) {
+    if (cells_clear.load(std::memory_order_relaxed)) return;
+    const CellReadingEvidence step = cell_reading_evidence(job.step, *job.layout);
+    const std::lock_guard lock(cells_mutex);
+    if (cells_clear.load(std::memory_order_relaxed)) return;
+    cells += step;
+    if (cells.frames < kCellEvidenceFrames) return;
+    cells_clear.store(true, std::memory_order_relaxed);
+    const AreaSource area = options.analysis.area;
+    const std::optional<CellReading> favoured = cells.favoured();
+    if (!favoured) {
+      spdlog::info(
+          "monitor: {} region-frames do not show how the cells read the pressure ({} fit "
+          "averaging cells better); the fits take the {} area",
+          cells.frames, cells.mean_better, area_source_name(area));
+      return;
+    }
+    const bool mean = *favoured == CellReading::Mean;
+    const std::string evidence = fmt::format(
+        "the cells read the pressure {} ({} of {} region-frames fit averaging cells better)",
+        mean ? "averaged over their area" : "at their centres", cells.mean_better, cells.frames);
+    if (mean && area == AreaSource::Footprint) {
+      spdlog::warn(
+          "monitor: {}: the footprint the fits take over-reads such cells (n comes out about "
+          "twice the truth); set [model] area = \"footprint-mean\" (analyze takes it by itself)",
+          evidence);
+    } else if (!mean && area == AreaSource::FootprintMean) {
+      spdlog::warn(
+          "monitor: {}: the footprint-mean the fits take is biased on such cells (n comes out "
+          "at a tenth to a quarter of the truth); set [model] area = \"footprint\"",
+          evidence);
+    } else {
+      spdlog::info("monitor: {}; the fits take the {} area", evidence, area_source_name(area));
+    }
+  }
+
   /// One runner per worker at most: each takes the oldest waiting step until none is left.
   void run_jobs() {
     static thread_local ContactEllipseCache cache;
@@ -606,6 +651,7 @@ struct Monitor::Impl {
       try {
         try {
           analysis = analyse_step(job->step, *job->layout, config, options.analysis, &cache);
+          weigh_cells(*job);
           std::shared_ptr<const InsideEffects> inside;
           const std::optional<StepAnalysis> extended = fit_with_effects(*job, *analysis, inside);
           std::shared_ptr<const SharedExponents> running;
@@ -1306,6 +1352,11 @@ struct Monitor::Impl {
   /// second, so that a step finalised meanwhile waits for no fit but its own.
   std::optional<boost::asio::thread_pool> effects_thread;
 
+  // How the cells read, from the workers' steps until it is clear (weigh_cells).
+  std::mutex cells_mutex;
+  CellReadingEvidence cells;
+  std::atomic<bool> cells_clear{false};
+
   // The running m's window: the workers fill it, the exponent thread copies it.
   std::mutex exponent_mutex;
   ExponentWindow exponent_window;
@@ -1313,6 +1364,16 @@ struct Monitor::Impl {
   std::optional<boost::asio::thread_pool> exponent_thread;
   std::thread detector;
 };
+
+AreaSource live_area_source(const ModelSettings& model) {
+  if (model.area == "auto") return AreaSource::Footprint;
+  const std::optional<AreaSource> area = parse_area_source(model.area);
+  if (!area) {
+    throw std::invalid_argument("live_area_source: [model] area \"" + model.area +
+                                "\" is not an area (load_config checks it)");
+  }
+  return *area;
+}
 
 Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publisher) {
   if (!(options.sample_rate_hz > 0.0) || !std::isfinite(options.sample_rate_hz)) {

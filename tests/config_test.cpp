@@ -870,6 +870,24 @@ TEST(Config, ModelRunningMIsOffByDefaultAndValidated) {
   EXPECT_EQ(load_config(dir / kMain).model.m_window_steps, 50);
 }
 
+// [model] area: auto as shipped (analyze takes the footprint the session's cells call for, the
+// live monitor the footprint); else one of analyze's areas, and nothing else.
+TEST(Config, ModelAreaIsAutoAsShippedAndValidated) {
+  EXPECT_EQ(load_config(shipped_config()).model.area, "auto");
+  EXPECT_EQ(ModelSettings{}.area, "auto");
+  const std::vector<Refusal> cases = {
+      {"ModelAreaUnknown", kMain, replace(R"(area = "auto")", R"(area = "cells")"), "model.area",
+       R"(must be "auto", "footprint", "footprint-mean" or "ellipse", got "cells")"},
+      {"ModelAreaNotAString", kMain, replace(R"(area = "auto")", "area = 1"), "model.area",
+       "expected a string"},
+      {"ModelAreaMissing", kMain, replace("area = \"auto\"\n", ""), "model.area", "missing"},
+  };
+  expect_refusals(cases);
+  const fs::path dir = copy_config("ModelArea");
+  edit_file(dir / kMain, replace(R"(area = "auto")", R"(area = "footprint-mean")"));
+  EXPECT_EQ(load_config(dir / kMain).model.area, "footprint-mean");
+}
+
 // [asymmetry] and [asymmetry.m_per_session]: every region's SD for kbar and cbar, as the shipped
 // file documents them; each must be there, known and in [0, 100].
 TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {

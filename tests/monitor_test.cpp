@@ -21,6 +21,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <tuple>
 #include <utility>
@@ -31,6 +32,7 @@
 #include "gaitmon/batch.hpp"
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/insole.hpp"
+#include "gaitmon/simulator.hpp"
 #include "log_capture.hpp"
 #include "monitor_support.hpp"
 #include "test_support.hpp"
@@ -40,6 +42,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using test::RecordingPublisher;
+using ::testing::HasSubstr;
+using ::testing::Not;
 
 Config shipped_config() {
   return load_config(test::source_dir() / "config" / "gaitmon.toml");
@@ -92,6 +96,12 @@ void offer_all(Monitor& monitor, const std::vector<SensorFrame>& frames) {
       return;
     }
   }
+}
+
+std::size_t count_of(const std::string& text, std::string_view what) {
+  std::size_t count = 0;
+  for (auto at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++count;
+  return count;
 }
 
 // Polls `done` every millisecond for up to 60 s.
@@ -438,6 +448,65 @@ TEST(Monitor, EveryStepHasATissueReportWhenStepsComeNoFasterThanWalking) {
   // the final one.
   EXPECT_GE(publisher.tissues().size(), steps + 1);
   EXPECT_LE(publisher.tissues().size(), publisher.fits().size() + 1);
+}
+
+// A live fit cannot wait for the session's evidence of how its cells read, as analyze's auto
+// does, so [model] area "auto" is the footprint live, and the monitor names the footprint the
+// cells call for once its steps show it: a warning where the fits take the other kind, else one
+// line at info. The raster is the simulator's, not the code's guess.
+TEST(Monitor, NamesTheFootprintTheCellsCallForOnceTheirStepsShowIt) {
+  EXPECT_EQ(live_area_source(ModelSettings{}), AreaSource::Footprint);
+  ModelSettings model;
+  model.area = "footprint-mean";
+  EXPECT_EQ(live_area_source(model), AreaSource::FootprintMean);
+  model.area = "cells";
+  EXPECT_THROW(live_area_source(model), std::invalid_argument);
+
+  const Config config = shipped_config();
+  const fs::path dir = test::scratch_dir("monitor-cells");
+  for (const Rasterisation raster : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
+    SimulationOptions simulation;
+    simulation.size = InsoleSize::S41_42;
+    simulation.duration_s = 8.0;
+    simulation.seed = 21;
+    simulation.rasterisation = raster;
+    const fs::path csv = dir / (std::string(rasterisation_name(raster)) + ".csv");
+    simulate_session(config, simulation, csv, fs::path(csv).replace_extension(".json"));
+    SessionHeader header;
+    const std::vector<SensorFrame> frames = test::session_frames(csv, &header);
+    const bool averaging = raster == Rasterisation::Coverage;
+    for (const AreaSource area : {AreaSource::Footprint, AreaSource::FootprintMean}) {
+      const test::LogCapture log;
+      RecordingPublisher publisher;
+      MonitorOptions options = quick_replay();
+      options.analysis.area = area;
+      options.sample_rate_hz = header.sample_rate_hz;
+      {
+        Monitor monitor(config, options, publisher);
+        offer_all(monitor, frames);
+        monitor.stop();
+      }
+      const std::string text = log.text.str();
+      const std::string what =
+          fmt::format("{} raster, {} area", rasterisation_name(raster), area_source_name(area));
+      EXPECT_EQ(count_of(text, "monitor: the cells read the pressure"), 1u) << what << "\n" << text;
+      EXPECT_THAT(text, HasSubstr(averaging ? "read the pressure averaged over their area"
+                                            : "read the pressure at their centres"))
+          << what;
+      const bool other_kind = averaging != (area == AreaSource::FootprintMean);
+      if (other_kind) {
+        EXPECT_THAT(text, HasSubstr(averaging ? R"(set [model] area = "footprint-mean")"
+                                              : R"(set [model] area = "footprint")"))
+            << what;
+        EXPECT_THAT(text, HasSubstr("warn")) << what;
+      } else {
+        EXPECT_THAT(text,
+                    HasSubstr(fmt::format("the fits take the {} area", area_source_name(area))))
+            << what;
+        EXPECT_THAT(text, Not(HasSubstr("set [model] area"))) << what;
+      }
+    }
+  }
 }
 
 TEST(Monitor, TheTissueIsNotPooledOutsideTheDefaultFit) {

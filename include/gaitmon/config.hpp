@@ -99,6 +99,10 @@ struct ModelSettings {
   /// complete steps (both feet), from kFirstSharedMSteps of them on. Not with effects.
   bool m_per_session = false;
   int m_window_steps = 200;
+  /// The contact area the fits are given: "auto" (how the session's cells read decides, for
+  /// `analyze`; the footprint for the live monitor, which names the footprint the cells call
+  /// for once it is clear) or an area_source_name() (analysis.hpp).
+  std::string area = "auto";
 };
 
 /// The live monitor's first running m ([model] m_per_session) waits for this many complete steps.

@@ -670,6 +670,8 @@ std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const In
 void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   const Config config = load_global_config(global);
   if (!args.m_per_session_given) args.m_per_session = config.model.m_per_session;
+  // --fit seed8 takes the seed's ellipse unless --area says otherwise (settings_from).
+  if (args.area.empty() && args.fit != "seed8") args.area = config.model.area;
   AnalysisSettings settings = settings_from(args);
   const std::vector<std::string>& names = args.effects_given ? args.effects : config.model.effects;
   if (settings.fit.mode == FitMode::Seed8 || settings.fit.free_scale) {
@@ -873,9 +875,10 @@ void add_analyze_command(CLI::App& app, const GlobalOptions& global) {
                   "polynomials; the default with --fit seed8)")
       ->check(CLI::IsMember({"none", "seed"}));
   sub->add_option("--area", args->area,
-                  "Contact area given to the fit: auto (default: footprint-mean where the "
-                  "session's readings fit cells that average the pressure better, else "
-                  "footprint; see the summary's cells line), footprint (a paraboloid fitted to "
+                  "Contact area given to the fit (default: [model] area of the config, auto as "
+                  "shipped): auto (footprint-mean where the session's readings fit cells that "
+                  "average the pressure better, else footprint; see the summary's cells line), "
+                  "footprint (a paraboloid fitted to "
                   "the active cells' loads where they determine it, else the contact ellipse), "
                   "footprint-mean (the same for cells that read the mean pressure over their "
                   "area, as simulate --rasterisation coverage does, where the footprint "

@@ -49,6 +49,7 @@ void run_replay(const GlobalOptions& global, const ReplayArgs& args) {
   MonitorOptions options;
   options.sample_rate_hz = source.header().sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
+  options.analysis.area = live_area_source(config.model);
   // A replay never skips: a full ring or backlog makes the fake driver wait.
   options.backlog_overflow = BacklogOverflow::Wait;
   options.driver_status = [&](StatusReport& status) { link.fill(status); };

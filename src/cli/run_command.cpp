@@ -45,6 +45,7 @@ void run_live(const GlobalOptions& global, const RunArgs& args) {
   MonitorOptions options;
   options.sample_rate_hz = config.sample_rate_hz;
   options.publish_raw = config.lcm.raw_enabled;
+  options.analysis.area = live_area_source(config.model);
   options.backlog_overflow = BacklogOverflow::DropOldest;
   options.driver_status = [&](StatusReport& status) {
     link.fill(status);

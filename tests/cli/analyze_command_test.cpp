@@ -883,6 +883,41 @@ TEST(AnalyzeCommand, MPerSessionComesFromTheConfigUnlessGivenOnTheCommandLine) {
   EXPECT_NE(out.find("give --m-per-session=false"), std::string::npos) << out;
 }
 
+// [model] area is analyze's area where --area is not given (--fit seed8 still takes the seed's
+// ellipse); --area overrides it.
+TEST(AnalyzeCommand, TheAreaComesFromTheConfigUnlessGivenOnTheCommandLine) {
+  const Analysed& a = analysed();
+  ASSERT_EQ(a.status, 0) << a.output;
+  const auto dir = test::scratch_dir("analyze-area-config");
+  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / name, dir / name);
+  }
+  std::string config = read_all(dir / "gaitmon.toml");
+  const std::string shipped = R"(area = "auto")";
+  const auto at = config.find(shipped);
+  ASSERT_NE(at, std::string::npos);
+  config.replace(at, shipped.size(), R"(area = "footprint-mean")");
+  test::write_text(dir / "gaitmon.toml", config);
+  const std::string analyze = "--config " + (dir / "gaitmon.toml").string() + " analyze " +
+                              (a.dir / "s.csv").string() + " --out ";
+  int status = -1;
+  std::string out = run(analyze + (dir / "mean").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("area footprint-mean)"), std::string::npos) << out;
+  EXPECT_EQ(settings_of(dir / "mean").at("area"), "footprint-mean");
+  EXPECT_FALSE(settings_of(dir / "mean").at("area_auto").get<bool>());
+  // The cells of this centre-raster session call for the footprint, which the summary says.
+  EXPECT_NE(out.find("--area footprint (or auto) fits them"), std::string::npos) << out;
+  out = run(analyze + (dir / "auto").string() + " --area auto", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(settings_of(dir / "auto").at("area"), "footprint");
+  EXPECT_TRUE(settings_of(dir / "auto").at("area_auto").get<bool>());
+  EXPECT_EQ(read_all(dir / "auto" / "regions.csv"), read_all(a.dir / "out" / "regions.csv"));
+  out = run(analyze + (dir / "seed8").string() + " --fit seed8", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(settings_of(dir / "seed8").at("area"), "ellipse");
+}
+
 TEST(AnalyzeCommand, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("analyze-bad");
   test::write_text(dir / "bad.csv", test::session_head() + test::session_row("0.0,L") +
