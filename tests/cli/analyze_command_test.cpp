@@ -16,6 +16,9 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <stdexcept>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "test_support.hpp"
@@ -851,20 +854,30 @@ TEST(AnalyzeCommand, MPerSessionFitsEveryStepAtOneMPerRegion) {
   EXPECT_FALSE(fs::exists(a.dir / "m-effects" / "regions.csv"));
 }
 
+// A scratch copy of the shipped config in which `from`, the main file's one line of it, reads
+// `to`; its directory.
+fs::path shipped_config_with(const std::string& name, std::string_view from, std::string_view to) {
+  const fs::path dir = test::scratch_dir(name);
+  for (const char* file : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / file, dir / file);
+  }
+  std::string config = read_all(dir / "gaitmon.toml");
+  const auto at = config.find(from);
+  if (at == std::string::npos || config.find(from, at + 1) != std::string::npos) {
+    throw std::logic_error("the shipped config has not one \"" + std::string(from) + "\"");
+  }
+  config.replace(at, from.size(), to);
+  test::write_text(dir / "gaitmon.toml", config);
+  return dir;
+}
+
 // [model] m_per_session = true in the config does what --m-per-session does, and
 // --m-per-session=false turns it off again.
 TEST(AnalyzeCommand, MPerSessionComesFromTheConfigUnlessGivenOnTheCommandLine) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
-  const auto dir = test::scratch_dir("analyze-m-config");
-  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
-    fs::copy_file(test::source_dir() / "config" / name, dir / name);
-  }
-  std::string config = read_all(dir / "gaitmon.toml");
-  const auto at = config.find("m_per_session = false");
-  ASSERT_NE(at, std::string::npos);
-  config.replace(at, std::string("m_per_session = false").size(), "m_per_session = true");
-  test::write_text(dir / "gaitmon.toml", config);
+  const fs::path dir =
+      shipped_config_with("analyze-m-config", "m_per_session = false", "m_per_session = true");
   const std::string analyze = "--config " + (dir / "gaitmon.toml").string() + " analyze " +
                               (a.dir / "s.csv").string() + " --out ";
   int status = -1;
@@ -888,16 +901,8 @@ TEST(AnalyzeCommand, MPerSessionComesFromTheConfigUnlessGivenOnTheCommandLine) {
 TEST(AnalyzeCommand, TheAreaComesFromTheConfigUnlessGivenOnTheCommandLine) {
   const Analysed& a = analysed();
   ASSERT_EQ(a.status, 0) << a.output;
-  const auto dir = test::scratch_dir("analyze-area-config");
-  for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
-    fs::copy_file(test::source_dir() / "config" / name, dir / name);
-  }
-  std::string config = read_all(dir / "gaitmon.toml");
-  const std::string shipped = R"(area = "auto")";
-  const auto at = config.find(shipped);
-  ASSERT_NE(at, std::string::npos);
-  config.replace(at, shipped.size(), R"(area = "footprint-mean")");
-  test::write_text(dir / "gaitmon.toml", config);
+  const fs::path dir =
+      shipped_config_with("analyze-area-config", R"(area = "auto")", R"(area = "footprint-mean")");
   const std::string analyze = "--config " + (dir / "gaitmon.toml").string() + " analyze " +
                               (a.dir / "s.csv").string() + " --out ";
   int status = -1;
