@@ -108,12 +108,12 @@ namespace gaitmon {
 
 enum class BacklogOverflow : std::uint8_t { DropOldest, Wait };
 
-/// What a command decides at run time, beside the config.
 /// The area the live fits take for [model] area: the footprint for "auto", as a live fit cannot
 /// wait for a session's evidence of how its cells read (the monitor names the footprint they call
 /// for once its steps show it).
 AreaSource live_area_source(const ModelSettings& model);
 
+/// What a command decides at run time, beside the config.
 struct MonitorOptions {
   /// The stream's frame rate, for the segmenter's memory bounds (segmenter_limits) and the time
   /// step after a device clock reset. Replays pass the session's.

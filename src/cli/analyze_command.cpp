@@ -42,16 +42,16 @@ struct AnalyzeArgs {
   std::string fit = "identifiable";
   // Empty: the default, which for --fit seed8 is the seed's own input (see settings_from).
   std::string smoothing;
-  std::string area;  ///< empty: auto, or the seed's ellipse with --fit seed8
-
-  /// Whether the area is taken from how the session's cells read (resolved in run_analyze).
-  bool area_auto() const { return area == "auto" || (area.empty() && fit != "seed8"); }
+  std::string area;  ///< empty: [model] area, or the seed's ellipse with --fit seed8
   std::string end_rate = "two-frame";
   bool free_scale = false;
   bool m_per_session = false;
   bool m_per_session_given = false;  ///< else [model] m_per_session of the config
   std::vector<std::string> effects;
   bool effects_given = false;
+
+  /// Whether the area is taken from how the session's cells read (resolved in run_analyze).
+  bool area_auto() const { return area == "auto" || (area.empty() && fit != "seed8"); }
 };
 
 std::string declared_note(const FitSettings& fit) {
