@@ -1,7 +1,8 @@
 // The per-step analysis of one foot-step (warm ellipse cache, 8 region fits; target 2 ms), on
 // the centre raster with the footprint and on the coverage raster with footprint-mean,
-// `gaitmon analyze` on a 10-minute two-foot simulated session (target 3 s), and the live monitor's
-// pools of every region over its window of steps (GAITMON_TISSUE, at most ten a second).
+// `gaitmon analyze` on a 10-minute two-foot simulated session of each raster (target 3 s), and
+// the live monitor's pools of every region over its window of steps (GAITMON_TISSUE, at most ten
+// a second).
 #include <benchmark/benchmark.h>
 
 #include <array>
@@ -111,15 +112,17 @@ fs::path gaitmon_executable() {
   return fs::read_symlink("/proc/self/exe").parent_path().parent_path() / "gaitmon";
 }
 
-// `flags`: an option of `analyze` to compare with the default (none), after a space.
-void BM_AnalyzeCommandTenMinutes(benchmark::State& state, const char* flags) {
+// `flags`: an option of `analyze` to compare with the default (none), after a space. On the
+// coverage raster the default (--area auto) takes footprint-mean.
+void BM_AnalyzeCommandTenMinutes(benchmark::State& state, gaitmon::Rasterisation raster,
+                                 const char* flags) {
   const fs::path exe = gaitmon_executable();
   if (!fs::exists(exe)) {
     state.SkipWithError("the gaitmon executable is not built beside tests/");
     return;
   }
-  const std::string command = exe.string() + " analyze " + simulated(600.0).string() + " --out " +
-                              (bench_dir() / "out").string() + flags + " > /dev/null";
+  const std::string command = exe.string() + " analyze " + simulated(600.0, raster).string() +
+                              " --out " + (bench_dir() / "out").string() + flags + " > /dev/null";
   for (auto _ : state) {
     if (std::system(command.c_str()) != 0) {
       state.SkipWithError("gaitmon analyze failed");
@@ -127,12 +130,19 @@ void BM_AnalyzeCommandTenMinutes(benchmark::State& state, const char* flags) {
     }
   }
 }
-BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, default, "")
+BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, default, gaitmon::Rasterisation::CellCentre, "")
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->Repetitions(3)
     ->UseRealTime();
-BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, m_per_session, " --m-per-session")
+BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, coverage_raster_default,
+                  gaitmon::Rasterisation::Coverage, "")
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1)
+    ->Repetitions(3)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(BM_AnalyzeCommandTenMinutes, m_per_session, gaitmon::Rasterisation::CellCentre,
+                  " --m-per-session")
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->Repetitions(3)
