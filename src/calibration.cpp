@@ -116,6 +116,9 @@ SessionSamples run_session(const Config& config, const CalibrationDesign& design
   options.noise_sd_bits = design.noise_sd_bits;
   options.max_bias_bits = design.max_bias_bits;
   options.placement_sd_mm = design.placement_sd_mm;
+  options.rasterisation = design.rasterisation;
+  AnalysisSettings settings;
+  if (design.rasterisation == Rasterisation::Coverage) settings.area = AreaSource::FootprintMean;
   const fs::path csv = dir / fmt::format("session-{}.csv", i);
   const fs::path truth_json = dir / fmt::format("session-{}.truth.json", i);
   const SimulationTruth truth = simulate_session(config, options, csv, truth_json);
@@ -123,12 +126,12 @@ SessionSamples run_session(const Config& config, const CalibrationDesign& design
   std::vector<StepAnalysis> steps;
   segment_session(csv, config, [&](Step&& step) {
     if (step.status == StepStatus::Ok)
-      steps.push_back(analyse_step(step, layout, config, {}, &cache));
+      steps.push_back(analyse_step(step, layout, config, settings, &cache));
   });
   fs::remove(csv);
   fs::remove(truth_json);
   std::vector<StepAnalysis> at_shared_m = steps;
-  fit_damping_exponent_per_session(at_shared_m, config, {});
+  fit_damping_exponent_per_session(at_shared_m, config, settings);
   SessionSamples samples;
   const MaterialBounds bounds = material_bounds(config.fit_bounds);
   add_steps(steps, truth, bounds, samples.per_step);
@@ -252,6 +255,15 @@ CalibrationDesignEntry read_design(detail::TableReader table) {
   }
   if (table.has("placement_sd_mm")) {
     design.placement_sd_mm = detail::number_in(table, "placement_sd_mm", 0.0, 10.0);
+  }
+  if (table.has("rasterisation")) {
+    const std::string raster = table.string("rasterisation");
+    const std::optional<Rasterisation> parsed = parse_rasterisation(raster);
+    if (!parsed) {
+      table.fail("rasterisation",
+                 fmt::format(R"(must be "centre" or "coverage", got "{}")", raster));
+    }
+    design.rasterisation = *parsed;
   }
   try {
     design.check();

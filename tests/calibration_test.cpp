@@ -421,6 +421,11 @@ TEST(Calibration, ADesignsFileWithAMistakeNamesTheFileTheKeyAndTheLine) {
   EXPECT_EQ(ok[0].design.sizes, std::vector<InsoleSize>{InsoleSize::S41_42});
   EXPECT_EQ(ok[0].design.last_seed, 2U);
   EXPECT_EQ(ok[0].design.noise_sd_bits, CalibrationDesign{}.noise_sd_bits);
+  EXPECT_EQ(ok[0].design.rasterisation, Rasterisation::CellCentre);
+  const auto coverage = load_calibration_designs(
+      test::write_text(dir / "coverage.toml", good + "rasterisation = \"coverage\"\n"));
+  ASSERT_EQ(coverage.size(), 1U);
+  EXPECT_EQ(coverage[0].design.rasterisation, Rasterisation::Coverage);
 
   const struct {
     const char* name;
@@ -449,6 +454,8 @@ TEST(Calibration, ADesignsFileWithAMistakeNamesTheFileTheKeyAndTheLine) {
        good + "[[design]]\ntables = [\"asymmetry\"]\n"
               "sizes = [\"41-42\"]\nseeds = [1, 2]\nduration_s = 10\n",
        "design[2].body_mass_kg", "missing"},
+      {"a raster", good + "rasterisation = \"cells\"\n", "design[1].rasterisation",
+       R"(must be "centre" or "coverage", got "cells" (line 7))"},
       {"bad syntax", "[[design]\n", "(syntax)", "line 1"},
   };
   for (const auto& c : cases) {

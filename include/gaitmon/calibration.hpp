@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "gaitmon/config.hpp"
+#include "gaitmon/simulator.hpp"
 #include "gaitmon/types.hpp"
 
 namespace gaitmon {
@@ -33,6 +34,9 @@ struct CalibrationDesign {
   double noise_sd_bits = 0.5;
   int max_bias_bits = 2;
   double placement_sd_mm = 0.0;
+  /// How the simulated cells read; on the coverage raster (cells that average) the sessions are
+  /// analysed with footprint-mean, the area `analyze --area auto` takes there.
+  Rasterisation rasterisation = Rasterisation::CellCentre;
 
   std::size_t session_count() const;
   /// The i-th session's size, seed and mass (sizes outer, seeds inner).
@@ -53,9 +57,9 @@ struct CalibrationDesignEntry {
 
 /// Reads a designs file: an array of [[design]] tables, each with `tables` (["pooling"],
 /// ["asymmetry"] or both), `sizes`, `seeds` = [first, last], `duration_s`, `body_mass_kg` = [min,
-/// max] and optionally `noise_sd_bits`, `max_bias_bits`, `placement_sd_mm` (the simulator's
-/// defaults otherwise), in the ranges `gaitmon calibrate` takes. Throws ConfigError naming the
-/// file, the key and its line.
+/// max] and optionally `noise_sd_bits`, `max_bias_bits`, `placement_sd_mm` and `rasterisation`
+/// ("centre" or "coverage"; the simulator's defaults otherwise), in the ranges `gaitmon calibrate`
+/// takes. Throws ConfigError naming the file, the key and its line.
 std::vector<CalibrationDesignEntry> load_calibration_designs(const std::filesystem::path& path);
 
 /// One pooled mean's (or one difference of the feet's) error against the truth, on the scale it

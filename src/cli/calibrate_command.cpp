@@ -317,10 +317,11 @@ std::string design_text(const CalibrationDesign& d) {
   for (InsoleSize s : d.sizes) sizes.emplace_back(insole_size_name(s));
   return fmt::format(
       "{} simulated session{} of {} s (sizes {}; seeds {}; body mass {} kg; noise {} bits, dc "
-      "bias 0-{} bits, placement SD {} mm)",
+      "bias 0-{} bits, placement SD {} mm{})",
       d.session_count(), d.session_count() == 1 ? "" : "s", d.duration_s, fmt::join(sizes, ", "),
       range_text(d.first_seed, d.last_seed), range_text(d.min_body_mass_kg, d.max_body_mass_kg),
-      d.noise_sd_bits, d.max_bias_bits, d.placement_sd_mm);
+      d.noise_sd_bits, d.max_bias_bits, d.placement_sd_mm,
+      d.rasterisation == Rasterisation::Coverage ? "; coverage raster, area footprint-mean" : "");
 }
 
 // Calls `f(shared_m, table, key, region)` for every entry of the config's tables.
@@ -492,6 +493,7 @@ nlohmann::json design_json(const Config& config, const DesignRun& run) {
                         {"noise_sd_bits", design.noise_sd_bits},
                         {"max_bias_bits", design.max_bias_bits},
                         {"placement_sd_mm", design.placement_sd_mm},
+                        {"rasterisation", rasterisation_name(design.rasterisation)},
                         {"sizes", nlohmann::json::array()},
                         {"tables", nlohmann::json::array()},
                         {"per_step", mode_json(config, run, run.modes[0])},
@@ -735,13 +737,21 @@ void add_calibrate_command(CLI::App& app, const GlobalOptions& global) {
                   "Step-to-step SD of where the foot lands on the insole, mm")
       ->check(number_in(0.0, 10.0))
       ->capture_default_str();
+  sub->add_option_function<std::string>(
+         "--rasterisation",
+         [args](const std::string& raster) {
+           args->design.rasterisation = *parse_rasterisation(raster);
+         },
+         "How the simulated cells read: centre (default) or coverage (cells that average the "
+         "pressure over their area, analysed with footprint-mean as analyze's auto takes it)")
+      ->check(CLI::IsMember({"centre", "coverage"}));
   auto* designs = sub->add_option(
       "--designs", args->designs_file,
       "A designs file (config/calibration_designs.toml: the shipped tables' four) in place of "
       "the options above: each table's entries the largest of the designs that measure it");
   designs->check(CLI::ExistingFile);
   for (const char* option : {"--sizes", "--seeds", "--duration", "--body-mass", "--noise",
-                             "--max-bias", "--placement-sd"}) {
+                             "--max-bias", "--placement-sd", "--rasterisation"}) {
     designs->excludes(sub->get_option(option));
   }
   auto* settle = sub->add_flag(

@@ -192,6 +192,30 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
 // measures every entry as written. A design whose rounds come back to an earlier round's instead
 // writes the larger of each entry, with which the plain command measures no entry larger and at
 // most the entries the rounds traded otherwise.
+// --rasterisation coverage simulates cells that average the pressure and analyses them with
+// footprint-mean, as analyze's auto does there: the same design measures other tables than on
+// the centre raster, and calibration.json says which raster.
+TEST(CalibrateCommand, OnTheCoverageRasterTheSessionsAreAnalysedWithFootprintMean) {
+  const auto dir = test::scratch_dir("calibrate-coverage");
+  const std::string design = "--sizes 41-42 --seeds 1-2 --duration 10 --out ";
+  int status = -1;
+  std::string out = calibrate(design + (dir / "centre").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(out.find("coverage raster"), std::string::npos) << out;
+  out = calibrate(design + (dir / "coverage").string() + " --rasterisation coverage", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("placement SD 0 mm; coverage raster, area footprint-mean)"), std::string::npos)
+      << out;
+  const auto centre = nlohmann::json::parse(read_all(dir / "centre" / "calibration.json"));
+  const auto coverage = nlohmann::json::parse(read_all(dir / "coverage" / "calibration.json"));
+  EXPECT_EQ(centre.at("designs").at(0).at("rasterisation"), "centre");
+  EXPECT_EQ(coverage.at("designs").at(0).at("rasterisation"), "coverage");
+  EXPECT_NE(centre.at("designs").at(0).at("per_step"), coverage.at("designs").at(0).at("per_step"));
+  out = calibrate(design + (dir / "bad").string() + " --rasterisation cells", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_FALSE(fs::exists(dir / "bad"));
+}
+
 TEST(CalibrateCommand, SettleMeasuresAgainWithItsOwnTablesUntilTheyMeasureThemselves) {
   const struct {
     const char* design;
@@ -457,9 +481,10 @@ TEST(CalibrateCommand, HelpNamesTheDesignsOptionsAndTheirDefaults) {
   int status = -1;
   const std::string out = calibrate("--help", &status);
   ASSERT_EQ(status, 0) << out;
-  for (const char* option : {"--sizes", "--seeds TEXT=1-20", "--duration", "--body-mass TEXT=50-90",
-                             "--noise", "--max-bias", "--placement-sd", "--designs", "--settle",
-                             "--max-rounds UINT:INT in [2 - 50]=10", "--out"}) {
+  for (const char* option :
+       {"--sizes", "--seeds TEXT=1-20", "--duration", "--body-mass TEXT=50-90", "--noise",
+        "--max-bias", "--placement-sd", "--rasterisation", "--designs", "--settle",
+        "--max-rounds UINT:INT in [2 - 50]=10", "--out"}) {
     EXPECT_NE(out.find(option), std::string::npos) << option << "\n" << out;
   }
 }
