@@ -1,6 +1,8 @@
 // The per-step analysis pipeline and the session-level summary.
 #include "gaitmon/analysis.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -271,8 +273,10 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
     estimates.resize(kept);
     estimated_steps.resize(kept);
   }
-  r.pooling = pool_region_steps(estimates, region, config);
-  const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+  const PoolingSettings& tables = pooling_tables(config, settings.area);
+  r.pooling = pool_region_steps(estimates, region, tables, config.fit_bounds);
+  const AsymmetrySettings& pairs = asymmetry_tables(config, settings.area);
+  const PairSds& pair = shared_m ? pairs.m_per_session : pairs.per_step;
   if (settings.fit.mode != FitMode::Identifiable || settings.fit.free_scale) {
     r.pooling.not_pooled = "pooling needs the default fit (identifiable, P declared)";
   }
@@ -282,7 +286,7 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
   std::tie(r.cbar_trend, r.cbar_asymmetry) =
       step_course(steps, estimated_steps, estimates, kLnCbar, &RegionFit::cbar_ns_per_mm3, region,
                   true, pair.cbar_pair_sd_pct[index_of(region)]);
-  r.chain_sd = chain_sd(config.pooling, region, shared_m);
+  r.chain_sd = chain_sd(tables, region, shared_m);
   r.pooled_per_step.resize(steps.size());
   r.pooled_mean = pooled_mean_with_chain_error(r.pooling, r.chain_sd);
   if (r.pooling.pooled) {
@@ -310,6 +314,19 @@ RegionSessionAnalysis analyse_region(std::span<const StepAnalysis> steps, Region
 
 }  // namespace
 
+const PoolingSettings& pooling_tables(const Config& config, AreaSource area) {
+  return area == AreaSource::FootprintMean ? config.pooling_footprint_mean : config.pooling;
+}
+
+const AsymmetrySettings& asymmetry_tables(const Config& config, AreaSource area) {
+  return area == AreaSource::FootprintMean ? config.asymmetry_footprint_mean : config.asymmetry;
+}
+
+std::string chain_table_name(std::string_view kind, AreaSource area, bool shared_m) {
+  return fmt::format("[{}{}{}]", kind, area == AreaSource::FootprintMean ? ".footprint_mean" : "",
+                     shared_m ? ".m_per_session" : "");
+}
+
 MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shared_m) {
   const ChainSds& chain = shared_m ? pooling.m_per_session : pooling.per_step;
   const std::size_t ri = index_of(region);
@@ -325,13 +342,13 @@ MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool share
 }
 
 PooledEstimates pool_region_steps(std::span<const MaterialEstimate> estimates, Region region,
-                                  const Config& config) {
+                                  const PoolingSettings& pooling, const FitBounds& fit_bounds) {
   std::vector<MaterialEstimate> own(estimates.begin(), estimates.end());
-  const MaterialBounds bounds = material_bounds(config.fit_bounds);
+  const MaterialBounds bounds = material_bounds(fit_bounds);
   for (MaterialEstimate& e : own) {
     e = within_m_range(e, bounds);
     const bool shared_m = e.slope_on_shared_m.has_value();
-    const MaterialVector sd = step_sd(config.pooling, region, shared_m);
+    const MaterialVector sd = step_sd(pooling, region, shared_m);
     for (std::size_t p = 0; p < (shared_m ? 3 : 4); ++p) e.covariance[p][p] += sd[p] * sd[p];
   }
   return pool_steps(own, bounds);

@@ -460,11 +460,20 @@ void read_pair_sds(TableReader& table, PairSds& sds) {
   read_per_region(table.table("cbar_pair_sd_pct"), sds.cbar_pair_sd_pct, 100.0);
 }
 
-void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry) {
+// A table's own pair SDs and its m_per_session table's; the caller finishes it.
+void read_asymmetry_tables(TableReader& table, AsymmetrySettings& asymmetry) {
   read_pair_sds(table, asymmetry.per_step);
   TableReader shared = table.table("m_per_session");
   read_pair_sds(shared, asymmetry.m_per_session);
   shared.finish();
+}
+
+void read_asymmetry(TableReader table, AsymmetrySettings& asymmetry,
+                    AsymmetrySettings& footprint_mean) {
+  read_asymmetry_tables(table, asymmetry);
+  TableReader mean = table.table("footprint_mean");
+  read_asymmetry_tables(mean, footprint_mean);
+  mean.finish();
   table.finish();
 }
 
@@ -480,11 +489,19 @@ void read_chain_sds(TableReader& table, ChainSds& sds) {
   read_per_region(table.table("m_step_sd"), sds.m_step_sd, 1.0);
 }
 
-void read_pooling(TableReader table, PoolingSettings& pooling) {
+// A table's own chain SDs and its m_per_session table's; the caller finishes it.
+void read_pooling_tables(TableReader& table, PoolingSettings& pooling) {
   read_chain_sds(table, pooling.per_step);
   TableReader shared = table.table("m_per_session");
   read_chain_sds(shared, pooling.m_per_session);
   shared.finish();
+}
+
+void read_pooling(TableReader table, PoolingSettings& pooling, PoolingSettings& footprint_mean) {
+  read_pooling_tables(table, pooling);
+  TableReader mean = table.table("footprint_mean");
+  read_pooling_tables(mean, footprint_mean);
+  mean.finish();
   table.finish();
 }
 
@@ -633,8 +650,8 @@ Config load_config(const fs::path& main_file) {
   read_segmentation(root.table("segmentation"), config.sample_rate_hz, config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
   read_model(root.table("model"), file, config.model);
-  read_asymmetry(root.table("asymmetry"), config.asymmetry);
-  read_pooling(root.table("pooling"), config.pooling);
+  read_asymmetry(root.table("asymmetry"), config.asymmetry, config.asymmetry_footprint_mean);
+  read_pooling(root.table("pooling"), config.pooling, config.pooling_footprint_mean);
   read_wire(root.table("wire"), config.wire);
   read_serial(root.table("serial"), config.serial);
   read_ring(root.table("ring"), config.ring);

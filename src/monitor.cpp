@@ -65,7 +65,9 @@ std::string region_status(const RegionFit& fit) {
   return status;
 }
 
-FitReport fit_report(const StepAnalysis& analysis, const Config& config, bool& failed) {
+// `pooling`: the tables of the area the step was fitted on (pooling_tables).
+FitReport fit_report(const StepAnalysis& analysis, const PoolingSettings& pooling,
+                     const FitBounds& bounds, bool& failed) {
   FitReport report;
   report.foot = analysis.foot;
   report.step = analysis.step;
@@ -89,7 +91,7 @@ FitReport fit_report(const StepAnalysis& analysis, const Config& config, bool& f
     out.se_cbar = f.cbar_ns_per_mm3.se;
     out.se_m = f.m.se;
     if (const std::optional<MaterialParams> total =
-            with_chain_error(f, r.region, config.pooling, config.fit_bounds)) {
+            with_chain_error(f, r.region, pooling, bounds)) {
       out.se_kbar_total = total->kbar_n_per_mm3.se;
       out.se_n_total = total->n.se;
       out.se_cbar_total = total->cbar_ns_per_mm3.se;
@@ -659,7 +661,8 @@ struct Monitor::Impl {
           ready->report = fit_report(extended     ? *extended
                                      : at_running ? *at_running
                                                   : *analysis,
-                                     config, ready->failed);
+                                     pooling_tables(config, options.analysis.area),
+                                     config.fit_bounds, ready->failed);
           if (extended) {
             ready->report.effects_inside = inside->joined;
             ready->report.effects_utime = inside->utime;
@@ -791,9 +794,11 @@ struct Monitor::Impl {
         out.status = "not_pooled:pooling needs the default fit (identifiable, P declared)";
         continue;
       }
-      const PooledEstimates pooled = pool_region_steps(estimates, kRegions[i], config);
+      const PoolingSettings& tables = pooling_tables(config, options.analysis.area);
+      const PooledEstimates pooled =
+          pool_region_steps(estimates, kRegions[i], tables, config.fit_bounds);
       const std::optional<MaterialEstimate> mean =
-          pooled_mean_with_chain_error(pooled, chain_sd(config.pooling, kRegions[i], false));
+          pooled_mean_with_chain_error(pooled, chain_sd(tables, kRegions[i], false));
       if (!mean) {
         out.status = "not_pooled:" + pooled.not_pooled;
         continue;

@@ -614,7 +614,8 @@ TEST(PoolRegionSteps, WeighsEachStepWithItsOwnErrorBeyondItsJacobian) {
       if (shared_m) e.slope_on_shared_m = MaterialVector{0.0, 0.0, 0.0, 1.0};
       steps.push_back(e);
     }
-    const PooledEstimates pooled = pool_region_steps(steps, Region::Met1_2, config);
+    const PooledEstimates pooled =
+        pool_region_steps(steps, Region::Met1_2, config.pooling, config.fit_bounds);
     const PooledEstimates unweighted = pool_steps(steps, material_bounds(config.fit_bounds));
     ASSERT_TRUE(pooled.pooled) << pooled.not_pooled;
     for (std::size_t k = 0; k < 4; ++k) {
@@ -660,7 +661,8 @@ TEST(PoolRegionSteps, HoldsEachStepsMWithinItsRangeBeforeItPools) {
     e.covariance[3][3] = m_variance[i];
     steps.push_back(e);
   }
-  const PooledEstimates pooled = pool_region_steps(steps, Region::Heel, config);
+  const PooledEstimates pooled =
+      pool_region_steps(steps, Region::Heel, config.pooling, config.fit_bounds);
   ASSERT_TRUE(pooled.pooled) << pooled.not_pooled;
   ASSERT_EQ(pooled.between_step[3][3], 0.0);
   const double held = 3.0 / (0.56 * 0.56);

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "gaitmon/analysis.hpp"
 #include "gaitmon/config.hpp"
 #include "gaitmon/error.hpp"
 #include "test_support.hpp"
@@ -214,10 +215,6 @@ TEST(Calibration, EachMeasuredSdIsTheLeastStepThatBringsTheRmsOfZToOne) {
   }
 }
 
-std::string table_key(bool shared_m, const char* section, const char* key) {
-  return fmt::format("[{}{}] {}", section, shared_m ? ".m_per_session" : "", key);
-}
-
 // Per entry, the larger of what the designs measured; where none measured it (a region no session
 // pooled or compared), toe1's.
 std::array<double, kRegionCount> larger_of(
@@ -281,41 +278,60 @@ std::vector<std::array<double, kRegionCount>> readme_table(const std::string& re
   return rows;
 }
 
-// The README shows the shipped [pooling] and [asymmetry] chain SDs as tables ("How honest the
-// standard errors are", "Left against right"); a change of the config's tables that leaves them
-// behind fails here.
+std::string table_key(AreaSource area, bool shared_m, const char* section, const char* key) {
+  return chain_table_name(section, area, shared_m) + " " + key;
+}
+
+// The README's headers of the chain's tables, per area.
+std::string readme_chain_header(AreaSource area) {
+  return area == AreaSource::FootprintMean
+             ? "| footprint-mean | heel | midfoot posterior | midfoot anterior | met1_2 |"
+             : "| | heel | midfoot posterior | midfoot anterior | met1_2 |";
+}
+
+std::string readme_pair_header(AreaSource area, bool shared_m) {
+  return fmt::format("| SD of 100 ln(right / left){}{} |",
+                     area == AreaSource::FootprintMean ? ", footprint-mean" : "",
+                     shared_m ? ", at one m" : "");
+}
+
+// The README shows the shipped [pooling] and [asymmetry] chain SDs, and their footprint_mean
+// tables, as tables ("How honest the standard errors are", "Left against right", "How the cells
+// read"); a change of the config's tables that leaves them behind fails here.
 TEST(Calibration, TheReadmesTablesOfTheShippedSdsAreTheConfigs) {
   std::ifstream file(test::source_dir() / "README.md");
   ASSERT_TRUE(file) << "no README.md in " << test::source_dir();
   const std::string readme{std::istreambuf_iterator<char>(file), {}};
   const Config config = load_config(default_config_path());
-  const std::string kChainHeader = "| | heel | midfoot posterior | midfoot anterior | met1_2 |";
   const std::vector<std::string> kChainLabels = {"kbar (%)", "n", "cbar (%)", "m"};
-  for (const bool shared_m : {false, true}) {
-    SCOPED_TRACE(table_key(shared_m, "pooling", "*_chain_sd"));
-    const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
-    const auto rows = readme_table(readme, kChainHeader, shared_m ? 1 : 0, kChainLabels);
-    ASSERT_EQ(rows.size(), 4U) << "the README's table of the chain's SDs is not where expected";
-    const std::array<const std::array<double, kRegionCount>*, 4> shipped = {
-        &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
-    for (std::size_t k = 0; k < 4; ++k) {
-      for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
-        EXPECT_EQ(rows[k][ri], (*shipped[k])[ri])
-            << kChainLabels[k] << " " << region_name(kRegions[ri]);
+  for (const AreaSource area : {AreaSource::Footprint, AreaSource::FootprintMean}) {
+    for (const bool shared_m : {false, true}) {
+      SCOPED_TRACE(table_key(area, shared_m, "pooling", "*_chain_sd"));
+      const PoolingSettings& tables = pooling_tables(config, area);
+      const ChainSds& chain = shared_m ? tables.m_per_session : tables.per_step;
+      const auto rows =
+          readme_table(readme, readme_chain_header(area), shared_m ? 1 : 0, kChainLabels);
+      ASSERT_EQ(rows.size(), 4U) << "the README's table of the chain's SDs is not where expected";
+      const std::array<const std::array<double, kRegionCount>*, 4> shipped = {
+          &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
+      for (std::size_t k = 0; k < 4; ++k) {
+        for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+          EXPECT_EQ(rows[k][ri], (*shipped[k])[ri])
+              << kChainLabels[k] << " " << region_name(kRegions[ri]);
+        }
       }
     }
-  }
-  for (const bool shared_m : {false, true}) {
-    SCOPED_TRACE(table_key(shared_m, "asymmetry", "*_pair_sd_pct"));
-    const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
-    const auto rows = readme_table(
-        readme,
-        shared_m ? "| SD of 100 ln(right / left), at one m |" : "| SD of 100 ln(right / left) |", 0,
-        {"kbar", "cbar"});
-    ASSERT_EQ(rows.size(), 2U) << "the README's table of the pair's SDs is not where expected";
-    for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
-      EXPECT_EQ(rows[0][ri], pair.kbar_pair_sd_pct[ri]) << "kbar " << region_name(kRegions[ri]);
-      EXPECT_EQ(rows[1][ri], pair.cbar_pair_sd_pct[ri]) << "cbar " << region_name(kRegions[ri]);
+    for (const bool shared_m : {false, true}) {
+      SCOPED_TRACE(table_key(area, shared_m, "asymmetry", "*_pair_sd_pct"));
+      const AsymmetrySettings& tables = asymmetry_tables(config, area);
+      const PairSds& pair = shared_m ? tables.m_per_session : tables.per_step;
+      const auto rows =
+          readme_table(readme, readme_pair_header(area, shared_m), 0, {"kbar", "cbar"});
+      ASSERT_EQ(rows.size(), 2U) << "the README's table of the pair's SDs is not where expected";
+      for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
+        EXPECT_EQ(rows[0][ri], pair.kbar_pair_sd_pct[ri]) << "kbar " << region_name(kRegions[ri]);
+        EXPECT_EQ(rows[1][ri], pair.cbar_pair_sd_pct[ri]) << "cbar " << region_name(kRegions[ri]);
+      }
     }
   }
 }
@@ -326,12 +342,33 @@ TEST(Calibration, TheReadmesTablesOfTheShippedSdsAreTheConfigs) {
 //   six sizes, 50-90 kg, seeds 1-20 (the command's defaults), and 60 sessions of 30 s of 60-kg
 //   walkers, sizes 37-38, 41-42 and 45-46, seeds 1-20;
 // - [asymmetry] and [asymmetry.m_per_session]: 90 sessions of 60 s of 60-kg walkers, sizes 37-38,
-//   41-42 and 45-46, seeds 1-30, and 90 sessions of 60 s, six sizes, 50-90 kg, seeds 1-15.
+//   41-42 and 45-46, seeds 1-30, and 90 sessions of 60 s, six sizes, 50-90 kg, seeds 1-15;
+// - their footprint_mean tables: the same four designs on cells that average the pressure over
+//   their area (the coverage raster), analysed with footprint-mean.
 // The designs file is checked to hold those. A change of the fit or the chain that moves the
 // tables fails here: measure again with the command and update config/gaitmon.toml and the README.
-TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
-  const std::vector<CalibrationDesignEntry> designs =
+class ShippedTables : public ::testing::TestWithParam<Rasterisation> {};
+
+}  // namespace
+
+// For ctest's and gtest's listings, which print a parameter.
+void PrintTo(Rasterisation raster, std::ostream* out) {
+  *out << rasterisation_name(raster);
+}
+
+namespace {
+
+TEST_P(ShippedTables, AreWhatTheCommandMeasuresOnTheirDesigns) {
+  const Rasterisation raster = GetParam();
+  const AreaSource area =
+      raster == Rasterisation::Coverage ? AreaSource::FootprintMean : AreaSource::Footprint;
+  const std::vector<CalibrationDesignEntry> all_designs =
       load_calibration_designs(test::source_dir() / "config" / "calibration_designs.toml");
+  ASSERT_EQ(all_designs.size(), 8U);
+  std::vector<CalibrationDesignEntry> designs;
+  for (const CalibrationDesignEntry& entry : all_designs) {
+    if (entry.design.rasterisation == raster) designs.push_back(entry);
+  }
   CalibrationDesign all;
   all.sizes = {kInsoleSizes.begin(), kInsoleSizes.end()};
   CalibrationDesign walkers_60kg;
@@ -351,7 +388,7 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
   for (std::size_t i = 0; i < designs.size(); ++i) {
     const CalibrationDesign& d = designs[i].design;
     const CalibrationDesign& n = *named[i].design;
-    SCOPED_TRACE(fmt::format("design {}", i + 1));
+    SCOPED_TRACE(fmt::format("design {} of the {} raster", i + 1, rasterisation_name(raster)));
     EXPECT_EQ(d.sizes, n.sizes);
     EXPECT_EQ(d.first_seed, n.first_seed);
     EXPECT_EQ(d.last_seed, n.last_seed);
@@ -370,7 +407,8 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
   }
 
   const Config config = load_config(default_config_path());
-  const auto scratch = test::scratch_dir("calibration-designs");
+  const auto scratch =
+      test::scratch_dir("calibration-designs-" + std::string(rasterisation_name(raster)));
   std::vector<CalibrationSamples> samples;
   for (const CalibrationDesignEntry& entry : designs) {
     samples.push_back(collect_chain_samples(config, entry.design, scratch));
@@ -387,26 +425,35 @@ TEST(Calibration, TheShippedTablesAreWhatTheCommandMeasuresOnTheirDesigns) {
       if (designs[i].pooling) pooling.push_back(sds);
       if (designs[i].asymmetry) asymmetry.push_back(sds);
     }
-    const ChainSds& chain = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+    const PoolingSettings& tables = pooling_tables(config, area);
+    const ChainSds& chain = shared_m ? tables.m_per_session : tables.per_step;
     const std::array<const std::array<double, kRegionCount>*, 4> chain_shipped = {
         &chain.kbar_chain_sd_pct, &chain.n_chain_sd, &chain.cbar_chain_sd_pct, &chain.m_chain_sd};
     const std::array<const std::array<double, kRegionCount>*, 4> step_shipped = {
         &chain.kbar_step_sd_pct, &chain.n_step_sd, &chain.cbar_step_sd_pct, &chain.m_step_sd};
     for (std::size_t k = 0; k < 4; ++k) {
-      expect_shipped(table_key(shared_m, "pooling", kChainNames[k]), *chain_shipped[k],
+      expect_shipped(table_key(area, shared_m, "pooling", kChainNames[k]), *chain_shipped[k],
                      larger_of({&pooling[0].chain[k], &pooling[1].chain[k]}));
-      expect_shipped(table_key(shared_m, "pooling", kStepNames[k]), *step_shipped[k],
+      expect_shipped(table_key(area, shared_m, "pooling", kStepNames[k]), *step_shipped[k],
                      larger_of({&pooling[0].step[k], &pooling[1].step[k]}));
     }
-    const PairSds& pair = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    const AsymmetrySettings& pair_tables = asymmetry_tables(config, area);
+    const PairSds& pair = shared_m ? pair_tables.m_per_session : pair_tables.per_step;
     const std::array<const std::array<double, kRegionCount>*, 2> pair_shipped = {
         &pair.kbar_pair_sd_pct, &pair.cbar_pair_sd_pct};
     for (std::size_t k = 0; k < 2; ++k) {
-      expect_shipped(table_key(shared_m, "asymmetry", kPairNames[k]), *pair_shipped[k],
+      expect_shipped(table_key(area, shared_m, "asymmetry", kPairNames[k]), *pair_shipped[k],
                      larger_of({&asymmetry[0].pair[k], &asymmetry[1].pair[k]}));
     }
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(Calibration, ShippedTables,
+                         ::testing::Values(Rasterisation::CellCentre, Rasterisation::Coverage),
+                         [](const auto& info) {
+                           return info.param == Rasterisation::Coverage ? "CoverageRaster"
+                                                                        : "CentreRaster";
+                         });
 
 // A designs file with a mistake names the file, the key and its line, and says why.
 TEST(Calibration, ADesignsFileWithAMistakeNamesTheFileTheKeyAndTheLine) {

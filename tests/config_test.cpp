@@ -66,6 +66,19 @@ Edit replace(std::string from, std::string to) {
   return replace(from, from, std::move(to));
 }
 
+// The heel's value of table `key` after `anchor`, whatever it was.
+Edit set_heel(std::string anchor, std::string key, std::string value) {
+  return [=](std::string& text) {
+    const auto at = text.find(anchor);
+    if (at == std::string::npos) throw std::logic_error("anchor not found: " + anchor);
+    const std::string heel = key + " = { heel = ";
+    const auto pos = text.find(heel, at);
+    if (pos == std::string::npos) throw std::logic_error("text not found: " + heel);
+    const auto from = pos + heel.size();
+    text.replace(from, text.find(',', from) - from, value);
+  };
+}
+
 Edit prepend(std::string line) {
   return [=](std::string& text) { text.insert(0, line); };
 }
@@ -888,8 +901,9 @@ TEST(Config, ModelAreaIsAutoAsShippedAndValidated) {
   EXPECT_EQ(load_config(dir / kMain).model.area, "footprint-mean");
 }
 
-// [asymmetry] and [asymmetry.m_per_session]: every region's SD for kbar and cbar, as the shipped
-// file documents them; each must be there, known and in [0, 100].
+// [asymmetry] and [asymmetry.m_per_session], and the same two of [asymmetry.footprint_mean]:
+// every region's SD for kbar and cbar, as the shipped file documents them; each must be there,
+// known and in [0, 100].
 TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   const AsymmetrySettings a = load_config(shipped_config()).asymmetry;
   using PerRegion = std::array<double, kRegionCount>;
@@ -897,6 +911,13 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   EXPECT_EQ(a.per_step.cbar_pair_sd_pct, (PerRegion{3.0, 6.0, 4.5, 5.5, 5.5, 9.5, 9.5, 12.5}));
   EXPECT_EQ(a.m_per_session.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.0, 2.0, 0.5, 1.0, 3.0}));
   EXPECT_EQ(a.m_per_session.cbar_pair_sd_pct, (PerRegion{0.5, 1.5, 1.0, 1.0, 1.0, 3.5, 3.5, 3.5}));
+  const AsymmetrySettings mean = load_config(shipped_config()).asymmetry_footprint_mean;
+  EXPECT_EQ(mean.per_step.kbar_pair_sd_pct, (PerRegion{1.0, 7.0, 6.0, 2.0, 2.5, 9.0, 1.5, 5.0}));
+  EXPECT_EQ(mean.per_step.cbar_pair_sd_pct, (PerRegion{1.5, 10.5, 4.0, 4.0, 5.0, 5.5, 5.5, 15.5}));
+  EXPECT_EQ(mean.m_per_session.kbar_pair_sd_pct,
+            (PerRegion{1.0, 7.0, 6.0, 2.0, 2.0, 2.0, 3.0, 5.0}));
+  EXPECT_EQ(mean.m_per_session.cbar_pair_sd_pct,
+            (PerRegion{0.5, 3.0, 3.5, 1.0, 1.0, 5.5, 5.5, 8.5}));
   const std::vector<Refusal> cases = {
       {"AsymmetryNegative", kMain,
        replace("kbar_pair_sd_pct = { heel = 1.0", "kbar_pair_sd_pct = { heel = -1"),
@@ -913,6 +934,13 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
        "missing"},
       {"AsymmetrySharedMMissing", kMain, erase_from_to("[asymmetry.m_per_session]", "[pooling]"),
        "asymmetry.m_per_session", "missing"},
+      {"AsymmetryFootprintMeanMissing", kMain,
+       erase_from_to("[asymmetry.footprint_mean]", "[pooling]"), "asymmetry.footprint_mean",
+       "missing"},
+      {"AsymmetryFootprintMeanSharedMTooLarge", kMain,
+       set_heel("[asymmetry.footprint_mean.m_per_session]", "cbar_pair_sd_pct", "101"),
+       "asymmetry.footprint_mean.m_per_session.cbar_pair_sd_pct.heel",
+       "must be in [0, 100], got 101"},
   };
   expect_refusals(cases);
   const fs::path dir = copy_config("AsymmetryTrusted");
@@ -921,9 +949,9 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
   EXPECT_EQ(load_config(dir / kMain).asymmetry.per_step.kbar_pair_sd_pct[0], 0.0);
 }
 
-// [pooling] and [pooling.m_per_session]: every region's chain SD and step SD for kbar, n, cbar and
-// m, as the shipped file documents them; kbar's and cbar's in [0, 1000] (per cent), n's and m's in
-// [0, 1].
+// [pooling] and [pooling.m_per_session], and the same two of [pooling.footprint_mean]: every
+// region's chain SD and step SD for kbar, n, cbar and m, as the shipped file documents them;
+// kbar's and cbar's in [0, 1000] (per cent), n's and m's in [0, 1].
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   const PoolingSettings p = load_config(shipped_config()).pooling;
   using PerRegion = std::array<double, kRegionCount>;
@@ -949,6 +977,22 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   EXPECT_EQ(p.m_per_session.cbar_step_sd_pct,
             (PerRegion{0.0, 22.5, 9.5, 15.0, 5.0, 109.5, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.m_step_sd, (PerRegion{0.0, 0.075, 0.01, 0.08, 0.05, 0.175, 0.0, 0.04}));
+  const PoolingSettings mean = load_config(shipped_config()).pooling_footprint_mean;
+  EXPECT_EQ(mean.per_step.kbar_chain_sd_pct,
+            (PerRegion{5.0, 19.0, 13.0, 13.0, 7.5, 24.5, 0.0, 16.0}));
+  EXPECT_EQ(mean.per_step.n_chain_sd, (PerRegion{0.03, 0.08, 0.06, 0.08, 0.05, 0.15, 0.0, 0.075}));
+  EXPECT_EQ(mean.per_step.cbar_chain_sd_pct,
+            (PerRegion{11.5, 16.5, 17.0, 11.0, 6.0, 48.5, 211.5, 26.0}));
+  EXPECT_EQ(mean.per_step.m_chain_sd,
+            (PerRegion{0.05, 0.06, 0.035, 0.07, 0.04, 0.05, 0.225, 0.06}));
+  EXPECT_EQ(mean.per_step.kbar_step_sd_pct, (PerRegion{0.0, 4.0, 2.5, 13.5, 8.5, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(mean.per_step.m_step_sd, (PerRegion{0.0, 0.0, 0.0, 0.125, 0.16, 0.0, 0.0, 0.0}));
+  EXPECT_EQ(mean.m_per_session.kbar_chain_sd_pct,
+            (PerRegion{5.0, 19.5, 12.5, 12.5, 6.5, 25.5, 7.5, 15.0}));
+  EXPECT_EQ(mean.m_per_session.cbar_chain_sd_pct,
+            (PerRegion{4.0, 13.5, 22.0, 0.0, 0.0, 69.5, 216.0, 0.0}));
+  EXPECT_EQ(mean.m_per_session.m_step_sd,
+            (PerRegion{0.01, 0.025, 0.025, 0.04, 0.035, 0.03, 0.0, 0.0}));
   const std::vector<Refusal> cases = {
       {"PoolingNAboveOne", kMain, replace("n_chain_sd = { heel = 0.02", "n_chain_sd = { heel = 2"),
        "pooling.n_chain_sd.heel", "must be in [0, 1], got 2"},
@@ -970,6 +1014,14 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
        "pooling.m_per_session.m_step_sd.heel", "must be in [0, 1], got 1.5"},
       {"PoolingStepTableMissing", kMain, erase_from_to("n_step_sd", "cbar_step_sd_pct"),
        "pooling.n_step_sd", "missing"},
+      {"PoolingFootprintMeanMissing", kMain, erase_from_to("[pooling.footprint_mean]", "[wire]"),
+       "pooling.footprint_mean", "missing"},
+      {"PoolingFootprintMeanNAboveOne", kMain,
+       set_heel("[pooling.footprint_mean]", "n_chain_sd", "1.5"),
+       "pooling.footprint_mean.n_chain_sd.heel", "must be in [0, 1], got 1.5"},
+      {"PoolingFootprintMeanSharedMStepMissing", kMain,
+       replace("[pooling.footprint_mean.m_per_session]", "cbar_step_sd_pct", "cbar_step_sd"),
+       "pooling.footprint_mean.m_per_session.cbar_step_sd_pct", "missing"},
   };
   expect_refusals(cases);
 }

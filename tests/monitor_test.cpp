@@ -129,15 +129,19 @@ void expect_close(double actual, double expected, const std::string& what) {
 }
 
 // What GAITMON_FIT's se_*_total should be for `fit` of `region`, worked from the config's chain
-// and step SDs: ln kbar's and ln cbar's variances are (se / value)^2; at a declared (running) m
+// and step SDs (those of `area`'s tables): ln kbar's and ln cbar's variances are (se / value)^2;
+// at a declared (running) m
 // its own variance and [pooling.m_per_session]'s chain SD of m reach the others through their
 // slopes. At the step's own m a variance v of m beyond the range's, range^2 / 3, is held there,
 // and each other's share of it, c^2 / v with c its covariance with m, shrinks to c^2 range^2 /
 // (3 v^2). Zeros where the fit has no covariance of its four parameters.
-std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, const Config& config) {
+std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, const Config& config,
+                                        AreaSource area) {
   if (!fit.material_covariance) return {0.0, 0.0, 0.0, 0.0};
   const bool shared = !fit.m.free;
-  const ChainSds& chain = shared ? config.pooling.m_per_session : config.pooling.per_step;
+  const PoolingSettings& tables =
+      area == AreaSource::FootprintMean ? config.pooling_footprint_mean : config.pooling;
+  const ChainSds& chain = shared ? tables.m_per_session : tables.per_step;
   const std::size_t ri = index_of(region);
   const double m_variance =
       fit.m.se * fit.m.se + (shared ? chain.m_chain_sd[ri] * chain.m_chain_sd[ri] : 0.0);
@@ -167,8 +171,9 @@ std::array<double, 4> expected_total_se(const RegionFit& fit, Region region, con
 }
 
 void expect_total_se(const RegionFitReport& got, const RegionFit& fit, Region region,
-                     const Config& config, const std::string& where) {
-  const std::array<double, 4> e = expected_total_se(fit, region, config);
+                     const Config& config, const std::string& where,
+                     AreaSource area = AreaSource::Footprint) {
+  const std::array<double, 4> e = expected_total_se(fit, region, config, area);
   expect_close(got.se_kbar_total, e[0], where + " se_kbar_total");
   expect_close(got.se_n_total, e[1], where + " se_n_total");
   expect_close(got.se_cbar_total, e[2], where + " se_cbar_total");
@@ -453,7 +458,8 @@ TEST(Monitor, EveryStepHasATissueReportWhenStepsComeNoFasterThanWalking) {
 // A live fit cannot wait for the session's evidence of how its cells read, as analyze's auto
 // does, so [model] area "auto" is the footprint live, and the monitor names the footprint the
 // cells call for once its steps show it: a warning where the fits take the other kind, else one
-// line at info. The raster is the simulator's, not the code's guess.
+// line at info. The raster is the simulator's, not the code's guess. Each fit's standard errors
+// against the tissue take the chain's SDs of the area it was fitted on.
 TEST(Monitor, NamesTheFootprintTheCellsCallForOnceTheirStepsShowIt) {
   EXPECT_EQ(live_area_source(ModelSettings{}), AreaSource::Footprint);
   ModelSettings model;
@@ -463,6 +469,8 @@ TEST(Monitor, NamesTheFootprintTheCellsCallForOnceTheirStepsShowIt) {
   EXPECT_THROW(live_area_source(model), std::invalid_argument);
 
   const Config config = shipped_config();
+  ASSERT_NE(config.pooling_footprint_mean.per_step.kbar_chain_sd_pct[index_of(Region::Heel)],
+            config.pooling.per_step.kbar_chain_sd_pct[index_of(Region::Heel)]);
   const fs::path dir = test::scratch_dir("monitor-cells");
   for (const Rasterisation raster : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
     SimulationOptions simulation;
@@ -489,6 +497,28 @@ TEST(Monitor, NamesTheFootprintTheCellsCallForOnceTheirStepsShowIt) {
       const std::string text = log.text.str();
       const std::string what =
           fmt::format("{} raster, {} area", rasterisation_name(raster), area_source_name(area));
+      // The fits' standard errors against the tissue take the chain's SDs of the area they were
+      // fitted on ([pooling.footprint_mean] on footprint-mean), which differ.
+      const std::vector<Step> steps = batch_steps(csv, config);
+      const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
+      std::map<StepKey, FitReport> fit_of;
+      for (const FitReport& fit : publisher.fits()) fit_of[{fit.foot, fit.step}] = fit;
+      std::size_t compared = 0;
+      for (const Step& step : steps) {
+        if (step.status != StepStatus::Ok || compared >= 4) continue;
+        const StepAnalysis expected = analyse_step(step, layout, config, options.analysis);
+        const auto it = fit_of.find({step.foot, step.index});
+        ASSERT_NE(it, fit_of.end()) << what;
+        ++compared;
+        for (const RegionAnalysis& r : expected.regions) {
+          if (r.fit.status != FitStatus::Ok) continue;
+          expect_total_se(it->second.regions[index_of(r.region)], r.fit, r.region, config,
+                          fmt::format("{}, {} step {} {}", what, foot_name(step.foot), step.index,
+                                      region_name(r.region)),
+                          area);
+        }
+      }
+      EXPECT_EQ(compared, 4u) << what;
       EXPECT_EQ(count_of(text, "monitor: the cells read the pressure"), 1u) << what << "\n" << text;
       EXPECT_THAT(text, HasSubstr(averaging ? "read the pressure averaged over their area"
                                             : "read the pressure at their centres"))

@@ -462,7 +462,8 @@ ChainResult run_chain(double tissue_step_sd_pct) {
     for (const auto& [key, group] : groups) {
       std::vector<MaterialEstimate> estimates;
       for (const auto& [e, t] : group) estimates.push_back(e);
-      const PooledEstimates p = pool_region_steps(estimates, key.second, config());
+      const PooledEstimates p =
+          pool_region_steps(estimates, key.second, config().pooling, config().fit_bounds);
       if (!p.pooled) continue;
       ++out.groups_pooled;
       between.push_back(std::sqrt(p.between_step[0][0]));

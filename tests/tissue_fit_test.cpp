@@ -208,7 +208,8 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
   for (const auto& [key, pool] : pools) {
     std::vector<MaterialEstimate> estimates;
     for (const auto& [e, truth] : pool) estimates.push_back(e);
-    const PooledEstimates p = pool_region_steps(estimates, std::get<2>(key), config());
+    const PooledEstimates p =
+        pool_region_steps(estimates, std::get<2>(key), config().pooling, config().fit_bounds);
     for (std::size_t i = 0; i < pool.size(); ++i) {
       for (std::size_t k = 0; k < 4; ++k) {
         add_pooled(std::get<2>(key), k,
@@ -438,8 +439,8 @@ TEST(TissueFitRecovery, FollowsATissueAwayFromTheAppendixMeans) {
       if (fit.m.at_bound) ++m_at_bound;
       if (const auto e = material_estimate(fit)) estimates.push_back(*e);
     }
-    const PooledEstimates pool =
-        pool_region_steps(estimates, groups[g].steps.front().region, config());
+    const PooledEstimates pool = pool_region_steps(estimates, groups[g].steps.front().region,
+                                                   config().pooling, config().fit_bounds);
     if (!pool.pooled) continue;
     ++pools;
     // The pool holds ln kbar, n, ln cbar, m.

@@ -6,6 +6,7 @@
 #include <memory>
 #include <optional>
 #include <span>
+#include <string>
 #include <string_view>
 #include <utility>
 #include <vector>
@@ -186,6 +187,16 @@ struct SessionAnalysis {
   Spread nrmse_total_pct;
 };
 
+/// The chain's tables for fits given `area`: [pooling.footprint_mean] and
+/// [asymmetry.footprint_mean] for footprint-mean (cells that average the pressure, whose chain
+/// errs otherwise), [pooling] and [asymmetry] for the footprint and the ellipse.
+const PoolingSettings& pooling_tables(const Config& config, AreaSource area);
+const AsymmetrySettings& asymmetry_tables(const Config& config, AreaSource area);
+
+/// The config's name of the table pooling_tables() or asymmetry_tables() gives, `kind` "pooling"
+/// or "asymmetry": "[pooling]", "[pooling.m_per_session]", "[pooling.footprint_mean]", ...
+std::string chain_table_name(std::string_view kind, AreaSource area, bool shared_m);
+
 /// The measurement chain's SDs of `region` on the pooled scale (ln kbar, n, ln cbar, m): those of
 /// `pooling.m_per_session` for steps fitted at one m per region, else of `pooling.per_step`.
 MaterialVector chain_sd(const PoolingSettings& pooling, Region region, bool shared_m);
@@ -200,7 +211,7 @@ MaterialVector step_sd(const PoolingSettings& pooling, Region region, bool share
 /// on its step no more than that error allows. At a shared m on kbar, n and cbar only: m's
 /// variance there is the session's, one for every step.
 PooledEstimates pool_region_steps(std::span<const MaterialEstimate> estimates, Region region,
-                                  const Config& config);
+                                  const PoolingSettings& pooling, const FitBounds& bounds);
 
 /// The pooled mean of `pooling` with `chain_sd` added (with_shared_error): the region's tissue
 /// over the pooled steps, carrying the error every step shares, which pooling cannot average

@@ -205,8 +205,13 @@ struct Config {
   ModelSettings model;          ///< [model] of the main file
   AsymmetrySettings asymmetry;  ///< [asymmetry] of the main file
   PoolingSettings pooling;      ///< [pooling] of the main file
-  WireSettings wire;            ///< [wire]: the insole frame layout
-  SerialSettings serial;        ///< [serial]: the serial driver
+  /// [asymmetry.footprint_mean] and [pooling.footprint_mean]: the same tables for fits on the
+  /// footprint of cells that average the pressure over their area (footprint-mean), whose chain
+  /// errs otherwise (README, "How the cells read"). pooling_tables() (analysis.hpp) chooses.
+  AsymmetrySettings asymmetry_footprint_mean;
+  PoolingSettings pooling_footprint_mean;
+  WireSettings wire;      ///< [wire]: the insole frame layout
+  SerialSettings serial;  ///< [serial]: the serial driver
   RingSettings ring;
   MonitorSettings monitor;
   LcmSettings lcm;  ///< [lcm] of the main file

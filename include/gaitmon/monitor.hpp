@@ -42,7 +42,8 @@
 //  - Each analysed Ok step's own fits (at each step's own m, without effects, as `gaitmon
 //    analyze` pools them) go into a window of the latest config.monitor.tissue_window_steps
 //    (both feet, in the detector's order), and a thread of its own pools each region's over it
-//    (pool_region_steps, with [pooling]'s SDs) and publishes a TissueReport: after each step, or
+//    (pool_region_steps, with the SDs of [pooling], or of [pooling.footprint_mean] where [model]
+//    area is "footprint-mean") and publishes a TissueReport: after each step, or
 //    at most once every 100 ms, the steps that came in meanwhile taken together. Over a session
 //    no longer than the window the final one equals `gaitmon analyze`'s pooled means.
 //

@@ -169,9 +169,10 @@ std::string pooled_columns(const std::optional<MaterialParams>& p) {
 
 // The step's own standard errors with the chain's shared error (with_chain_error), empty where
 // the fit has no material estimate.
-std::string total_se_columns(const RegionFit& fit, Region region, const Config& config) {
+std::string total_se_columns(const RegionFit& fit, Region region, const Config& config,
+                             AreaSource area) {
   const std::optional<MaterialParams> p =
-      with_chain_error(fit, region, config.pooling, config.fit_bounds);
+      with_chain_error(fit, region, pooling_tables(config, area), config.fit_bounds);
   if (!p) return ",,,";
   return fmt::format("{:.3g},{:.3g},{:.3g},{:.3g}", p->kbar_n_per_mm3.se, p->n.se,
                      p->cbar_ns_per_mm3.se, p->m.se);
@@ -179,7 +180,7 @@ std::string total_se_columns(const RegionFit& fit, Region region, const Config& 
 
 // `analyses` in the order analyse_session was given them.
 std::string regions_csv(const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
-                        const Config& config) {
+                        const Config& config, AreaSource area) {
   std::string out =
       "foot,step,region,status,frames,peak_force_n,peak_area_mm2,A_mm,B_mm,C_mm,d0_mm,"
       "kbar_n_per_mm3,n,cbar_ns_per_mm3,m,se_kbar,se_n,se_cbar,se_m,nrmse_pct,aspect_a_over_b,"
@@ -192,7 +193,7 @@ std::string regions_csv(const std::vector<StepAnalysis>& analyses, const Session
       const RegionFit& f = r.fit;
       const std::string pooled_and_total =
           pooled_columns(session.regions[index_of(r.region)].pooled_per_step[si]) + "," +
-          total_se_columns(f, r.region, config);
+          total_se_columns(f, r.region, config, area);
       fmt::format_to(std::back_inserter(out), "{},{},{},{},{},{:.3f},{:.2f},", foot_name(s.foot),
                      s.step, region_name(r.region), status_text(f), r.frames, r.peak_force_n,
                      r.peak_area_mm2);
@@ -282,10 +283,12 @@ nlohmann::json pooling_json(const RegionSessionAnalysis& r) {
        "per-step fits pooled across steps by a normal random-effects model on (ln kbar, n, ln "
        "cbar, m): regions.csv's *_pooled columns (include/gaitmon/pooling.hpp). se is the "
        "mean's standard error with the measurement chain's shared error, chain_sd from "
-       "[pooling] of the config, or [pooling.m_per_session] at one m per session (ln kbar "
-       "and ln cbar: relative); se_steps is the steps' scatter alone. At one m per session "
-       "the steps were pooled at that m, and its error (its se and its chain_sd) enters the "
-       "others' se through how they move with it. For the region's tissue over the session "
+       "the config's table that settings.pooling_table names ([pooling], [pooling.m_per_session] "
+       "at one m per session, [pooling.footprint_mean] and its m_per_session on the area "
+       "footprint-mean; ln kbar and ln cbar: relative); se_steps is the steps' scatter alone. At "
+       "one m per session the steps were pooled at that m, and its error (its se and its "
+       "chain_sd) enters the others' se through how they move with it. For the region's tissue "
+       "over the session "
        "read this mean: session_fit's standard errors are its Jacobian's, and up to fifteen times "
        "too small against the truth (README, \"Per-step estimates pooled across steps\")"}};
 }
@@ -407,17 +410,20 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
   j["insole_size"] = insole_size_name(header.insole_size);
   j["sample_rate_hz"] = header.sample_rate_hz;
   j["steps"] = {{"total", steps.size()}, {"analysed", analyses.size()}};
-  j["settings"] = {{"model", model_variant_name(settings.fit.model)},
-                   {"fit", fit_mode_name(settings.fit.mode)},
-                   {"smoothing", smoothing_name(settings.fit.smoothing)},
-                   {"area", area_source_name(settings.area)},
-                   {"area_auto", args.area_auto()},
-                   {"end_rate", end_rate_name(settings.fit.end_rate)},
-                   {"free_scale", settings.fit.free_scale},
-                   {"m_per_session", args.m_per_session},
-                   {"starts", settings.fit.starts},
-                   {"max_iterations", settings.fit.max_iterations},
-                   {"bounds", bounds_json(config.fit_bounds)}};
+  j["settings"] = {
+      {"model", model_variant_name(settings.fit.model)},
+      {"fit", fit_mode_name(settings.fit.mode)},
+      {"smoothing", smoothing_name(settings.fit.smoothing)},
+      {"area", area_source_name(settings.area)},
+      {"area_auto", args.area_auto()},
+      {"pooling_table", chain_table_name("pooling", settings.area, args.m_per_session)},
+      {"asymmetry_table", chain_table_name("asymmetry", settings.area, args.m_per_session)},
+      {"end_rate", end_rate_name(settings.fit.end_rate)},
+      {"free_scale", settings.fit.free_scale},
+      {"m_per_session", args.m_per_session},
+      {"starts", settings.fit.starts},
+      {"max_iterations", settings.fit.max_iterations},
+      {"bounds", bounds_json(config.fit_bounds)}};
   j["note"] = declared_note(settings.fit);
   j["cell_reading"] = cell_reading_json(cells);
   j["nrmse_total_pct_across_steps"] = spread_json(session.nrmse_total_pct);
@@ -468,8 +474,10 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
                "from a weighted regression of each step's ln kbar and ln cbar on its foot "
                "and its heel strike (null: fewer than {} steps of either foot off the "
                "bounds). Its standard error is that of the steps' scatter and the pair of "
-               "insoles' own SD ([asymmetry] of the config, [asymmetry.m_per_session] at one m "
-               "per session) together; z is the log ratio "
+               "insoles' own SD (the config's table that settings.asymmetry_table names: "
+               "[asymmetry], [asymmetry.m_per_session] at one m per session, "
+               "[asymmetry.footprint_mean] and its m_per_session on the area footprint-mean) "
+               "together; z is the log ratio "
                "over it, and beyond about 3 the feet differ (include/gaitmon/asymmetry.hpp)",
                kMinAsymmetryStepsPerFoot)}}},
         {"appendix_i",
@@ -518,12 +526,12 @@ void print_named(const SessionAnalysis& session,
 
 // The pooled means with the standard errors that hold the chain's shared error: what a region's
 // tissue was over the session, where the medians above are what one step gives.
-void print_pooled(const SessionAnalysis& session, bool m_per_session) {
+void print_pooled(const SessionAnalysis& session, AreaSource area, bool m_per_session) {
   fmt::print(
       "pooled over the session, +- one standard error with the measurement chain's error "
       "({} of the config):\n{:<19}{:>18}{:>17}{:>21}{:>17}\n",
-      m_per_session ? "[pooling.m_per_session]" : "[pooling]", "region", "kbar N/mm3", "n",
-      "cbar Ns/mm3", "m");
+      chain_table_name("pooling", area, m_per_session), "region", "kbar N/mm3", "n", "cbar Ns/mm3",
+      "m");
   for (const RegionSessionAnalysis& r : session.regions) {
     if (!r.pooled_mean) {
       fmt::print("{:<19}not pooled: {}\n", region_name(r.region), r.pooling.not_pooled);
@@ -592,7 +600,7 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
     }
     fmt::print("m per session, every step fitted at it: {}\n", fmt::join(shared, ", "));
   }
-  print_pooled(session, args.m_per_session);
+  print_pooled(session, settings.area, args.m_per_session);
   print_named(
       session, &RegionSessionAnalysis::kbar_trend, &RegionSessionAnalysis::cbar_trend,
       [](const LogTrend& t) {
@@ -784,7 +792,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
 
   std::filesystem::create_directories(args.out_dir);
   outputs.add("steps.csv", steps_csv(steps));
-  outputs.add("regions.csv", regions_csv(analyses, session, config));
+  outputs.add("regions.csv", regions_csv(analyses, session, config, settings.area));
   outputs.add("session.json", session_json(args, header, config, settings, steps, analyses, session,
                                            extended, cells));
   if (args.report) {

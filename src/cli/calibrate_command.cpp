@@ -85,6 +85,25 @@ struct TableKey {
 // [asymmetry].
 enum class Table { Chain, Step, Pair };
 
+// Which of the config's sets of tables: those of the footprint or of footprint-mean (measured on
+// the coverage raster), for steps fitted each at its own m or at one m per session.
+struct TableSet {
+  bool footprint_mean = false;
+  bool shared_m = false;
+};
+
+constexpr TableSet kTableSets[] = {{false, false}, {false, true}, {true, false}, {true, true}};
+
+AreaSource area_of(TableSet set) {
+  return set.footprint_mean ? AreaSource::FootprintMean : AreaSource::Footprint;
+}
+
+// "[pooling]", "[asymmetry.footprint_mean.m_per_session]", ...
+std::string table_name(Table table, TableSet set) {
+  return chain_table_name(table == Table::Pair ? "asymmetry" : "pooling", area_of(set),
+                          set.shared_m);
+}
+
 constexpr TableKey kChainKeys[] = {{"kbar_chain_sd_pct", "ln kbar %", 0, true},
                                    {"n_chain_sd", "n", 1, false},
                                    {"cbar_chain_sd_pct", "ln cbar %", 2, true},
@@ -128,13 +147,15 @@ double real(const std::string& text) {
 
 // One entry of the config's tables, on the config's scale (100 ln for kbar and cbar).
 template <typename C>
-auto& config_entry(C& config, bool shared_m, Table table, std::size_t parameter,
+auto& config_entry(C& config, TableSet set, Table table, std::size_t parameter,
                    std::size_t region) {
   if (table == Table::Pair) {
-    auto& sds = shared_m ? config.asymmetry.m_per_session : config.asymmetry.per_step;
+    auto& pairs = set.footprint_mean ? config.asymmetry_footprint_mean : config.asymmetry;
+    auto& sds = set.shared_m ? pairs.m_per_session : pairs.per_step;
     return (parameter == 0 ? sds.kbar_pair_sd_pct : sds.cbar_pair_sd_pct)[region];
   }
-  auto& sds = shared_m ? config.pooling.m_per_session : config.pooling.per_step;
+  auto& pooling = set.footprint_mean ? config.pooling_footprint_mean : config.pooling;
+  auto& sds = set.shared_m ? pooling.m_per_session : pooling.per_step;
   const std::array chain = {&sds.kbar_chain_sd_pct, &sds.n_chain_sd, &sds.cbar_chain_sd_pct,
                             &sds.m_chain_sd};
   const std::array step = {&sds.kbar_step_sd_pct, &sds.n_step_sd, &sds.cbar_step_sd_pct,
@@ -142,14 +163,14 @@ auto& config_entry(C& config, bool shared_m, Table table, std::size_t parameter,
   return (*(table == Table::Step ? step : chain)[parameter])[region];
 }
 
-double config_value(const Config& config, bool shared_m, Table table, std::size_t parameter,
+double config_value(const Config& config, TableSet set, Table table, std::size_t parameter,
                     std::size_t region) {
-  return config_entry(config, shared_m, table, parameter, region);
+  return config_entry(config, set, table, parameter, region);
 }
 
 // What one mode (each step at its own m, or one m per session) measured, beside the config's.
 struct ModeReport {
-  bool shared_m = false;
+  TableSet set;
   const ChainSamples* samples = nullptr;
   MeasuredChainSds measured;
 };
@@ -164,8 +185,12 @@ struct DesignRun {
   bool measures(Table table) const {
     return table == Table::Pair ? entry.asymmetry : entry.pooling;
   }
+  // A design measures the tables of the cells it simulates, in both ways of fitting m.
+  bool measures(TableSet set) const {
+    return set.footprint_mean == (entry.design.rasterisation == Rasterisation::Coverage);
+  }
   // The entry as this design measured it, if it measures that table and had samples for it.
-  std::optional<double> measured(bool shared_m, Table table, std::size_t parameter,
+  std::optional<double> measured(TableSet set, Table table, std::size_t parameter,
                                  std::size_t region) const;
 };
 
@@ -215,15 +240,14 @@ Cell cell_of(const Config& config, const ModeReport& mode, Table table, const Ta
               : table == Table::Step ? &mode.samples->steps[region][p]
                                      : &mode.samples->pooled[region][p];
   c.measured = measured_entry(mode.measured, table, p, region);
-  c.config = config_value(config, mode.shared_m, table, p, region);
+  c.config = config_value(config, mode.set, table, p, region);
   // m's SD reaches the others through their slopes on a shared m (0 where m is each step's own).
   const double m_sd = pair ? 0.0 : mode.measured.chain[3][region].value_or(0.0);
-  const double config_m_sd =
-      pair ? 0.0 : config_value(config, mode.shared_m, Table::Chain, 3, region);
+  const double config_m_sd = pair ? 0.0 : config_value(config, mode.set, Table::Chain, 3, region);
   // A step errs by the chain's SD and its own.
   const double chain = table == Table::Step ? mode.measured.chain[p][region].value_or(0.0) : 0.0;
   const double config_chain =
-      table == Table::Step ? config_value(config, mode.shared_m, Table::Chain, p, region) : 0.0;
+      table == Table::Step ? config_value(config, mode.set, Table::Chain, p, region) : 0.0;
   const double scale = k.percent ? 0.01 : 1.0;
   if (c.measured) c.rms_measured = rms_z(*c.samples, std::hypot(chain, *c.measured) * scale, m_sd);
   c.rms_config = rms_z(*c.samples, std::hypot(config_chain, c.config) * scale, config_m_sd);
@@ -231,10 +255,10 @@ Cell cell_of(const Config& config, const ModeReport& mode, Table table, const Ta
   return c;
 }
 
-std::optional<double> DesignRun::measured(bool shared_m, Table table, std::size_t parameter,
+std::optional<double> DesignRun::measured(TableSet set, Table table, std::size_t parameter,
                                           std::size_t region) const {
-  if (!measures(table)) return std::nullopt;
-  return measured_entry(modes[shared_m].measured, table, parameter, region);
+  if (!measures(table) || !measures(set)) return std::nullopt;
+  return measured_entry(modes[set.shared_m].measured, table, parameter, region);
 }
 
 std::string sd_text(std::optional<double> sd, bool percent) {
@@ -266,9 +290,9 @@ void print_table(const Config& config, const ModeReport& mode, Table table) {
           "brackets, then the RMS of z with the SD measured / the config's / none";
       break;
   }
-  fmt::print("\n[{}{}] ({}): {}\n", table == Table::Pair ? "asymmetry" : "pooling",
-             mode.shared_m ? ".m_per_session" : "",
-             mode.shared_m ? "one m per region over the session" : "each step at its own m", what);
+  fmt::print("\n{} ({}): {}\n", table_name(table, mode.set),
+             mode.set.shared_m ? "one m per region over the session" : "each step at its own m",
+             what);
   fmt::print("{:<18} {:>5}", "region",
              table == Table::Pair ? "pairs" : (table == Table::Step ? "steps" : "pools"));
   for (const TableKey& k : keys_of(table)) fmt::print("  {:<28}", k.label);
@@ -286,21 +310,22 @@ void print_table(const Config& config, const ModeReport& mode, Table table) {
   }
 }
 
-// One config table as TOML from `written`, saying above it where no design measured a region.
+// One config table as TOML from `written`, saying above it where no design measured a region of
+// the cells they `simulated`.
 std::string toml_line(const Config& config, const Config& written, std::span<const DesignRun> runs,
-                      bool shared_m, Table table, const TableKey& k) {
+                      TableSet set, Table table, const TableKey& k, bool simulated) {
   std::vector<std::string> entries, kept;
   for (std::size_t ri = 0; ri < kRegionCount; ++ri) {
     const bool measured = std::any_of(runs.begin(), runs.end(), [&](const DesignRun& run) {
-      return run.measured(shared_m, table, k.parameter, ri).has_value();
+      return run.measured(set, table, k.parameter, ri).has_value();
     });
     if (!measured) kept.emplace_back(region_name(kRegions[ri]));
     entries.push_back(
         fmt::format("{} = {}", region_name(kRegions[ri]),
-                    sd_text(config_value(written, shared_m, table, k.parameter, ri), k.percent)));
+                    sd_text(config_value(written, set, table, k.parameter, ri), k.percent)));
   }
   std::string text;
-  if (!kept.empty()) {
+  if (simulated && !kept.empty()) {
     text = fmt::format("# {}: nothing to measure in these sessions, the value of {}\n",
                        fmt::join(kept, ", "), config.source.string());
   }
@@ -324,13 +349,13 @@ std::string design_text(const CalibrationDesign& d) {
       d.rasterisation == Rasterisation::Coverage ? "; coverage raster, area footprint-mean" : "");
 }
 
-// Calls `f(shared_m, table, key, region)` for every entry of the config's tables.
+// Calls `f(set, table, key, region)` for every entry of the config's tables.
 template <typename F>
 void for_each_entry(F f) {
-  for (const bool shared_m : {false, true}) {
+  for (const TableSet set : kTableSets) {
     for (const Table table : {Table::Chain, Table::Step, Table::Pair}) {
       for (const TableKey& k : keys_of(table)) {
-        for (std::size_t ri = 0; ri < kRegionCount; ++ri) f(shared_m, table, k, ri);
+        for (std::size_t ri = 0; ri < kRegionCount; ++ri) f(set, table, k, ri);
       }
     }
   }
@@ -340,15 +365,14 @@ void for_each_entry(F f) {
 std::vector<std::string> entries_moved(const Config& from, const Config& to,
                                        std::optional<Table> only = std::nullopt) {
   std::vector<std::string> moved;
-  for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
+  for_each_entry([&](TableSet set, Table table, const TableKey& k, std::size_t ri) {
     if (only && table != *only) return;
-    const double a = config_value(from, shared_m, table, k.parameter, ri);
-    const double b = config_value(to, shared_m, table, k.parameter, ri);
+    const double a = config_value(from, set, table, k.parameter, ri);
+    const double b = config_value(to, set, table, k.parameter, ri);
     if (std::abs(a - b) <= 1e-9) return;
-    moved.push_back(fmt::format("[{}{}] {} {} {} -> {}",
-                                table == Table::Pair ? "asymmetry" : "pooling",
-                                shared_m ? ".m_per_session" : "", region_name(kRegions[ri]), k.key,
-                                sd_text(a, k.percent), sd_text(b, k.percent)));
+    moved.push_back(fmt::format("{} {} {} {} -> {}", table_name(table, set),
+                                region_name(kRegions[ri]), k.key, sd_text(a, k.percent),
+                                sd_text(b, k.percent)));
   });
   return moved;
 }
@@ -360,14 +384,14 @@ int entries_apart(const Config& a, const Config& b, std::optional<Table> only = 
 // `config` with, per entry, the largest the designs that measure its table measured (its own
 // where none did).
 Config with_measured(Config config, std::span<const DesignRun> runs) {
-  for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
+  for_each_entry([&](TableSet set, Table table, const TableKey& k, std::size_t ri) {
     std::optional<double> largest;
     for (const DesignRun& run : runs) {
-      if (const auto m = run.measured(shared_m, table, k.parameter, ri)) {
+      if (const auto m = run.measured(set, table, k.parameter, ri)) {
         largest = std::max(largest.value_or(*m), *m);
       }
     }
-    if (largest) config_entry(config, shared_m, table, k.parameter, ri) = *largest;
+    if (largest) config_entry(config, set, table, k.parameter, ri) = *largest;
   });
   return config;
 }
@@ -421,13 +445,15 @@ std::string note_of(const Settling& settling, int step_sds_otherwise) {
 }
 
 std::string tables_of(const DesignRun& run) {
+  const TableSet set{run.entry.design.rasterisation == Rasterisation::Coverage, false};
   std::vector<std::string> tables;
-  if (run.entry.pooling) tables.emplace_back("[pooling]");
-  if (run.entry.asymmetry) tables.emplace_back("[asymmetry]");
+  if (run.entry.pooling) tables.push_back(table_name(Table::Chain, set));
+  if (run.entry.asymmetry) tables.push_back(table_name(Table::Pair, set));
   return fmt::format("{}", fmt::join(tables, " and "));
 }
 
-// The config's four tables as written, under a header that names the designs and the note.
+// The config's tables of the cells the designs simulated as written, under a header that names
+// the designs and the note.
 std::string toml_text(const Config& config, const Config& written, std::span<const DesignRun> runs,
                       const std::string& note) {
   std::string text = "# Measured by gaitmon calibrate on\n";
@@ -445,14 +471,23 @@ std::string toml_text(const Config& config, const Config& written, std::span<con
       "step's\n# own estimate and of the feet's difference to an RMS of 1, rounded up. To use "
       "them, replace\n# the keys of the same tables in the config.\n# Note: {}.\n",
       note);
+  // Every table, so that the text takes the place of the config's; those of cells no design
+  // simulated are the config's, said once above each.
   for (const Table kind : {Table::Pair, Table::Chain}) {
-    for (const bool shared_m : {false, true}) {
-      text += fmt::format("\n[{}{}]\n", kind == Table::Pair ? "asymmetry" : "pooling",
-                          shared_m ? ".m_per_session" : "");
+    for (const TableSet set : kTableSets) {
+      const bool simulated = std::any_of(runs.begin(), runs.end(),
+                                         [&](const DesignRun& run) { return run.measures(set); });
+      text += fmt::format("\n{}\n", table_name(kind, set));
+      if (!simulated) {
+        text += fmt::format("# no design here simulated {}: the values of {}\n",
+                            set.footprint_mean ? "cells that average the pressure (coverage raster)"
+                                               : "cells that read at their centres (centre raster)",
+                            config.source.string());
+      }
       for (const Table table : kind == Table::Pair ? std::vector{Table::Pair}
                                                    : std::vector{Table::Chain, Table::Step}) {
         for (const TableKey& k : keys_of(table)) {
-          text += toml_line(config, written, runs, shared_m, table, k);
+          text += toml_line(config, written, runs, set, table, k, simulated);
         }
       }
     }
@@ -506,10 +541,11 @@ nlohmann::json design_json(const Config& config, const DesignRun& run) {
 
 nlohmann::json written_json(const Config& written) {
   nlohmann::json out;
-  for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
-    out[shared_m ? "m_per_session" : "per_step"][table == Table::Pair ? "asymmetry" : "pooling"]
-       [std::string(region_name(kRegions[ri]))][k.key] =
-           config_value(written, shared_m, table, k.parameter, ri);
+  for_each_entry([&](TableSet set, Table table, const TableKey& k, std::size_t ri) {
+    nlohmann::json& tables = set.footprint_mean ? out["footprint_mean"] : out;
+    tables[set.shared_m ? "m_per_session" : "per_step"]
+          [table == Table::Pair ? "asymmetry" : "pooling"][std::string(region_name(kRegions[ri]))]
+          [k.key] = config_value(written, set, table, k.parameter, ri);
   });
   return out;
 }
@@ -603,10 +639,13 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
       if (runs.size() > 1) label += fmt::format(", design {}/{}", i + 1, runs.size());
       DesignRun& run = runs[i];
       run.samples = collect_or_stop(pooled_with.back(), run.entry.design, scratch, label);
-      run.modes = {
-          ModeReport{false, &run.samples.per_step, measure_chain_sds(run.samples.per_step)},
-          ModeReport{true, &run.samples.m_per_session,
-                     measure_chain_sds(run.samples.m_per_session)}};
+      const bool footprint_mean = run.measures(TableSet{true, false});
+      run.modes = {ModeReport{{footprint_mean, false},
+                              &run.samples.per_step,
+                              measure_chain_sds(run.samples.per_step)},
+                   ModeReport{{footprint_mean, true},
+                              &run.samples.m_per_session,
+                              measure_chain_sds(run.samples.m_per_session)}};
     }
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -637,10 +676,10 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
       settling.cycle_from = static_cast<std::size_t>(again - pooled_with.begin()) + 1;
       Config smaller = written;
       for (auto c = again; c != pooled_with.end(); ++c) {
-        for_each_entry([&](bool shared_m, Table table, const TableKey& k, std::size_t ri) {
-          const double other = config_value(*c, shared_m, table, k.parameter, ri);
-          double& larger = config_entry(written, shared_m, table, k.parameter, ri);
-          double& least = config_entry(smaller, shared_m, table, k.parameter, ri);
+        for_each_entry([&](TableSet set, Table table, const TableKey& k, std::size_t ri) {
+          const double other = config_value(*c, set, table, k.parameter, ri);
+          double& larger = config_entry(written, set, table, k.parameter, ri);
+          double& least = config_entry(smaller, set, table, k.parameter, ri);
           larger = std::max(larger, other);
           least = std::min(least, other);
         });
@@ -747,7 +786,7 @@ void add_calibrate_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({"centre", "coverage"}));
   auto* designs = sub->add_option(
       "--designs", args->designs_file,
-      "A designs file (config/calibration_designs.toml: the shipped tables' four) in place of "
+      "A designs file (config/calibration_designs.toml: the shipped tables' eight) in place of "
       "the options above: each table's entries the largest of the designs that measure it");
   designs->check(CLI::ExistingFile);
   for (const char* option : {"--sizes", "--seeds", "--duration", "--body-mass", "--noise",

@@ -545,7 +545,7 @@ std::string region_section(const ReportInput& in, const RegionSessionAnalysis& r
 
 /// Each region's kbar and cbar under the right foot against the left, with two standard errors
 /// either side (the steps' and the pair of insoles' together), and the same in a table.
-std::string feet_section(const SessionAnalysis& session) {
+std::string feet_section(const SessionAnalysis& session, AreaSource area) {
   constexpr std::array<std::string_view, kRegionCount> kShort = {
       "heel", "midfoot post.", "midfoot ant.", "met1_2", "met3_5", "toe1", "toe2", "toes3_5"};
   std::string out = "<section id=\"feet\"><h2>Left against right</h2>";
@@ -600,13 +600,13 @@ std::string feet_section(const SessionAnalysis& session) {
       "<p class=\"note\">How much higher each region's kbar and cbar are under the right foot than "
       "under the left, at the same time of the walk (a drift both feet share is taken out). The "
       "standard error holds the steps' scatter and what the pair of insoles alone makes of the "
-      "same tissue (<code>[asymmetry]</code> of the config, or <code>[asymmetry.m_per_session]"
-      "</code> at one m per session): a difference between the two "
-      "insoles reads as one of the tissue. Bold: 3 standard errors or more, outside the toes, "
+      "same tissue (<code>{}</code> of the config, or <code>{}</code> at one m per session): a "
+      "difference between the two insoles reads as one of the tissue. Bold: 3 standard errors or "
+      "more, outside the toes, "
       "whose one to three active cells scatter beyond their standard errors.</p><table><tr>"
       "<th>region</th><th>kbar, right vs left (%)</th><th>cbar, right vs left (%)</th></tr>{}"
       "</table></section>",
-      rows);
+      chain_table_name("asymmetry", area, false), chain_table_name("asymmetry", area, true), rows);
   return out;
 }
 
@@ -785,7 +785,7 @@ std::string render_report_html(const ReportInput& in) {
   if (in.extended != nullptr) out += " &middot; <a href=\"#effects\">effects</a>";
   out += "</p>";
   if (in.extended != nullptr) out += effects_section(*in.extended);
-  out += feet_section(*in.session);
+  out += feet_section(*in.session, in.settings->area);
   for (const RegionSessionAnalysis& r : in.session->regions) out += region_section(in, r);
   out += step_table(in.steps);
   out += "</body></html>\n";

@@ -96,8 +96,8 @@ void BM_PoolEveryRegionOverTheTissueWindow(benchmark::State& state) {
   for (auto _ : state) {
     pooled = 0;
     for (std::size_t i = 0; i < gaitmon::kRegionCount; ++i) {
-      const gaitmon::PooledEstimates p =
-          gaitmon::pool_region_steps(estimates[i], gaitmon::kRegions[i], config());
+      const gaitmon::PooledEstimates p = gaitmon::pool_region_steps(
+          estimates[i], gaitmon::kRegions[i], config().pooling, config().fit_bounds);
       pooled += p.pooled ? 1 : 0;
       benchmark::DoNotOptimize(p.mean);
     }

@@ -21,6 +21,7 @@
 #include <string_view>
 #include <vector>
 
+#include "gaitmon/config.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -678,6 +679,31 @@ TEST(AnalyzeCommand, AreaAutoTakesTheFootprintTheCellsReadingCallsFor) {
   EXPECT_EQ(out.find("or auto) fits them"), std::string::npos) << out;
   EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("area"), "footprint-mean");
   EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("area_auto"), true);
+
+  // The pools on footprint-mean take its chain's SDs, measured on such cells, which differ from
+  // the footprint's; so do the summary and session.json.
+  const Config config = load_config(default_config_path());
+  const std::size_t heel = index_of(Region::Heel);
+  const double mean_sd = config.pooling_footprint_mean.per_step.kbar_chain_sd_pct[heel] / 100.0;
+  ASSERT_NE(mean_sd, config.pooling.per_step.kbar_chain_sd_pct[heel] / 100.0);
+  EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("pooling_table"), "[pooling.footprint_mean]");
+  EXPECT_EQ(settings_of(a.dir / "auto-coverage").at("asymmetry_table"),
+            "[asymmetry.footprint_mean]");
+  EXPECT_EQ(settings_of(a.dir / "footprint-centre").at("pooling_table"), "[pooling]");
+  EXPECT_NE(out.find("([pooling.footprint_mean] of the config)"), std::string::npos) << out;
+  const auto heel_pool = [&](const char* dir) {
+    return nlohmann::json::parse(read_all(a.dir / dir / "session.json"))
+        .at("regions")
+        .at("heel")
+        .at("pooling");
+  };
+  const auto mean_pool = heel_pool("auto-coverage");
+  ASSERT_TRUE(mean_pool.at("pooled").get<bool>()) << mean_pool.dump();
+  EXPECT_DOUBLE_EQ(mean_pool.at("chain_sd").at("ln_kbar").get<double>(), mean_sd);
+  const auto centre_pool = heel_pool("footprint-centre");
+  ASSERT_TRUE(centre_pool.at("pooled").get<bool>()) << centre_pool.dump();
+  EXPECT_DOUBLE_EQ(centre_pool.at("chain_sd").at("ln_kbar").get<double>(),
+                   config.pooling.per_step.kbar_chain_sd_pct[heel] / 100.0);
 }
 
 TEST(AnalyzeCommand, Seed8WarnsAboutTheUndeterminedParameters) {

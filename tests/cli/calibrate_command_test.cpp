@@ -194,7 +194,9 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
 // most the entries the rounds traded otherwise.
 // --rasterisation coverage simulates cells that average the pressure and analyses them with
 // footprint-mean, as analyze's auto does there: the same design measures other tables than on
-// the centre raster, and calibration.json says which raster.
+// the centre raster, and calibration.json says which raster. They are the footprint_mean tables
+// ([pooling.footprint_mean], ...), which calibration.toml gives in their place, the others as the
+// config has them.
 TEST(CalibrateCommand, OnTheCoverageRasterTheSessionsAreAnalysedWithFootprintMean) {
   const auto dir = test::scratch_dir("calibrate-coverage");
   const std::string design = "--sizes 41-42 --seeds 1-2 --duration 10 --out ";
@@ -211,6 +213,42 @@ TEST(CalibrateCommand, OnTheCoverageRasterTheSessionsAreAnalysedWithFootprintMea
   EXPECT_EQ(centre.at("designs").at(0).at("rasterisation"), "centre");
   EXPECT_EQ(coverage.at("designs").at(0).at("rasterisation"), "coverage");
   EXPECT_NE(centre.at("designs").at(0).at("per_step"), coverage.at("designs").at(0).at("per_step"));
+  for (const char* table : {"\n[pooling.footprint_mean] (each step at its own m): the SD of the",
+                            "\n[pooling.footprint_mean.m_per_session] (one m per region over",
+                            "\n[asymmetry.footprint_mean] (each step at its own m)"}) {
+    EXPECT_NE(out.find(table), std::string::npos) << table << "\n" << out;
+  }
+  EXPECT_EQ(out.find("\n[pooling] ("), std::string::npos) << out;
+  const std::string toml = read_all(dir / "coverage" / "calibration.toml");
+  EXPECT_NE(toml.find("\n[pooling]\n# no design here simulated cells that read at their centres "
+                      "(centre raster): the values of "),
+            std::string::npos)
+      << toml;
+  const Config shipped = load_config(test::source_dir() / "config" / "gaitmon.toml");
+  const Config taken = load_config(config_taking(dir / "coverage" / "calibration.toml", dir));
+  const auto& mode = coverage.at("designs").at(0).at("per_step");
+  const auto& written = coverage.at("written").at("footprint_mean").at("per_step");
+  int moved = 0;
+  for (Region region : kRegions) {
+    const std::size_t ri = index_of(region);
+    const std::string name(region_name(region));
+    EXPECT_EQ(taken.pooling.per_step.kbar_chain_sd_pct[ri],
+              shipped.pooling.per_step.kbar_chain_sd_pct[ri])
+        << name;
+    EXPECT_EQ(taken.asymmetry.per_step.cbar_pair_sd_pct[ri],
+              shipped.asymmetry.per_step.cbar_pair_sd_pct[ri])
+        << name;
+    const double kbar = taken.pooling_footprint_mean.per_step.kbar_chain_sd_pct[ri];
+    EXPECT_DOUBLE_EQ(kbar, expected_value(mode, "pooling", "kbar_chain_sd_pct", name.c_str()))
+        << name;
+    EXPECT_DOUBLE_EQ(kbar, written.at("pooling").at(name).at("kbar_chain_sd_pct").get<double>())
+        << name;
+    EXPECT_DOUBLE_EQ(taken.asymmetry_footprint_mean.per_step.cbar_pair_sd_pct[ri],
+                     expected_value(mode, "asymmetry", "cbar_pair_sd_pct", name.c_str()))
+        << name;
+    if (kbar != shipped.pooling_footprint_mean.per_step.kbar_chain_sd_pct[ri]) ++moved;
+  }
+  EXPECT_GT(moved, 0) << "two sessions measure the shipped tables otherwise";
   out = calibrate(design + (dir / "bad").string() + " --rasterisation cells", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_FALSE(fs::exists(dir / "bad"));
