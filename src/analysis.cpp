@@ -33,6 +33,11 @@ std::string_view area_source_name(AreaSource source) {
   return "footprint";
 }
 
+AreaSource footprint_for(const CellReadingEvidence& evidence) {
+  return evidence.favoured() == CellReading::Mean ? AreaSource::FootprintMean
+                                                  : AreaSource::Footprint;
+}
+
 std::optional<AreaSource> parse_area_source(std::string_view text) {
   if (text == "ellipse") return AreaSource::Ellipse;
   if (text == "footprint") return AreaSource::Footprint;

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "gaitmon/crosstalk.hpp"
+#include "parallel_for.hpp"
 
 namespace gaitmon {
 namespace {
@@ -326,6 +327,15 @@ CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& 
     evidence.mean_residual_ss += mean->residual_ss;
   }
   return evidence;
+}
+
+CellReadingEvidence cell_reading_evidence(std::span<const Step> steps, const InsoleLayout& layout) {
+  std::vector<CellReadingEvidence> per_step(steps.size());
+  detail::parallel_for(
+      steps.size(), [&](std::size_t i) { per_step[i] = cell_reading_evidence(steps[i], layout); });
+  CellReadingEvidence sum;
+  for (const CellReadingEvidence& e : per_step) sum += e;
+  return sum;
 }
 
 }  // namespace gaitmon

@@ -43,6 +43,10 @@ enum class AreaSource { Ellipse, Footprint, FootprintMean };
 std::string_view area_source_name(AreaSource source);
 std::optional<AreaSource> parse_area_source(std::string_view text);
 
+/// The footprint a session's cells call for (`--area auto`): footprint-mean where the evidence
+/// favours cells that average the pressure, else the footprint.
+AreaSource footprint_for(const CellReadingEvidence& evidence);
+
 /// Twice the four free parameters of the default fit.
 inline constexpr int kMinFootprintFrames = 8;
 

@@ -121,4 +121,8 @@ struct CellReadingEvidence {
 /// size.
 CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& layout);
 
+/// The evidence of every step, the steps on every core and summed in step order, so that the
+/// sums are the same every run.
+CellReadingEvidence cell_reading_evidence(std::span<const Step> steps, const InsoleLayout& layout);
+
 }  // namespace gaitmon

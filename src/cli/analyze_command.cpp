@@ -381,25 +381,6 @@ nlohmann::json m_per_session_json(const RegionSessionAnalysis& r, bool asked) {
            "error, which pooling's se does"}};
 }
 
-std::string_view cell_reading_name(std::optional<CellReading> reading) {
-  if (!reading) return "undetermined";
-  return *reading == CellReading::Mean ? "mean" : "centre";
-}
-
-nlohmann::json cell_reading_json(const CellReadingEvidence& e) {
-  return {{"frames", e.frames},
-          {"mean_better_frames", e.mean_better},
-          {"centre_residual_rms_bits", residual_rms_bits(e.centre_residual_ss, e.cells)},
-          {"mean_residual_rms_bits", residual_rms_bits(e.mean_residual_ss, e.cells)},
-          {"favoured", cell_reading_name(e.favoured())},
-          {"note",
-           "each step's frame of each region's largest summed reading (at least " +
-               std::to_string(CellReadingEvidence::kMinEvidenceCells) +
-               " active cells) fitted with a paraboloid cap read at the cells' centres and "
-               "averaged over them; favoured: the reading with the smaller residual in at least "
-               "three quarters of at least 10 frames"}};
-}
-
 std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, const Config& config,
                          const AnalysisSettings& settings, const std::vector<StepRow>& steps,
                          const std::vector<StepAnalysis>& analyses, const SessionAnalysis& session,
@@ -729,20 +710,12 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
                                    "or a gap, or longer than 60 s)",
                                    info.frames_per_foot[0], info.frames_per_foot[1], steps.size()));
     }
-    // Per step on every core, summed in step order so that the sums are the same every run.
     const auto cells_start = std::chrono::steady_clock::now();
-    std::vector<CellReadingEvidence> per_step(ok_steps.size());
-    detail::parallel_for(ok_steps.size(), [&](std::size_t i) {
-      per_step[i] = cell_reading_evidence(ok_steps[i], layout);
-    });
-    for (const CellReadingEvidence& e : per_step) cells += e;
+    cells = cell_reading_evidence(ok_steps, layout);
     spdlog::debug(
         "weighed how the cells read in {:.2f} s",
         std::chrono::duration<double>(std::chrono::steady_clock::now() - cells_start).count());
-    if (args.area_auto()) {
-      settings.area =
-          cells.favoured() == CellReading::Mean ? AreaSource::FootprintMean : AreaSource::Footprint;
-    }
+    if (args.area_auto()) settings.area = footprint_for(cells);
     // The shares of the time measured on a 60-s session: one effect's fit takes about seven
     // times as long as all the steps' fits, and the session-level fits a twentieth of those.
     const double steps_end = names.empty() ? 0.95 : 0.25;

@@ -11,6 +11,7 @@
 
 #include "commands.hpp"
 #include "discrepancy_report.hpp"
+#include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/error.hpp"
@@ -19,6 +20,7 @@
 #include "gaitmon/session.hpp"
 #include "output_file.hpp"
 #include "progress.hpp"
+#include "report_html.hpp"
 
 namespace gaitmon::cli {
 namespace {
@@ -27,7 +29,14 @@ struct DiscrepancyArgs {
   std::filesystem::path session;
   std::filesystem::path out_dir;
   bool report = false;
+  std::string area = "auto";
   DiscrepancySettings settings;
+};
+
+// The area the fits were given, and how the session's cells read, which `auto` follows.
+struct AreaUsed {
+  AreaSource area = AreaSource::Footprint;
+  CellReadingEvidence cells;
 };
 
 // " name=value+-se" per parameter, "(no SE)" where the data do not determine it.
@@ -89,7 +98,8 @@ nlohmann::json map_json(const ResidualMap& map) {
   return j;
 }
 
-std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResult& r) {
+std::string discrepancy_json(const DiscrepancyArgs& args, const AreaUsed& used,
+                             const DiscrepancyResult& r) {
   nlohmann::json j;
   j["session"] = args.session.filename().string();
   nlohmann::json named = nlohmann::json::array();
@@ -130,7 +140,10 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const DiscrepancyResul
       {"min_ceiling_steps_pct", args.settings.min_ceiling_steps_pct},
       {"min_neighbour_share", args.settings.min_neighbour_share},
       {"second_effect", args.settings.second_effect},
+      {"area", area_source_name(used.area)},
+      {"area_auto", args.area == "auto"},
       {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
+  j["cell_reading"] = cell_reading_json(used.cells);
   j["data"] = {{"steps", r.steps},
                {"step_regions", r.step_regions},
                {"step_regions_left_out_ellipse_area", r.step_regions_left_out},
@@ -195,6 +208,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   std::vector<Step> steps;
   DiscrepancyInput input;
   DiscrepancyResult result;
+  AreaUsed used;
   {
     ProgressBar progress("discrepancy");
     segment_session(
@@ -208,14 +222,18 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
                        fmt::format("{} complete steps, need at least {} (one per fold of --folds)",
                                    steps.size(), args.settings.folds));
     }
-    input = prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
+    used.cells = cell_reading_evidence(steps, layout);
+    used.area = args.area == "auto" ? footprint_for(used.cells) : *parse_area_source(args.area);
+    AnalysisSettings analysis = discrepancy_analysis_settings();
+    analysis.area = used.area;
+    input = prepare_discrepancy_input(steps, layout, config, analysis);
     progress.update(0.3);
     result = find_discrepancy(input, args.settings,
                               [&](double fraction) { progress.update(0.3 + 0.7 * fraction); });
   }
 
   std::filesystem::create_directories(args.out_dir);
-  outputs.add("discrepancy.json", discrepancy_json(args, result));
+  outputs.add("discrepancy.json", discrepancy_json(args, used, result));
   if (args.report) {
     outputs.add("discrepancy.html",
                 render_discrepancy_html(args.session.filename().string(), result));
@@ -227,6 +245,11 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
       "{:.1f} %; an NRMSE of 1 % is {:.2f} N RMS\n",
       args.session.string(), result.steps, result.step_regions, result.step_regions_left_out,
       result.noise_floor_nrmse_pct, result.nrmse_scale_n / 100.0);
+  fmt::print("cells: {}; area {}{}\n", cell_reading_sentence(used.cells),
+             area_source_name(used.area), args.area == "auto" ? " (auto)" : "");
+  if (const std::string advice = cell_reading_advice(used.cells, used.area); !advice.empty()) {
+    fmt::print("note: {}\n", advice);
+  }
   // The parameters show why a candidate with a clear gain may still not be named: one without
   // a standard error (at a bound of its range, or along a flat direction) is not determined.
   fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}  {}\n", "candidate", "held-out %", "shrink %",
@@ -295,6 +318,14 @@ void add_discrepancy_command(CLI::App& app, const GlobalOptions& global) {
       ->check(session_file_read_twice());
   sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
   sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
+  sub->add_option("--area", args->area,
+                  "Contact area given to the fits: auto (footprint-mean where the session's "
+                  "readings fit cells that average the pressure better, else footprint, as "
+                  "analyze's auto), footprint or footprint-mean. On cells that average, the "
+                  "footprint over-reads the area and the neighbours' share of the load reads as "
+                  "crosstalk")
+      ->check(CLI::IsMember({"auto", "footprint", "footprint-mean"}))
+      ->capture_default_str();
   sub->add_option("--folds", args->settings.folds, "k of the k-fold over steps")
       ->check(CLI::Range(2, 20))
       ->capture_default_str();

@@ -687,6 +687,25 @@ double residual_rms_bits(double residual_ss, int cells) {
   return cells > 0 ? std::sqrt(residual_ss / cells) : 0.0;
 }
 
+std::string_view cell_reading_name(std::optional<CellReading> reading) {
+  if (!reading) return "undetermined";
+  return *reading == CellReading::Mean ? "mean" : "centre";
+}
+
+nlohmann::json cell_reading_json(const CellReadingEvidence& e) {
+  return {{"frames", e.frames},
+          {"mean_better_frames", e.mean_better},
+          {"centre_residual_rms_bits", residual_rms_bits(e.centre_residual_ss, e.cells)},
+          {"mean_residual_rms_bits", residual_rms_bits(e.mean_residual_ss, e.cells)},
+          {"favoured", cell_reading_name(e.favoured())},
+          {"note",
+           "each step's frame of each region's largest summed reading (at least " +
+               std::to_string(CellReadingEvidence::kMinEvidenceCells) +
+               " active cells) fitted with a paraboloid cap read at the cells' centres and "
+               "averaged over them; favoured: the reading with the smaller residual in at least "
+               "three quarters of at least 10 frames"}};
+}
+
 std::string cell_reading_sentence(const CellReadingEvidence& e) {
   if (e.frames == 0) {
     return fmt::format("no region-frame with {} active cells to tell how the cells read",

@@ -1,9 +1,11 @@
 // The self-contained HTML report of `gaitmon analyze`: inline SVG and CSS, no script, no network.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "gaitmon/analysis.hpp"
@@ -47,6 +49,10 @@ struct EffectPlacement {
 };
 EffectPlacement place_effects(const ExtendedModelFit& fit);
 
+/// "centre", "mean" or "undetermined".
+std::string_view cell_reading_name(std::optional<CellReading> reading);
+/// How the cells read, as session.json and discrepancy.json give it.
+nlohmann::json cell_reading_json(const CellReadingEvidence& evidence);
 /// How the cells read, in one sentence for the summary and the report: how many region-frames
 /// each reading fits better, the residuals and what they favour.
 std::string cell_reading_sentence(const CellReadingEvidence& evidence);
