@@ -996,6 +996,9 @@ void check_settings(const DiscrepancySettings& s, const DiscrepancyInput& input)
   if (!std::isfinite(s.min_neighbour_share)) {
     throw std::invalid_argument("discrepancy: min_neighbour_share must be finite");
   }
+  if (!std::isfinite(s.min_cell_coupling)) {
+    throw std::invalid_argument("discrepancy: min_cell_coupling must be finite");
+  }
   if (static_cast<int>(input.steps.size()) < s.folds) {
     throw std::invalid_argument("discrepancy: " + std::to_string(input.steps.size()) +
                                 " complete steps, need at least " + std::to_string(s.folds) +
@@ -1161,6 +1164,8 @@ void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> step
     throw std::invalid_argument("measure_crosstalk_views: one step per analysed step expected");
   }
   input.neighbour_share = neighbour_share(steps, layout);
+  const CellReadingEvidence cells = cell_reading_evidence(steps, layout);
+  input.cell_coupling = {cells.coupling(), cells.fits().frames};
   std::vector<CrosstalkCorrection> corrections;
   for (double k : discrepancy_detail::kCrosstalkGrid) corrections.emplace_back(layout, k);
   const CellMeanFootprint cell_mean =
@@ -1288,9 +1293,15 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   out.zero_levels = zero_level_drift(input);
   out.ceiling_plateau_steps = ceiling_plateau_steps(input);
   out.neighbour_share = input.neighbour_share;
+  out.cell_coupling = input.cell_coupling;
   // Too few cells beside a load to judge the share, and the readings do not show crosstalk.
-  const bool crosstalk_seen = input.neighbour_share.cell_frames >= kMinNeighbourShareCellFrames &&
-                              input.neighbour_share.floor >= settings.min_neighbour_share;
+  const bool share_shows_crosstalk =
+      input.neighbour_share.cell_frames >= kMinNeighbourShareCellFrames &&
+      input.neighbour_share.floor >= settings.min_neighbour_share;
+  const CellCoupling& cell_coupling = input.cell_coupling;
+  const bool cells_show_crosstalk =
+      cell_coupling.frames < 0 ||
+      (cell_coupling.frames > 0 && cell_coupling.coupling >= settings.min_cell_coupling);
   const bool ceiling_seen =
       out.ceiling_plateau_steps < 0 ||
       (out.ceiling_plateau_steps >= settings.min_ceiling_steps &&
@@ -1313,7 +1324,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   // agrees. Of those, the one whose held-out likelihood gains most over both channels.
   // Its parameters must be determined, too: an optimum on a bound of the plausible range or
   // along a flat direction (no finite standard error) is not an effect the data show. And a
-  // ceiling or crosstalk must show in the readings themselves (ceiling_seen, crosstalk_seen).
+  // ceiling or crosstalk must show in the readings themselves (ceiling_seen,
+  // share_shows_crosstalk and cells_show_crosstalk).
   // Why a candidate is not named, in words; empty where it is.
   const auto verdict = [&](const CandidateResult& r) {
     std::vector<std::string> reasons;
@@ -1341,7 +1353,7 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
     if (spec_named(specs, r.name).needs_ceiling && !ceiling_seen) {
       reasons.push_back("the readings show no ceiling");
     }
-    if (r.name == kCrosstalk && !crosstalk_seen) {
+    if (r.name == kCrosstalk && !share_shows_crosstalk) {
       const NeighbourShare& share = input.neighbour_share;
       reasons.push_back(
           share.cell_frames < kMinNeighbourShareCellFrames
@@ -1352,6 +1364,15 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                             "read under {:.2g} of their neighbours' readings, where {:g} is "
                             "needed)",
                             share.floor, settings.min_neighbour_share));
+    } else if (r.name == kCrosstalk && !cells_show_crosstalk) {
+      reasons.push_back(
+          cell_coupling.frames == 0
+              ? fmt::format("no region-frame has {} cells over the threshold for the cells to "
+                            "show crosstalk",
+                            CellReadingEvidence::kMinEvidenceCells)
+              : fmt::format("the cells show no crosstalk (their readings fit their caps best "
+                            "with a coupling of {:.3f} undone, where {:g} is needed)",
+                            cell_coupling.coupling, settings.min_cell_coupling));
     }
     return fmt::format("{}", fmt::join(reasons, "; "));
   };

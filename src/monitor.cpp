@@ -602,7 +602,8 @@ struct Monitor::Impl {
     const std::lock_guard lock(cells_mutex);
     if (cells_clear.load(std::memory_order_relaxed)) return;
     cells += step;
-    if (cells.frames < kCellEvidenceFrames) return;
+    const CellReadingFits& fits = cells.fits();
+    if (fits.frames < kCellEvidenceFrames) return;
     cells_clear.store(true, std::memory_order_relaxed);
     const AreaSource area = options.analysis.area;
     const std::optional<CellReading> favoured = cells.favoured();
@@ -610,13 +611,15 @@ struct Monitor::Impl {
       spdlog::info(
           "monitor: {} region-frames do not show how the cells read the pressure ({} fit "
           "averaging cells better); the fits take the {} area",
-          cells.frames, cells.mean_better, area_source_name(area));
+          fits.frames, fits.mean_better, area_source_name(area));
       return;
     }
     const bool mean = *favoured == CellReading::Mean;
+    const double coupling = cells.coupling();
     const std::string evidence = fmt::format(
-        "the cells read the pressure {} ({} of {} region-frames fit averaging cells better)",
-        mean ? "averaged over their area" : "at their centres", cells.mean_better, cells.frames);
+        "the cells read the pressure {} ({} of {} region-frames fit averaging cells better{})",
+        mean ? "averaged over their area" : "at their centres", fits.mean_better, fits.frames,
+        coupling > 0.0 ? fmt::format(", with a crosstalk of {:.3f} undone", coupling) : "");
     if (mean && area == AreaSource::Footprint) {
       spdlog::warn(
           "monitor: {}: the footprint the fits take over-reads such cells (n comes out about "

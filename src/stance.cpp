@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -241,7 +242,7 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
   return series;
 }
 
-CellReadingEvidence& CellReadingEvidence::operator+=(const CellReadingEvidence& other) {
+CellReadingFits& CellReadingFits::operator+=(const CellReadingFits& other) {
   frames += other.frames;
   mean_better += other.mean_better;
   cells += other.cells;
@@ -250,7 +251,7 @@ CellReadingEvidence& CellReadingEvidence::operator+=(const CellReadingEvidence& 
   return *this;
 }
 
-std::optional<CellReading> CellReadingEvidence::favoured() const {
+std::optional<CellReading> CellReadingFits::favoured() const {
   // A reading that is the insole's own fits every large footprint closely and the other only
   // where noise hides the rim; a split says neither fits (a pressure that is no cap).
   constexpr int kMinFrames = 10;
@@ -264,7 +265,61 @@ std::optional<CellReading> CellReadingEvidence::favoured() const {
   return std::nullopt;
 }
 
-CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& layout) {
+CellReadingEvidence& CellReadingEvidence::operator+=(const CellReadingEvidence& other) {
+  for (std::size_t k = 0; k < at_coupling.size(); ++k) at_coupling[k] += other.at_coupling[k];
+  return *this;
+}
+
+namespace {
+
+// The better reading's residual per cell at one coupling; infinite without frames, as a
+// coupling whose fits failed says nothing.
+double best_residual_per_cell(const CellReadingFits& f) {
+  if (f.cells == 0) return std::numeric_limits<double>::infinity();
+  return std::min(f.centre_residual_ss, f.mean_residual_ss) / f.cells;
+}
+
+}  // namespace
+
+std::size_t CellReadingEvidence::best_index() const {
+  std::size_t best = 0;
+  for (std::size_t k = 1; k < at_coupling.size(); ++k) {
+    if (best_residual_per_cell(at_coupling[k]) < best_residual_per_cell(at_coupling[best])) {
+      best = k;
+    }
+  }
+  return best;
+}
+
+double CellReadingEvidence::coupling() const {
+  const std::size_t k = best_index();
+  if (at_coupling[k].cells == 0) return 0.0;
+  if (k == 0 || k + 1 == at_coupling.size()) return kCouplings[k];
+  // The residual is quadratic in the coupling near its least, as the readings are linear in it.
+  const bool mean = at_coupling[k].mean_residual_ss < at_coupling[k].centre_residual_ss;
+  const auto residual = [&](std::size_t i) {
+    const CellReadingFits& f = at_coupling[i];
+    if (f.cells == 0) return std::numeric_limits<double>::quiet_NaN();
+    return (mean ? f.mean_residual_ss : f.centre_residual_ss) / f.cells;
+  };
+  const double lo = residual(k - 1);
+  const double mid = residual(k);
+  const double hi = residual(k + 1);
+  const double curvature = lo - 2.0 * mid + hi;
+  if (!std::isfinite(curvature) || !(curvature > 0.0)) return kCouplings[k];
+  const double step = kCouplings[k + 1] - kCouplings[k];
+  return kCouplings[k] + 0.5 * step * (lo - hi) / curvature;
+}
+
+namespace {
+
+// One step's evidence with the readings' crosstalk undone at each of `corrections` (one per
+// CellReadingEvidence::kCouplings). A region's frame is the one of the largest summed reading
+// as read: undoing a coupling moves a little of its load onto its cells from around them and
+// does not change which frame carries the most. Regions share few such frames, and undoing one
+// is a solve over every cell, so each is undone once per coupling.
+CellReadingEvidence step_cell_reading_evidence(const Step& step, const InsoleLayout& layout,
+                                               std::span<const CrosstalkCorrection> corrections) {
   const std::size_t sensors = layout.sensor_count();
   if (step.sensor_zero_bits.size() != sensors) {
     throw std::invalid_argument("cell_reading_evidence: the step's zero has " +
@@ -276,17 +331,21 @@ CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& 
   const auto zeroed = [&](const Frame& frame, std::size_t i) {
     return static_cast<double>(frame.bits[i]) - step.sensor_zero_bits[i];
   };
-  CellReadingEvidence evidence;
+  for (const Frame& frame : step.stance) {
+    if (frame.bits.size() != sensors) {
+      throw std::invalid_argument("cell_reading_evidence: a frame has " +
+                                  std::to_string(frame.bits.size()) + " sensors, the layout " +
+                                  std::to_string(sensors));
+    }
+  }
+  // Per region, its peak frame's place among the distinct peak frames; -1 without one.
+  std::array<int, kRegionCount> peak_of{};
+  std::vector<const Frame*> peaks;
   for (Region region : kRegions) {
     const auto& members = layout.region_sensors(region);
     const Frame* peak = nullptr;
     double peak_bits = 0.0;
     for (const Frame& frame : step.stance) {
-      if (frame.bits.size() != sensors) {
-        throw std::invalid_argument("cell_reading_evidence: a frame has " +
-                                    std::to_string(frame.bits.size()) + " sensors, the layout " +
-                                    std::to_string(sensors));
-      }
       double bits = 0.0;
       int active = 0;
       for (std::size_t i : members) {
@@ -301,38 +360,73 @@ CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& 
         peak_bits = bits;
       }
     }
-    if (peak == nullptr) continue;
-    std::vector<LoadedCell> all;
-    std::vector<LoadedCell> loaded;
-    std::vector<CellCentre> unloaded;
-    for (std::size_t i : members) {
-      const Sensor& s = layout.sensor(i);
-      const double r = zeroed(*peak, i);
-      all.push_back({s.grid_x_mm, s.grid_y_mm, r});
-      if (r >= threshold_bits && r > 0.0) {
-        loaded.push_back({s.grid_x_mm, s.grid_y_mm, r});
-      } else {
-        unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
-      }
+    const auto found = std::find(peaks.begin(), peaks.end(), peak);
+    peak_of[index_of(region)] = peak == nullptr ? -1 : static_cast<int>(found - peaks.begin());
+    if (peak != nullptr && found == peaks.end()) peaks.push_back(peak);
+  }
+  CellReadingEvidence evidence;
+  std::vector<std::vector<double>> readings(peaks.size(), std::vector<double>(sensors));
+  std::vector<LoadedCell> all;
+  std::vector<LoadedCell> loaded;
+  std::vector<CellCentre> unloaded;
+  for (std::size_t k = 0; k < corrections.size(); ++k) {
+    for (std::size_t p = 0; p < peaks.size(); ++p) {
+      for (std::size_t i = 0; i < sensors; ++i) readings[p][i] = zeroed(*peaks[p], i);
+      corrections[k].undo(readings[p]);
     }
-    const auto free = free_footprint(loaded, cell, unloaded);
-    const double aspect = free ? free->aspect : layout.region_box_aspect(region);
-    const auto centre = fit_cell_cap(all, cell, aspect, threshold_bits, CellReading::Centre);
-    const auto mean = fit_cell_cap(all, cell, aspect, threshold_bits, CellReading::Mean);
-    if (!centre || !mean) continue;
-    ++evidence.frames;
-    evidence.mean_better += mean->residual_ss < centre->residual_ss ? 1 : 0;
-    evidence.cells += mean->cells;
-    evidence.centre_residual_ss += centre->residual_ss;
-    evidence.mean_residual_ss += mean->residual_ss;
+    for (Region region : kRegions) {
+      const int p = peak_of[index_of(region)];
+      if (p < 0) continue;
+      all.clear();
+      loaded.clear();
+      unloaded.clear();
+      for (std::size_t i : layout.region_sensors(region)) {
+        const Sensor& s = layout.sensor(i);
+        const double r = readings[static_cast<std::size_t>(p)][i];
+        all.push_back({s.grid_x_mm, s.grid_y_mm, r});
+        if (r >= threshold_bits && r > 0.0) {
+          loaded.push_back({s.grid_x_mm, s.grid_y_mm, r});
+        } else {
+          unloaded.push_back({s.grid_x_mm, s.grid_y_mm});
+        }
+      }
+      const auto free = free_footprint(loaded, cell, unloaded);
+      const double aspect = free ? free->aspect : layout.region_box_aspect(region);
+      const auto centre = fit_cell_cap(all, cell, aspect, threshold_bits, CellReading::Centre);
+      const auto mean = fit_cell_cap(all, cell, aspect, threshold_bits, CellReading::Mean);
+      if (!centre || !mean) continue;
+      CellReadingFits& fits = evidence.at_coupling[k];
+      ++fits.frames;
+      fits.mean_better += mean->residual_ss < centre->residual_ss ? 1 : 0;
+      fits.cells += mean->cells;
+      fits.centre_residual_ss += centre->residual_ss;
+      fits.mean_residual_ss += mean->residual_ss;
+    }
   }
   return evidence;
 }
 
+std::vector<CrosstalkCorrection> evidence_corrections(const InsoleLayout& layout) {
+  std::vector<CrosstalkCorrection> corrections;
+  corrections.reserve(CellReadingEvidence::kCouplings.size());
+  for (double k : CellReadingEvidence::kCouplings) corrections.emplace_back(layout, k);
+  return corrections;
+}
+
+}  // namespace
+
+CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& layout) {
+  return step_cell_reading_evidence(step, layout, evidence_corrections(layout));
+}
+
 CellReadingEvidence cell_reading_evidence(std::span<const Step> steps, const InsoleLayout& layout) {
-  std::vector<CellReadingEvidence> per_step(steps.size());
-  detail::parallel_for(
-      steps.size(), [&](std::size_t i) { per_step[i] = cell_reading_evidence(steps[i], layout); });
+  const std::vector<CrosstalkCorrection> corrections = evidence_corrections(layout);
+  const std::size_t weighed = std::min(steps.size(), CellReadingEvidence::kMaxSteps);
+  std::vector<CellReadingEvidence> per_step(weighed);
+  detail::parallel_for(weighed, [&](std::size_t j) {
+    per_step[j] =
+        step_cell_reading_evidence(steps[j * steps.size() / weighed], layout, corrections);
+  });
   CellReadingEvidence sum;
   for (const CellReadingEvidence& e : per_step) sum += e;
   return sum;

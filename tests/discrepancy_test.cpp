@@ -332,11 +332,15 @@ TEST(Discrepancy, TheNeighbourShareIsWhatCellsBesideALoadReadOfTheirNeighbours) 
     DiscrepancyInput input =
         make_discrepancy_input(steps, std::vector<StepAnalysis>(2), layout, shipped_config());
     EXPECT_EQ(input.neighbour_share.cell_frames, 0) << "measured only with the crosstalk views";
+    EXPECT_EQ(input.cell_coupling.frames, -1) << "measured only with the crosstalk views";
     measure_crosstalk_views(input, steps, layout, shipped_config(), AreaSource::Footprint);
-    return input.neighbour_share;
+    return input;
   };
-  const NeighbourShare plain = share_of(0.0);
-  const NeighbourShare mixed = share_of(0.05);
+  const DiscrepancyInput plain_input = share_of(0.0);
+  const NeighbourShare& plain = plain_input.neighbour_share;
+  const NeighbourShare mixed = share_of(0.05).neighbour_share;
+  // Four cells are too few for a cap: no region-frame shows crosstalk in the cells.
+  EXPECT_EQ(plain_input.cell_coupling.frames, 0);
   fmt::print("neighbour share: {} without crosstalk, {} with 0.05 ({} and {} cell-frames)\n",
              plain.floor, mixed.floor, plain.cell_frames, mixed.cell_frames);
   EXPECT_GT(plain.cell_frames, 6 * 4);

@@ -2,6 +2,7 @@
 // simulated steps say of how their cells read.
 #include "gaitmon/stance.hpp"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -414,8 +415,9 @@ TEST_F(StanceTest, FootprintsThatDisagreeLeaveTheFrameWithoutOne) {
 }
 
 // The simulator's two rasters are the two ways a cell can read: over a session's steps the
-// evidence names the one each session was made with, by nearly every region-frame. Sizes 35-36
-// and 45-46, whose cells are the smallest and the largest against the contacts.
+// evidence names the one each session was made with, by nearly every region-frame, and finds no
+// crosstalk to undo. Sizes 35-36 and 45-46, whose cells are the smallest and the largest against
+// the contacts.
 TEST_F(StanceTest, TheCellsReadingIsTheOneTheSessionWasRasterisedWith) {
   const auto dir = test::scratch_dir("stance_cell_reading");
   for (const InsoleSize size : {InsoleSize::S35_36, InsoleSize::S45_46}) {
@@ -435,14 +437,58 @@ TEST_F(StanceTest, TheCellsReadingIsTheOneTheSessionWasRasterisedWith) {
         if (step.status == StepStatus::Ok) evidence += cell_reading_evidence(step, layout);
       });
       const bool mean = raster == Rasterisation::Coverage;
-      std::printf("%s, %s raster: averaging cells fit %d of %d region-frames better\n",
-                  std::string(insole_size_name(size)).c_str(),
-                  std::string(rasterisation_name(raster)).c_str(), evidence.mean_better,
-                  evidence.frames);
-      ASSERT_GE(evidence.frames, 30);
+      const CellReadingFits& fits = evidence.fits();
+      std::printf(
+          "%s, %s raster: averaging cells fit %d of %d region-frames better; crosstalk %.3f\n",
+          std::string(insole_size_name(size)).c_str(),
+          std::string(rasterisation_name(raster)).c_str(), fits.mean_better, fits.frames,
+          evidence.coupling());
+      ASSERT_GE(fits.frames, 30);
       EXPECT_EQ(evidence.favoured(), mean ? CellReading::Mean : CellReading::Centre);
-      const int wins = mean ? evidence.mean_better : evidence.frames - evidence.mean_better;
-      EXPECT_GE(wins, 0.9 * evidence.frames);
+      const int wins = mean ? fits.mean_better : fits.frames - fits.mean_better;
+      EXPECT_GE(wins, 0.9 * fits.frames);
+      EXPECT_LT(evidence.coupling(), 0.03);
+    }
+  }
+}
+
+// Crosstalk spreads a cap's readings onto the cells around it, as cells that average the
+// pressure do: as read, a coupling of 0.1 made cells that read at their centres look averaging
+// (the matrix's session of seed 124 took footprint-mean, and its gap shrink fell from 48 to 28 %).
+// Weighed with the crosstalk undone, each raster is named again, and the coupling the readings
+// fit best at is the session's. Size 41-42.
+TEST_F(StanceTest, CrosstalkIsUndoneBeforeTheCellsReadingIsJudged) {
+  const auto dir = test::scratch_dir("stance_cell_reading_crosstalk");
+  const InsoleLayout layout(config_.insole(InsoleSize::S41_42), config_.sensor);
+  for (const Rasterisation raster : {Rasterisation::CellCentre, Rasterisation::Coverage}) {
+    for (const double coupling : {0.05, 0.1}) {
+      SimulationOptions options;
+      options.size = InsoleSize::S41_42;
+      options.duration_s = 8.0;
+      options.seed = 124;
+      options.rasterisation = raster;
+      options.effects = {"crosstalk"};
+      options.effect_params["crosstalk"] = {{"coupling", coupling}};
+      const auto csv = dir / fmt::format("{}-{}.csv", rasterisation_name(raster), coupling);
+      simulate_session(config_, options, csv,
+                       std::filesystem::path(csv).replace_extension(".json"));
+      std::vector<Step> steps;
+      segment_session(csv, config_, [&](Step&& step) {
+        if (step.status == StepStatus::Ok) steps.push_back(std::move(step));
+      });
+      const CellReadingEvidence evidence = cell_reading_evidence(steps, layout);
+      const CellReadingFits& as_read = evidence.at_coupling[0];
+      std::printf(
+          "%s raster, coupling %.2f: as read averaging cells fit %d of %d region-frames better; "
+          "with %.3f undone %d of %d\n",
+          std::string(rasterisation_name(raster)).c_str(), coupling, as_read.mean_better,
+          as_read.frames, evidence.coupling(), evidence.fits().mean_better, evidence.fits().frames);
+      const bool mean = raster == Rasterisation::Coverage;
+      EXPECT_EQ(evidence.favoured(), mean ? CellReading::Mean : CellReading::Centre);
+      EXPECT_NEAR(evidence.coupling(), coupling, 0.012);
+      if (!mean && coupling == 0.1) {
+        EXPECT_NE(as_read.favoured(), CellReading::Centre);
+      }
     }
   }
 }
@@ -450,7 +496,7 @@ TEST_F(StanceTest, TheCellsReadingIsTheOneTheSessionWasRasterisedWith) {
 // The reading is favoured only by three quarters of ten frames or more, and only where its summed
 // residual is the smaller too.
 TEST(CellReadingEvidence, FavoursAReadingOnlyByThreeQuartersOfTenFrames) {
-  CellReadingEvidence e;
+  CellReadingFits e;
   e.frames = 9;
   e.mean_better = 9;
   e.centre_residual_ss = 100.0;
@@ -465,11 +511,40 @@ TEST(CellReadingEvidence, FavoursAReadingOnlyByThreeQuartersOfTenFrames) {
   e.mean_residual_ss = 200.0;
   EXPECT_EQ(e.favoured(), CellReading::Centre);
   CellReadingEvidence sum;
-  sum += e;
-  sum += e;
-  EXPECT_EQ(sum.frames, 24);
-  EXPECT_EQ(sum.mean_better, 6);
-  EXPECT_EQ(sum.mean_residual_ss, 400.0);
+  sum.at_coupling[3] = e;
+  sum += sum;
+  EXPECT_EQ(sum.at_coupling[3].frames, 24);
+  EXPECT_EQ(sum.at_coupling[3].mean_better, 6);
+  EXPECT_EQ(sum.at_coupling[3].mean_residual_ss, 400.0);
+  EXPECT_EQ(sum.at_coupling[2].frames, 0);
+}
+
+// The coupling is where the better reading's residual per cell is least: on a residual that is
+// a parabola in the coupling the vertex exactly, between the grid's points; at the grid's end
+// where the least is there; 0 without frames. Couplings whose fits all failed say nothing.
+TEST(CellReadingEvidence, CouplingIsTheVertexOfTheBestReadingsResidual) {
+  const auto evidence = [](double vertex, double centre_offset) {
+    CellReadingEvidence e;
+    for (std::size_t k = 0; k < CellReadingEvidence::kCouplings.size(); ++k) {
+      const double d = CellReadingEvidence::kCouplings[k] - vertex;
+      CellReadingFits& f = e.at_coupling[k];
+      f.frames = 20;
+      f.cells = 400;
+      f.mean_residual_ss = 400.0 * (0.5 + 1000.0 * d * d);
+      f.centre_residual_ss = 400.0 * (0.5 + centre_offset + 1000.0 * d * d);
+    }
+    return e;
+  };
+  EXPECT_NEAR(evidence(0.057, 1.0).coupling(), 0.057, 1e-12);
+  EXPECT_EQ(evidence(0.057, 1.0).best_index(), 3u);
+  EXPECT_EQ(evidence(0.057, 1.0).favoured(), std::nullopt);     // no frame said which fits better
+  EXPECT_NEAR(evidence(0.057, -0.4).coupling(), 0.057, 1e-12);  // the centre's residual
+  EXPECT_EQ(evidence(0.3, 1.0).coupling(), CellReadingEvidence::kCouplings.back());
+  EXPECT_EQ(evidence(-0.01, 1.0).coupling(), 0.0);
+  CellReadingEvidence failed = evidence(0.057, 1.0);
+  failed.at_coupling[3] = {};
+  EXPECT_NE(failed.best_index(), 3u);
+  EXPECT_EQ(CellReadingEvidence{}.coupling(), 0.0);
 }
 
 // One hand-made heel cap read at the cells' centres: one region-frame, which the reading at the
@@ -477,7 +552,9 @@ TEST(CellReadingEvidence, FavoursAReadingOnlyByThreeQuartersOfTenFrames) {
 TEST_F(StanceTest, OneStepsHeelIsOneRegionFrameOfEvidence) {
   const auto bits = heel_cap(*layout_, 17.0 / 28.0, 28.0, 150.0);
   Step step = make_step({bits, bits});
-  const CellReadingEvidence e = cell_reading_evidence(step, *layout_);
+  const CellReadingEvidence evidence = cell_reading_evidence(step, *layout_);
+  EXPECT_EQ(evidence.coupling(), 0.0);
+  const CellReadingFits& e = evidence.fits();
   EXPECT_EQ(e.frames, 1);
   EXPECT_EQ(e.mean_better, 0);
   EXPECT_EQ(e.cells, static_cast<int>(layout_->region_sensors(Region::Heel).size()));
@@ -485,6 +562,22 @@ TEST_F(StanceTest, OneStepsHeelIsOneRegionFrameOfEvidence) {
   EXPECT_FALSE(e.favoured().has_value());
   step.sensor_zero_bits.resize(3);
   EXPECT_THROW(cell_reading_evidence(step, *layout_), std::invalid_argument);
+}
+
+// A walk longer than kMaxSteps is weighed at that many steps spread evenly over it: of 400
+// steps whose first half carries a heel cap and the second nothing, half the weighed steps give
+// a region-frame (the first 200 alone would give 200); a shorter walk is weighed whole.
+TEST_F(StanceTest, ALongWalkIsWeighedAtStepsSpreadOverIt) {
+  const auto bits = heel_cap(*layout_, 17.0 / 28.0, 28.0, 150.0);
+  const Step capped = make_step({bits, bits});
+  const Step empty = make_step({std::vector<std::uint8_t>(layout_->sensor_count(), 0)});
+  std::vector<Step> walk(2 * CellReadingEvidence::kMaxSteps, empty);
+  std::fill_n(walk.begin(), CellReadingEvidence::kMaxSteps, capped);
+  EXPECT_EQ(cell_reading_evidence(walk, *layout_).at_coupling[0].frames,
+            static_cast<int>(CellReadingEvidence::kMaxSteps / 2));
+  walk.resize(CellReadingEvidence::kMaxSteps / 2);
+  EXPECT_EQ(cell_reading_evidence(walk, *layout_).at_coupling[0].frames,
+            static_cast<int>(CellReadingEvidence::kMaxSteps / 2));
 }
 
 TEST_F(StanceTest, RejectsAZeroOfTheWrongSize) {

@@ -92,6 +92,7 @@
 #include "gaitmon/config.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/segmentation.hpp"
+#include "gaitmon/stance.hpp"
 #include "gaitmon/types.hpp"
 
 namespace gaitmon {
@@ -148,6 +149,14 @@ struct NeighbourShare {
   long cell_frames = 0;
 };
 
+/// The crosstalk coupling the cells' readings fit their caps best with undone
+/// (CellReadingEvidence::coupling) and the region-frames that say so; frames -1 where not
+/// measured, and crosstalk is then judged by the neighbour share alone.
+struct CellCoupling {
+  double coupling = 0.0;
+  int frames = -1;
+};
+
 struct DiscrepancyInput {
   std::vector<DiscrepancyStep> steps;  ///< complete steps of both feet, any order
   double sample_rate_hz = 100.0;
@@ -158,6 +167,7 @@ struct DiscrepancyInput {
   /// reading moves a region's zero by that many times its own. 0 where unknown.
   std::array<int, kRegionCount> region_cells{};
   NeighbourShare neighbour_share;  ///< of every step's readings (measure_crosstalk_views)
+  CellCoupling cell_coupling;      ///< of every step's readings (measure_crosstalk_views)
 };
 
 /// The analysis settings of the workflow's baseline: the raw series (Smoothing::None), because
@@ -179,9 +189,10 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
 
 /// Measures each step of `input` (made from `steps`, in the same order) again at each coupling
 /// the crosstalk candidate interpolates between, with the area source the steps were analysed
-/// with, on all cores; and the readings' NeighbourShare, which the candidate is named by. Only that
-/// candidate needs it: prepare_discrepancy_input calls it, and a caller of make_discrepancy_input
-/// whose effects name crosstalk does. Throws std::invalid_argument if the counts differ.
+/// with, on all cores; and the readings' NeighbourShare and cell coupling, which the candidate is
+/// named by. Only that candidate needs it: prepare_discrepancy_input calls it, and a caller of
+/// make_discrepancy_input whose effects name crosstalk does. Throws std::invalid_argument if the
+/// counts differ.
 void measure_crosstalk_views(DiscrepancyInput& input, std::span<const Step> steps,
                              const InsoleLayout& layout, const Config& config, AreaSource area);
 
@@ -213,6 +224,13 @@ struct DiscrepancySettings {
   /// the candidate took up misfit of the footprint in size 35-36 (5.4 and 9.8 % held-out) and
   /// in a creep session.
   double min_neighbour_share = 0.005;
+  /// and where the cells' readings fit their caps best with at least this crosstalk undone
+  /// (DiscrepancyInput::cell_coupling; with no region-frame to weigh, crosstalk is not named).
+  /// On cells that average the pressure the share above shows their partly covered rim as well
+  /// (0.000-0.061 in the matrix's 21 sessions without crosstalk on that raster, 0.051-0.061 with
+  /// it) and the candidate took up the footprint's misfit there; the coupling was 0-0.021
+  /// without crosstalk on either raster and 0.046-0.104 with couplings of 0.05-0.1.
+  double min_cell_coupling = CellReadingEvidence::kShownCoupling;
   bool second_effect = true;  ///< look for a second effect on top of the first
   int top_cells = 10;         ///< region x phase cells listed under `where`
 };
@@ -352,6 +370,7 @@ struct DiscrepancyResult {
   /// (DiscrepancySettings::min_ceiling_steps); -1 where the input has no cell counts.
   int ceiling_plateau_steps = -1;
   NeighbourShare neighbour_share;  ///< the input's (DiscrepancySettings::min_neighbour_share)
+  CellCoupling cell_coupling;      ///< the input's (DiscrepancySettings::min_cell_coupling)
   /// With a second, both as fitted once more with the other in place where that predicts the
   /// held-out steps better and leaves every parameter its standard error (as fit_extended_model);
   /// second_candidates have the first as named alone.

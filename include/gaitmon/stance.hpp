@@ -97,22 +97,55 @@ StanceSeries measure_stance(const Step& step, const InsoleLayout& layout,
                             CellMeanFootprint cell_mean = CellMeanFootprint::Skip,
                             const CrosstalkCorrection* crosstalk = nullptr);
 
-/// What steps say of how the insole's cells read the pressure (CellReading), which decides which
-/// footprint fits them (`--area footprint` or `footprint-mean`): both readings' fits
-/// (fit_cell_cap) to the same region-frames, each step's frame of a region's largest summed
-/// reading where at least kMinEvidenceCells cells reach the threshold.
-struct CellReadingEvidence {
-  static constexpr int kMinEvidenceCells = 8;
+/// Both readings' fits (fit_cell_cap) to the same region-frames: which reading fits them better.
+struct CellReadingFits {
   int frames = 0;       ///< region-frames where both readings' fits converged
   int mean_better = 0;  ///< of them, those the averaging cells fit with the smaller residual
   int cells = 0;        ///< the residuals summed over the frames (every cell of each region)
   double centre_residual_ss = 0.0;  ///< summed over the frames, bits^2
   double mean_residual_ss = 0.0;    ///< summed over the frames, bits^2
 
-  CellReadingEvidence& operator+=(const CellReadingEvidence& other);
+  CellReadingFits& operator+=(const CellReadingFits& other);
   /// The reading that fits better in at least three quarters of at least 10 frames, with the
   /// smaller summed residual too; nullopt where the frames do not say (too few, or split).
   std::optional<CellReading> favoured() const;
+};
+
+/// What steps say of how the insole's cells read the pressure (CellReading), which decides which
+/// footprint fits them (`--area footprint` or `footprint-mean`): both readings' fits to the same
+/// region-frames, each step's frame of a region's largest summed reading where at least
+/// kMinEvidenceCells cells reach the threshold. Crosstalk spreads a cap's readings onto the
+/// cells around it as averaging does, so the fits are made with the readings' crosstalk undone
+/// at each of kCouplings, and the evidence is that of the coupling the better reading fits best.
+struct CellReadingEvidence {
+  static constexpr int kMinEvidenceCells = 8;
+  /// A longer walk is weighed at this many steps spread evenly over it: about a thousand
+  /// region-frames, where ten can favour a reading. Weighing all 1090 foot-steps of a ten-minute
+  /// session at every coupling took 0.36 s of its analysis on two cores, these 0.07 s.
+  static constexpr std::size_t kMaxSteps = 200;
+  /// Crosstalk couplings (CrosstalkCorrection) the readings are weighed at; the plausible
+  /// couplings the matrix simulates run to 0.1 and the grid past it, so that its least there
+  /// has neighbours on both sides.
+  static constexpr std::array<double, 9> kCouplings{0.0,  0.02, 0.04, 0.06, 0.08,
+                                                    0.10, 0.12, 0.14, 0.16};
+  /// The least coupling() that shows crosstalk: on the simulator's sessions it was 0-0.021
+  /// without crosstalk on either raster, 0.046-0.104 with couplings of 0.05-0.1 (README, "How
+  /// the cells read").
+  static constexpr double kShownCoupling = 0.03;
+  std::array<CellReadingFits, kCouplings.size()> at_coupling;
+
+  CellReadingEvidence& operator+=(const CellReadingEvidence& other);
+  /// The index into kCouplings where either reading's residual RMS over the cells is least.
+  std::size_t best_index() const;
+  /// The fits at best_index(): what the cells' reading is judged by.
+  const CellReadingFits& fits() const { return at_coupling[best_index()]; }
+  /// The coupling the readings fit best with undone: the parabola through the best reading's
+  /// residual at best_index() and its neighbours on the grid, at its vertex (the grid's end
+  /// where the least is there; 0 with no frames).
+  double coupling() const;
+  std::optional<CellReading> favoured() const { return fits().favoured(); }
+  /// Whether the cells show crosstalk: some region-frame weighed, at kShownCoupling or more.
+  bool shows_crosstalk() const { return fits().frames > 0 && coupling() >= kShownCoupling; }
 };
 
 /// The evidence of one step, its readings zeroed with the step's zero and its threshold; the
@@ -121,8 +154,8 @@ struct CellReadingEvidence {
 /// size.
 CellReadingEvidence cell_reading_evidence(const Step& step, const InsoleLayout& layout);
 
-/// The evidence of every step, the steps on every core and summed in step order, so that the
-/// sums are the same every run.
+/// The evidence of every step, or of kMaxSteps spread evenly over a longer walk, the steps on
+/// every core and summed in step order, so that the sums are the same every run.
 CellReadingEvidence cell_reading_evidence(std::span<const Step> steps, const InsoleLayout& layout);
 
 }  // namespace gaitmon

@@ -139,6 +139,7 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const AreaUsed& used,
       {"min_ceiling_steps", args.settings.min_ceiling_steps},
       {"min_ceiling_steps_pct", args.settings.min_ceiling_steps_pct},
       {"min_neighbour_share", args.settings.min_neighbour_share},
+      {"min_cell_coupling", args.settings.min_cell_coupling},
       {"second_effect", args.settings.second_effect},
       {"area", area_source_name(used.area)},
       {"area_auto", args.area == "auto"},
@@ -181,6 +182,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const AreaUsed& used,
                        {{"floor", r.neighbour_share.floor},
                         {"cell_frames", r.neighbour_share.cell_frames},
                         {"neighbours_read_at_least_bits", kNeighbourShareBits}}}};
+  j["diagnostics"]["cell_coupling"] = {{"coupling", r.cell_coupling.coupling},
+                                       {"frames", r.cell_coupling.frames}};
   nlohmann::json zeros = nlohmann::json::array();
   for (const ZeroLevelDrift& z : r.zero_levels) {
     zeros.push_back({{"foot", foot_name(z.foot)},
@@ -272,6 +275,13 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
         "{:g})\n",
         result.neighbour_share.cell_frames, kNeighbourShareBits, result.neighbour_share.floor,
         args.settings.min_neighbour_share);
+  }
+  if (result.cell_coupling.frames > 0) {
+    fmt::print(
+        "crosstalk in the cells: over {} region-frames their readings fit their caps best with a "
+        "coupling of {:.3f} undone (crosstalk needs {:g})\n",
+        result.cell_coupling.frames, result.cell_coupling.coupling,
+        args.settings.min_cell_coupling);
   }
   std::string named;
   for (const EffectEstimate& e : result.named_effects) {

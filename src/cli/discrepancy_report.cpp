@@ -285,6 +285,13 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
         "crosstalk; crosstalk is named only where this share shows).</p>",
         r.neighbour_share.floor);
   }
+  if (r.cell_coupling.frames > 0) {
+    html += fmt::format(
+        "<p>Crosstalk in the cells: their readings fit their caps best with a coupling of {:.3f} "
+        "undone (crosstalk is named only where this shows too: cells that average the pressure "
+        "raise the share above by their partly covered rim, and not this).</p>",
+        r.cell_coupling.coupling);
+  }
   html += "<h2>Named effects</h2><ul>" + named + "</ul>";
   html += fmt::format(
       "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.</p>",

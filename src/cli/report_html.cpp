@@ -693,31 +693,39 @@ std::string_view cell_reading_name(std::optional<CellReading> reading) {
 }
 
 nlohmann::json cell_reading_json(const CellReadingEvidence& e) {
-  return {{"frames", e.frames},
-          {"mean_better_frames", e.mean_better},
-          {"centre_residual_rms_bits", residual_rms_bits(e.centre_residual_ss, e.cells)},
-          {"mean_residual_rms_bits", residual_rms_bits(e.mean_residual_ss, e.cells)},
-          {"favoured", cell_reading_name(e.favoured())},
-          {"note",
-           "each step's frame of each region's largest summed reading (at least " +
-               std::to_string(CellReadingEvidence::kMinEvidenceCells) +
-               " active cells) fitted with a paraboloid cap read at the cells' centres and "
-               "averaged over them; favoured: the reading with the smaller residual in at least "
-               "three quarters of at least 10 frames"}};
+  const CellReadingFits& f = e.fits();
+  return {
+      {"frames", f.frames},
+      {"mean_better_frames", f.mean_better},
+      {"centre_residual_rms_bits", residual_rms_bits(f.centre_residual_ss, f.cells)},
+      {"mean_residual_rms_bits", residual_rms_bits(f.mean_residual_ss, f.cells)},
+      {"favoured", cell_reading_name(e.favoured())},
+      {"crosstalk_coupling", e.coupling()},
+      {"note", "each step's frame of each region's largest summed reading (at least " +
+                   std::to_string(CellReadingEvidence::kMinEvidenceCells) +
+                   " active cells) fitted with a paraboloid cap read at the cells' centres and "
+                   "averaged over them, with the readings' crosstalk undone at couplings 0 to " +
+                   fmt::format("{:g}", CellReadingEvidence::kCouplings.back()) +
+                   "; the fits are those at the coupling where the better reading fits best "
+                   "(crosstalk_coupling, refined between the grid's points); favoured: the reading "
+                   "with the smaller residual in at least three quarters of at least 10 frames"}};
 }
 
 std::string cell_reading_sentence(const CellReadingEvidence& e) {
-  if (e.frames == 0) {
+  const CellReadingFits& f = e.fits();
+  if (f.frames == 0) {
     return fmt::format("no region-frame with {} active cells to tell how the cells read",
                        CellReadingEvidence::kMinEvidenceCells);
   }
   const std::optional<CellReading> favoured = e.favoured();
+  const double coupling = e.coupling();
   return fmt::format(
       "a cap read at the cells' centres fits {} of {} region-frames better, averaged over them "
-      "{} (residual RMS {:.2f} against {:.2f} bits): {}",
-      e.frames - e.mean_better, e.frames, e.mean_better,
-      residual_rms_bits(e.centre_residual_ss, e.cells),
-      residual_rms_bits(e.mean_residual_ss, e.cells),
+      "{} (residual RMS {:.2f} against {:.2f} bits{}): {}",
+      f.frames - f.mean_better, f.frames, f.mean_better,
+      residual_rms_bits(f.centre_residual_ss, f.cells),
+      residual_rms_bits(f.mean_residual_ss, f.cells),
+      coupling > 0.0 ? fmt::format(", with a crosstalk of {:.3f} undone", coupling) : "",
       !favoured                        ? "undetermined"
       : *favoured == CellReading::Mean ? "the cells average the pressure (footprint-mean)"
                                        : "the cells read at their centres (footprint)");

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "gaitmon/config.hpp"
+#include "gaitmon/stance.hpp"
 #include "test_support.hpp"
 
 namespace gaitmon {
@@ -640,7 +641,10 @@ TEST(AnalyzeCommand, AreaAutoTakesTheFootprintTheCellsReadingCallsFor) {
       << a.output;
   EXPECT_NE(a.output.find("area footprint (auto)"), std::string::npos) << a.output;
   EXPECT_EQ(a.output.find("or auto) fits them"), std::string::npos) << a.output;
+  EXPECT_EQ(a.output.find("with a crosstalk of"), std::string::npos) << a.output;
   const auto centre = nlohmann::json::parse(read_all(a.dir / "out" / "session.json"));
+  EXPECT_LT(centre.at("cell_reading").at("crosstalk_coupling").get<double>(),
+            CellReadingEvidence::kShownCoupling);
   EXPECT_EQ(centre.at("cell_reading").at("favoured"), "centre");
   EXPECT_GE(centre.at("cell_reading").at("frames").get<int>(), 10);
   EXPECT_LT(centre.at("cell_reading").at("centre_residual_rms_bits").get<double>(),
