@@ -595,7 +595,7 @@ struct Monitor::Impl {
   /// Adds the step to the evidence of how the cells read until it holds kCellEvidenceFrames
   /// region-frames, then says once whether the area the fits take is the footprint the favoured
   /// reading calls for: a live fit cannot wait for the session's evidence, as `analyze --area
-  /// auto` does.
+  /// auto` does. Where the cells show crosstalk that [model] effects leave out, it says so too.
   void weigh_cells(const Job& job) {
     if (cells_clear.load(std::memory_order_relaxed)) return;
     const CellReadingEvidence step = cell_reading_evidence(job.step, *job.layout);
@@ -605,6 +605,15 @@ struct Monitor::Impl {
     const CellReadingFits& fits = cells.fits();
     if (fits.frames < kCellEvidenceFrames) return;
     cells_clear.store(true, std::memory_order_relaxed);
+    const auto& effects = config.model.effects;
+    if (cells.shows_crosstalk() &&
+        std::find(effects.begin(), effects.end(), "crosstalk") == effects.end()) {
+      spdlog::warn(
+          "monitor: the cells' readings fit their caps best with a crosstalk of {:.3f} undone "
+          "({} region-frames): neighbouring cells read part of each other's load, which the fits "
+          "take up as tissue; add \"crosstalk\" to [model] effects to fit it",
+          cells.coupling(), fits.frames);
+    }
     const AreaSource area = options.analysis.area;
     const std::optional<CellReading> favoured = cells.favoured();
     if (!favoured) {

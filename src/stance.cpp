@@ -288,6 +288,13 @@ std::size_t CellReadingEvidence::best_index() const {
       best = k;
     }
   }
+  // A cap is no foot: where neither reading fits down to the noise, undoing a little crosstalk
+  // takes up some of the misfit too, and the coupling must earn its place.
+  const double as_read = best_residual_per_cell(at_coupling[0]);
+  const double ratio = kMaxResidualRatioWithCoupling * kMaxResidualRatioWithCoupling;
+  if (std::isfinite(as_read) && best_residual_per_cell(at_coupling[best]) > ratio * as_read) {
+    return 0;
+  }
   return best;
 }
 

@@ -535,8 +535,43 @@ TEST(Monitor, NamesTheFootprintTheCellsCallForOnceTheirStepsShowIt) {
             << what;
         EXPECT_THAT(text, Not(HasSubstr("set [model] area"))) << what;
       }
+      EXPECT_THAT(text, Not(HasSubstr("a crosstalk of"))) << what;
     }
   }
+}
+
+// Crosstalk spreads a cap's readings as averaging cells do; the monitor weighs the cells with it
+// undone, names the raster's reading, and warns once that [model] effects leave the crosstalk
+// its cells show out. Centre raster, coupling 0.1, the monitor's default area.
+TEST(Monitor, WarnsOnceWhereTheCellsShowCrosstalkTheEffectsLeaveOut) {
+  const Config config = shipped_config();
+  const fs::path dir = test::scratch_dir("monitor-cells-crosstalk");
+  SimulationOptions simulation;
+  simulation.size = InsoleSize::S41_42;
+  simulation.duration_s = 8.0;
+  simulation.seed = 21;
+  simulation.effects = {"crosstalk"};
+  simulation.effect_params["crosstalk"] = {{"coupling", 0.1}};
+  const fs::path csv = dir / "crosstalk.csv";
+  simulate_session(config, simulation, csv, dir / "crosstalk.json");
+  SessionHeader header;
+  const std::vector<SensorFrame> frames = test::session_frames(csv, &header);
+  const test::LogCapture log;
+  RecordingPublisher publisher;
+  MonitorOptions options = quick_replay();
+  options.sample_rate_hz = header.sample_rate_hz;
+  {
+    Monitor monitor(config, options, publisher);
+    offer_all(monitor, frames);
+    monitor.stop();
+  }
+  const std::string text = log.text.str();
+  const std::string warning =
+      "monitor: the cells' readings fit their caps best with a crosstalk of ";
+  ASSERT_EQ(count_of(text, warning), 1u) << text;
+  EXPECT_NEAR(std::stod(text.substr(text.find(warning) + warning.size())), 0.1, 0.012) << text;
+  EXPECT_THAT(text, HasSubstr(R"(add "crosstalk" to [model] effects to fit it)")) << text;
+  EXPECT_THAT(text, HasSubstr("read the pressure at their centres")) << text;
 }
 
 TEST(Monitor, TheTissueIsNotPooledOutsideTheDefaultFit) {

@@ -521,17 +521,18 @@ TEST(CellReadingEvidence, FavoursAReadingOnlyByThreeQuartersOfTenFrames) {
 
 // The coupling is where the better reading's residual per cell is least: on a residual that is
 // a parabola in the coupling the vertex exactly, between the grid's points; at the grid's end
-// where the least is there; 0 without frames. Couplings whose fits all failed say nothing.
+// where the least is there; 0 without frames, or where the least is not clearly below the
+// residual as read. Couplings whose fits all failed say nothing.
 TEST(CellReadingEvidence, CouplingIsTheVertexOfTheBestReadingsResidual) {
-  const auto evidence = [](double vertex, double centre_offset) {
+  const auto evidence = [](double vertex, double centre_offset, double floor = 0.5) {
     CellReadingEvidence e;
     for (std::size_t k = 0; k < CellReadingEvidence::kCouplings.size(); ++k) {
       const double d = CellReadingEvidence::kCouplings[k] - vertex;
       CellReadingFits& f = e.at_coupling[k];
       f.frames = 20;
       f.cells = 400;
-      f.mean_residual_ss = 400.0 * (0.5 + 1000.0 * d * d);
-      f.centre_residual_ss = 400.0 * (0.5 + centre_offset + 1000.0 * d * d);
+      f.mean_residual_ss = 400.0 * (floor + 1000.0 * d * d);
+      f.centre_residual_ss = 400.0 * (floor + centre_offset + 1000.0 * d * d);
     }
     return e;
   };
@@ -541,6 +542,12 @@ TEST(CellReadingEvidence, CouplingIsTheVertexOfTheBestReadingsResidual) {
   EXPECT_NEAR(evidence(0.057, -0.4).coupling(), 0.057, 1e-12);  // the centre's residual
   EXPECT_EQ(evidence(0.3, 1.0).coupling(), CellReadingEvidence::kCouplings.back());
   EXPECT_EQ(evidence(-0.01, 1.0).coupling(), 0.0);
+  // Where the caps leave a misfit that the least as read is near, the coupling is not taken: on
+  // a floor of 16 bits^2 the least's residual RMS is 0.91 of the one as read (over 5/6), on a
+  // floor of 1 0.49.
+  EXPECT_EQ(evidence(0.057, 1.0, 16.0).best_index(), 0u);
+  EXPECT_EQ(evidence(0.057, 1.0, 16.0).coupling(), 0.0);
+  EXPECT_EQ(evidence(0.057, 1.0, 1.0).best_index(), 3u);
   CellReadingEvidence failed = evidence(0.057, 1.0);
   failed.at_coupling[3] = {};
   EXPECT_NE(failed.best_index(), 3u);

@@ -228,8 +228,9 @@ struct DiscrepancySettings {
   /// (DiscrepancyInput::cell_coupling; with no region-frame to weigh, crosstalk is not named).
   /// On cells that average the pressure the share above shows their partly covered rim as well
   /// (0.000-0.061 in the matrix's 21 sessions without crosstalk on that raster, 0.051-0.061 with
-  /// it) and the candidate took up the footprint's misfit there; the coupling was 0-0.021
-  /// without crosstalk on either raster and 0.046-0.104 with couplings of 0.05-0.1.
+  /// it) and the candidate took up the footprint's misfit there; the coupling was 0 in all 96
+  /// simulated sessions without crosstalk on either raster and 0.045-0.104 with couplings of
+  /// 0.05-0.1 (README, "How the cells read").
   double min_cell_coupling = CellReadingEvidence::kShownCoupling;
   bool second_effect = true;  ///< look for a second effect on top of the first
   int top_cells = 10;         ///< region x phase cells listed under `where`

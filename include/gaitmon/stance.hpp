@@ -128,14 +128,20 @@ struct CellReadingEvidence {
   /// has neighbours on both sides.
   static constexpr std::array<double, 9> kCouplings{0.0,  0.02, 0.04, 0.06, 0.08,
                                                     0.10, 0.12, 0.14, 0.16};
-  /// The least coupling() that shows crosstalk: on the simulator's sessions it was 0-0.021
-  /// without crosstalk on either raster, 0.046-0.104 with couplings of 0.05-0.1 (README, "How
+  /// The least coupling() that shows crosstalk: on the simulator's sessions it was 0 in all 96
+  /// without crosstalk on either raster, 0.045-0.104 with couplings of 0.05-0.1 (README, "How
   /// the cells read").
   static constexpr double kShownCoupling = 0.03;
+  /// A coupling is taken only where it brings the better reading's residual RMS to at most this
+  /// share of that as read. With crosstalk of 0.05-0.1 it came to 0.26-0.80 of it; without,
+  /// the least fell to 0.86-0.99 of it at couplings of 0.015-0.086 on averaging cells of sizes
+  /// 43-44 and 45-46, whose caps leave 1.0-1.3 bits (README, "How the cells read").
+  static constexpr double kMaxResidualRatioWithCoupling = 5.0 / 6.0;
   std::array<CellReadingFits, kCouplings.size()> at_coupling;
 
   CellReadingEvidence& operator+=(const CellReadingEvidence& other);
-  /// The index into kCouplings where either reading's residual RMS over the cells is least.
+  /// The index into kCouplings where either reading's residual RMS over the cells is least, or
+  /// 0 where that is more than kMaxResidualRatioWithCoupling of the least as read.
   std::size_t best_index() const;
   /// The fits at best_index(): what the cells' reading is judged by.
   const CellReadingFits& fits() const { return at_coupling[best_index()]; }
