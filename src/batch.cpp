@@ -28,7 +28,8 @@ void check_session_rate(const std::filesystem::path& path, double sample_rate_hz
 
 SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Config& config,
                                      const std::function<void(Step&&)>& on_step,
-                                     const std::function<void(double)>& on_progress) {
+                                     const std::function<void(double)>& on_progress,
+                                     const std::function<void(Frame&)>& correct_frame) {
   SessionReader reader(path);
   SegmentedSessionInfo info;
   info.header = reader.header();
@@ -52,6 +53,7 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
   while (reader.next(frame)) {
     const auto foot = static_cast<std::size_t>(frame.foot);
     try {
+      if (correct_frame) correct_frame(frame);
       segmenters[foot]->push(frame, finalised);
     } catch (const std::invalid_argument& e) {
       throw InputError(path.string(), reader.line(), e.what());

@@ -1548,6 +1548,35 @@ bool effect_inside_tissue_fit(std::string_view name) {
   return spec.stage == 0;
 }
 
+bool effect_undone_in_readings(const ExtendedModelFit& fit, const EffectEstimate& effect,
+                               double min_zero_shrink_pct) {
+  check_discrepancy_effect(effect.name);
+  const double zero_shrink_pct = fit.zero_baseline_heldout_nrmse_pct > 0.0
+                                     ? 100.0 * (1.0 - fit.zero_extended_heldout_nrmse_pct /
+                                                          fit.zero_baseline_heldout_nrmse_pct)
+                                     : 0.0;
+  return effect.name == "sensor_creep" && zero_shrink_pct >= min_zero_shrink_pct &&
+         std::all_of(effect.params.begin(), effect.params.end(),
+                     [](const ParamEstimate& p) { return std::isfinite(p.se) && p.se > 0.0; });
+}
+
+std::optional<CreepCorrection> creep_to_undo(const ExtendedModelFit& fit,
+                                             double min_zero_shrink_pct) {
+  for (const EffectEstimate& e : fit.effects) {
+    if (!effect_undone_in_readings(fit, e, min_zero_shrink_pct)) continue;
+    const auto param = [&](std::string_view name) {
+      const auto it = std::find_if(e.params.begin(), e.params.end(),
+                                   [&](const ParamEstimate& p) { return p.name == name; });
+      if (it == e.params.end()) {
+        throw std::invalid_argument(fmt::format("{} without its {}", e.name, name));
+      }
+      return it->value;
+    };
+    return CreepCorrection(param("gain"), param("tau_s"));
+  }
+  return std::nullopt;
+}
+
 namespace {
 
 // fit_steps_with_effects for the steps of `input` that `wanted` (by their index in input.steps)

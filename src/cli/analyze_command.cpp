@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -339,6 +340,7 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
     for (const ParamEstimate& p : e.params) params[p.name] = {{"value", p.value}, {"se", p.se}};
     effects.push_back({{"name", e.name},
                        {"inside_tissue_fit", effect_inside_tissue_fit(e.name)},
+                       {"undone_in_readings", effect_undone_in_readings(*fit, e)},
                        {"params", params}});
   }
   nlohmann::json regions = nlohmann::json::object();
@@ -693,6 +695,8 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   SharedExponents m_per_session;
   SessionAnalysis session;
   CellReadingEvidence cells;
+  // The steps' median NRMSE of the total force before an effect was undone in the readings.
+  double total_nrmse_as_read_pct = 0.0;
   {
     ProgressBar progress("analyze");
     auto on_step = [&](Step&& step) {
@@ -700,16 +704,24 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
                        step.peak_force_n, step.status, std::nullopt});
       if (step.status == StepStatus::Ok) ok_steps.push_back(std::move(step));
     };
-    const SegmentedSessionInfo info = segment_session(
-        args.session, config, on_step, [&](double fraction) { progress.update(0.1 * fraction); });
-    // Outputs of nothing would read as a perfect fit: medians of 0 and an NRMSE of 0 %.
-    if (ok_steps.empty()) {
-      throw InputError(args.session.string(), 0,
-                       fmt::format("no complete step to fit in {} and {} frames of the left and "
-                                   "right foot ({} steps found, all cut by the recording's ends "
-                                   "or a gap, or longer than 60 s)",
-                                   info.frames_per_foot[0], info.frames_per_foot[1], steps.size()));
-    }
+    const auto segment = [&](const std::function<void(double)>& on_progress,
+                             const std::function<void(Frame&)>& correct_frame) {
+      steps.clear();
+      ok_steps.clear();
+      const SegmentedSessionInfo info =
+          segment_session(args.session, config, on_step, on_progress, correct_frame);
+      // Outputs of nothing would read as a perfect fit: medians of 0 and an NRMSE of 0 %.
+      if (ok_steps.empty()) {
+        throw InputError(
+            args.session.string(), 0,
+            fmt::format("no complete step to fit in {} and {} frames of the left and right foot "
+                        "({} steps found, all cut by the recording's ends or a gap, or longer "
+                        "than 60 s{})",
+                        info.frames_per_foot[0], info.frames_per_foot[1], steps.size(),
+                        correct_frame ? ", with the sensor creep undone" : ""));
+      }
+    };
+    segment([&](double fraction) { progress.update(0.1 * fraction); }, {});
     const auto cells_start = std::chrono::steady_clock::now();
     cells = cell_reading_evidence(ok_steps, layout);
     spdlog::debug(
@@ -734,7 +746,18 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
       extended = fit_extended_model(input, names, {}, {}, [&](double fraction) {
         progress.update(steps_end + (0.95 - steps_end) * fraction);
       });
-      analyses = fit_steps_with_effects(input, extended->effects, config, settings);
+      if (auto creep = creep_to_undo(*extended)) {
+        std::vector<double> totals;
+        for (const StepAnalysis& a : analyses) totals.push_back(a.nrmse_total_pct);
+        total_nrmse_as_read_pct = spread_of(std::move(totals)).median;
+        segment({}, [&](Frame& frame) { creep->undo(frame); });
+        analyses = analyse_steps(ok_steps, layout, config, settings, [](double) {});
+        analyses = fit_steps_with_effects(
+            extended_model_input(ok_steps, analyses, layout, config, names, settings.area),
+            extended->effects, config, settings);
+      } else {
+        analyses = fit_steps_with_effects(input, extended->effects, config, settings);
+      }
       spdlog::debug(
           "fitted the extended model in {:.2f} s",
           std::chrono::duration<double>(std::chrono::steady_clock::now() - effects_start).count());
@@ -806,12 +829,28 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
         extended->baseline_nrmse_pct, extended->extended_nrmse_pct,
         extended->baseline_heldout_nrmse_pct, extended->extended_heldout_nrmse_pct);
     // Without this the table above could be read as the tissue under every effect.
-    const auto [inside, on_top] = place_effects(*extended);
+    const auto [inside, undone, on_top] = place_effects(*extended);
     if (!inside.empty()) {
       fmt::print(
           "note: each step's tissue parameters above and in regions.csv are fitted with {} "
           "inside its model\n",
           fmt::join(inside, " and "));
+    }
+    if (const auto creep = creep_to_undo(*extended)) {
+      fmt::print(
+          "note: each step above and in regions.csv is measured and fitted from readings with "
+          "the sensor creep undone (gain {:.4g}, tau {:.4g} s); the total force's median NRMSE "
+          "over the steps as read was {:.1f} %\n",
+          creep->gain(), creep->tau_s(), total_nrmse_as_read_pct);
+    }
+    for (const EffectEstimate& e : extended->effects) {
+      if (e.name == "sensor_creep" && !effect_undone_in_readings(*extended, e)) {
+        fmt::print(
+            "note: sensor_creep is not undone in the readings: the zero channel does not show it "
+            "(its held-out NRMSE falls by less than {:.0f} %) or the data do not determine it "
+            "(its gain or tau has no standard error)\n",
+            DiscrepancySettings{}.min_zero_shrink_pct);
+      }
     }
     if (!on_top.empty()) {
       fmt::print(

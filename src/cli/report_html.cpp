@@ -643,6 +643,15 @@ std::string effects_section(const ExtendedModelFit& fit) {
                    "report of the tissue's force through them.</p>",
                    escape(fmt::format("{}", fmt::join(placed.inside, " and "))));
   }
+  if (!placed.undone.empty()) {
+    fmt::format_to(std::back_inserter(out),
+                   "<p class=\"note\"><b>{}</b> {} undone in the readings at the parameters "
+                   "below, and every step measured again from them, before each step's fit. The "
+                   "pooled NRMSE at the end of this section compares the models on the readings "
+                   "as read, where creep is fitted from the steps' zeros.</p>",
+                   escape(fmt::format("{}", fmt::join(placed.undone, " and "))),
+                   placed.undone.size() == 1 ? "is" : "are");
+  }
   if (!placed.on_top.empty()) {
     fmt::format_to(std::back_inserter(out),
                    "<p class=\"note\"><b>{}</b> {} fitted on top of the tissue parameters "
@@ -654,11 +663,13 @@ std::string effects_section(const ExtendedModelFit& fit) {
       "<table><tr><th>effect</th><th>parameter</th><th>value (SE)</th><th>in each step's "
       "fit</th></tr>";
   for (const EffectEstimate& e : fit.effects) {
-    const bool inside = effect_inside_tissue_fit(e.name);
+    const std::string_view place = effect_inside_tissue_fit(e.name)    ? "inside"
+                                   : effect_undone_in_readings(fit, e) ? "undone in the readings"
+                                                                       : "on top";
     for (const ParamEstimate& p : e.params) {
       fmt::format_to(std::back_inserter(out),
                      "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>", escape(e.name),
-                     escape(p.name), estimate_cell(p), inside ? "inside" : "on top");
+                     escape(p.name), estimate_cell(p), place);
     }
   }
   fmt::format_to(std::back_inserter(out),
@@ -747,7 +758,10 @@ std::string cell_reading_advice(const CellReadingEvidence& e, AreaSource area) {
 EffectPlacement place_effects(const ExtendedModelFit& fit) {
   EffectPlacement placed;
   for (const EffectEstimate& e : fit.effects) {
-    (effect_inside_tissue_fit(e.name) ? placed.inside : placed.on_top).push_back(e.name);
+    (effect_inside_tissue_fit(e.name)    ? placed.inside
+     : effect_undone_in_readings(fit, e) ? placed.undone
+                                         : placed.on_top)
+        .push_back(e.name);
   }
   return placed;
 }

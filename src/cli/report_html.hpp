@@ -41,10 +41,12 @@ struct ReportInput {
   const CellReadingEvidence* cells = nullptr;  ///< how the cells read; null leaves it out
 };
 
-/// The effects of an extended model by where they sit: inside each step's tissue fit
-/// (effect_inside_tissue_fit) or on top of the baseline's tissue parameters, in its order.
+/// The effects of an extended model by where `analyze` puts them: inside each step's tissue fit
+/// (effect_inside_tissue_fit), undone in the readings before each step is measured
+/// (effect_undone_in_readings), or on top of the baseline's tissue parameters, in its order.
 struct EffectPlacement {
   std::vector<std::string> inside;
+  std::vector<std::string> undone;
   std::vector<std::string> on_top;
 };
 EffectPlacement place_effects(const ExtendedModelFit& fit);
