@@ -1548,6 +1548,10 @@ bool effect_inside_tissue_fit(std::string_view name) {
   return spec.stage == 0;
 }
 
+bool crosstalk_left_out(const CellReadingEvidence& cells, std::span<const std::string> effects) {
+  return cells.shows_crosstalk() && !names_crosstalk(effects);
+}
+
 bool effect_undone_in_readings(const ExtendedModelFit& fit, const EffectEstimate& effect,
                                double min_zero_shrink_pct) {
   check_discrepancy_effect(effect.name);

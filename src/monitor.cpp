@@ -605,9 +605,7 @@ struct Monitor::Impl {
     const CellReadingFits& fits = cells.fits();
     if (fits.frames < kCellEvidenceFrames) return;
     cells_clear.store(true, std::memory_order_relaxed);
-    const auto& effects = config.model.effects;
-    if (cells.shows_crosstalk() &&
-        std::find(effects.begin(), effects.end(), "crosstalk") == effects.end()) {
+    if (crosstalk_left_out(cells, config.model.effects)) {
       spdlog::warn(
           "monitor: the cells' readings fit their caps best with a crosstalk of {:.3f} undone "
           "({} region-frames): neighbouring cells read part of each other's load, which the fits "
@@ -1416,6 +1414,13 @@ Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publis
     throw std::invalid_argument(
         "Monitor: [model] m_per_session needs the default fit (identifiable parameters, P "
         "declared) and no [model] effects");
+  }
+  if (std::find(config.model.effects.begin(), config.model.effects.end(), "sensor_creep") !=
+      config.model.effects.end()) {
+    spdlog::info(
+        "monitor: sensor_creep is estimated from the steps' zeros and published; each step is "
+        "fitted from the readings as read (gaitmon analyze --effects sensor_creep undoes the "
+        "creep in the readings and measures every step again)");
   }
   // Checked once here: a segmenter that cannot be built would reject every frame.
   (void)StepSegmenter(Foot::Left, 1, config.segmentation, 0.0,

@@ -1077,7 +1077,13 @@ TEST(Monitor, RefusesATissueEffectInsideAFitThatCannotTakeIt) {
   EXPECT_THROW(Monitor(config, seed8, publisher), std::invalid_argument);
   EXPECT_THROW(Monitor(config, free_scale, publisher), std::invalid_argument);
   config.model.effects = {"sensor_creep"};  // on top of the tissue fit: any fit takes it
+  const test::LogCapture log;
   EXPECT_NO_THROW(Monitor(config, seed8, publisher));
+  // Unlike analyze, the monitor does not undo the creep in the readings, and says so.
+  EXPECT_NE(log.text.str().find("monitor: sensor_creep is estimated from the steps' zeros and "
+                                "published; each step is fitted from the readings as read"),
+            std::string::npos)
+      << log.text.str();
 }
 
 // close() (the commands' SIGINT and SIGTERM) makes the shutdown publish the latest estimate as

@@ -461,6 +461,10 @@ std::optional<CreepCorrection> creep_to_undo(
 /// fit_steps_with_effects puts these inside each step's tissue fit.
 bool effect_inside_tissue_fit(std::string_view name);
 
+/// Whether the cells show crosstalk (CellReadingEvidence::shows_crosstalk) that `effects` leaves
+/// out, so that the fits take it up as tissue: `analyze` and the live monitor then say so.
+bool crosstalk_left_out(const CellReadingEvidence& cells, std::span<const std::string> effects);
+
 /// The steps of `input` (in its order) with each region that the workflow compares fitted again
 /// (fit_region) with the named effects that effect_inside_tissue_fit admits in its model, at
 /// their fitted parameters (`effects`, as fit_extended_model gives them), as a ForceTransform:

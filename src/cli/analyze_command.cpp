@@ -808,8 +808,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   }
   const std::vector<std::filesystem::path> written = outputs.commit();
   print_summary(args, header, settings, steps, analyses, session, cells, written);
-  if (cells.shows_crosstalk() &&
-      std::find(names.begin(), names.end(), "crosstalk") == names.end()) {
+  if (crosstalk_left_out(cells, names)) {
     fmt::print(
         "note: the cells' readings fit their caps best with a crosstalk of {:.3f} undone: "
         "neighbouring cells read part of each other's load, which the fits take up as tissue; "
