@@ -1552,16 +1552,21 @@ bool crosstalk_left_out(const CellReadingEvidence& cells, std::span<const std::s
   return cells.shows_crosstalk() && !names_crosstalk(effects);
 }
 
-bool effect_undone_in_readings(const ExtendedModelFit& fit, const EffectEstimate& effect,
+bool effect_undone_in_readings(const EffectEstimate& effect, double zero_shrink_pct,
                                double min_zero_shrink_pct) {
   check_discrepancy_effect(effect.name);
+  return effect.name == "sensor_creep" && zero_shrink_pct >= min_zero_shrink_pct &&
+         std::all_of(effect.params.begin(), effect.params.end(),
+                     [](const ParamEstimate& p) { return std::isfinite(p.se) && p.se > 0.0; });
+}
+
+bool effect_undone_in_readings(const ExtendedModelFit& fit, const EffectEstimate& effect,
+                               double min_zero_shrink_pct) {
   const double zero_shrink_pct = fit.zero_baseline_heldout_nrmse_pct > 0.0
                                      ? 100.0 * (1.0 - fit.zero_extended_heldout_nrmse_pct /
                                                           fit.zero_baseline_heldout_nrmse_pct)
                                      : 0.0;
-  return effect.name == "sensor_creep" && zero_shrink_pct >= min_zero_shrink_pct &&
-         std::all_of(effect.params.begin(), effect.params.end(),
-                     [](const ParamEstimate& p) { return std::isfinite(p.se) && p.se > 0.0; });
+  return effect_undone_in_readings(effect, zero_shrink_pct, min_zero_shrink_pct);
 }
 
 std::optional<CreepCorrection> creep_to_undo(const ExtendedModelFit& fit,

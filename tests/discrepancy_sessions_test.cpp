@@ -424,6 +424,9 @@ TEST(DiscrepancySessions, NamesTheCreepOfAnInsoleFromItsZeros) {
   EXPECT_EQ(j["named_effects"][0], "sensor_creep");
   EXPECT_GE(j["zero_channel"]["gap_shrink_pct"].get<double>(), 40.0) << j["zero_channel"].dump();
   EXPECT_NE(output.find("zero channel ("), std::string::npos) << output;
+  // Named from the zeros, shown and determined there: analyze would undo it in the readings.
+  EXPECT_NE(output.find("note: creep also reshapes each step's footprint"), std::string::npos)
+      << output;
   // The NRMSE's scale in newtons, in the JSON and on stdout alike.
   const double scale_n = j["nrmse_scale"]["newtons"].get<double>();
   EXPECT_GT(scale_n, 50.0);
@@ -521,6 +524,7 @@ TEST(DiscrepancySessions, OnCellsThatAverageTheAreaTheyCallForLeavesCrosstalkUnn
             std::string::npos)
       << auto_out;
   EXPECT_EQ(chosen["settings"]["area"], "footprint-mean");
+  EXPECT_EQ(auto_out.find("note: creep"), std::string::npos) << auto_out;
   EXPECT_EQ(chosen["settings"]["area_auto"], true);
   EXPECT_EQ(chosen["settings"]["min_cell_coupling"], 0.03);
   EXPECT_EQ(chosen["cell_reading"]["favoured"], "mean");

@@ -439,14 +439,20 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     const std::stop_token& stop = {},
                                     const std::function<void(double)>& on_progress = {});
 
-/// Whether `analyze` undoes `effect` of `fit` in the readings before it measures and fits each
+/// Whether `analyze` undoes the fitted `effect` in the readings before it measures and fits each
 /// step again: sensor_creep (creep.hpp), which changes the shape of the readings over a region and
 /// so the footprint, which no map of the force can give back. Only where the data show it and
 /// determine it: the zero channel, where creep shows, predicts the held-out steps at least
-/// `min_zero_shrink_pct` better with the effects (the workflow's rule for naming an effect from
-/// it), and gain and tau both have a standard error. On sessions without creep its fit ran to
-/// gains of 0.14 and 1.16 at taus of 0.06 and 0.03 s (the first with standard errors), with the
-/// zero channel 20 % worse: a gain on every reading, which undone would take a share of each.
+/// `min_zero_shrink_pct` better with the effects (`zero_shrink_pct`, the workflow's rule for
+/// naming an effect from it), and gain and tau both have a standard error. On sessions without
+/// creep its fit ran to gains of 0.14 and 1.16 at taus of 0.06 and 0.03 s (the first with
+/// standard errors), with the zero channel 20 % worse: a gain on every reading, which undone would
+/// take a share of each.
+bool effect_undone_in_readings(
+    const EffectEstimate& effect, double zero_shrink_pct,
+    double min_zero_shrink_pct = DiscrepancySettings{}.min_zero_shrink_pct);
+
+/// effect_undone_in_readings for an effect of `fit`, with its zero channel's held-out shrink.
 bool effect_undone_in_readings(
     const ExtendedModelFit& fit, const EffectEstimate& effect,
     double min_zero_shrink_pct = DiscrepancySettings{}.min_zero_shrink_pct);

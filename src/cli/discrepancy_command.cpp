@@ -311,6 +311,15 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
         result.zero_changes, result.zero_baseline_heldout_nrmse_pct,
         result.zero_extended_heldout_nrmse_pct, result.zero_gap_shrink_pct);
   }
+  for (const EffectEstimate& e : result.named_effects) {
+    if (effect_undone_in_readings(e, result.zero_gap_shrink_pct,
+                                  args.settings.min_zero_shrink_pct)) {
+      fmt::print(
+          "note: creep also reshapes each step's footprint, which the force figures above leave "
+          "to the baseline; gaitmon analyze --effects sensor_creep undoes it in the readings and "
+          "measures every step again\n");
+    }
+  }
   for (const auto& path : written) fmt::print("wrote {}\n", path.string());
 }
 
