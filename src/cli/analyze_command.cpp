@@ -351,7 +351,8 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
           {"note",
            "effect parameters are shared by all steps; each step and region keeps its own "
            "tissue amplitudes and stiffness exponent (include/gaitmon/discrepancy.hpp); NRMSE "
-           "pooled over step-regions"},
+           "pooled over step-regions, of the readings as read; an effect undone_in_readings was "
+           "undone in every cell's readings before the steps were measured and fitted again"},
           {"baseline_nrmse_pct", fit->baseline_nrmse_pct},
           {"extended_nrmse_pct", fit->extended_nrmse_pct},
           {"baseline_heldout_nrmse_pct", fit->baseline_heldout_nrmse_pct},
