@@ -952,6 +952,11 @@ EffectEstimate estimate_of(const CandidateOutcome& c) {
   return e;
 }
 
+bool named_in(const std::vector<EffectEstimate>& named, std::string_view name) {
+  return std::any_of(named.begin(), named.end(),
+                     [&](const EffectEstimate& e) { return e.name == name; });
+}
+
 double shrink(double before, double after) {
   return before > 0.0 ? 100.0 * (1.0 - after / before) : 0.0;
 }
@@ -1255,14 +1260,20 @@ DiscrepancyInput make_discrepancy_input(std::span<const Step> steps,
   return input;
 }
 
-DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
-                                   const DiscrepancySettings& settings,
-                                   const std::function<void(double)>& on_progress) {
+namespace {
+
+// find_discrepancy without the candidate `left_out` (none if empty): an effect already undone in
+// the readings is no candidate on them.
+DiscrepancyResult discrepancy_without(const DiscrepancyInput& input,
+                                      const DiscrepancySettings& settings,
+                                      const std::function<void(double)>& on_progress,
+                                      std::string_view left_out) {
   check_settings(settings, input);
   const Prepared prep = prepare(input, settings.folds);
   const std::vector<Unit>& units = prep.units;
   const Pooled& pooled = prep.pooled;
-  const auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
+  auto specs = candidate_specs(input.cell_area_mm2, input.newtons_per_bit);
+  std::erase_if(specs, [&](const CandidateSpec& spec) { return spec.name == left_out; });
   const int base_params = 2 * static_cast<int>(units.size());
 
   DiscrepancyResult out;
@@ -1431,6 +1442,8 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
     }
   }
   report(1.0);
+  // Named second after a first that passed where it did not: named all the same.
+  if (named_in(out.named_effects, out.most_likely_candidate)) out.not_named_reason.clear();
   const std::vector<double>& heldout = last->heldout.force;
   out.extended_heldout_nrmse_pct = nrmse(last->heldout.force_sse(), pooled.norm);
   out.gap_shrink_pct = shrink(out.baseline_heldout_nrmse_pct, out.extended_heldout_nrmse_pct);
@@ -1469,6 +1482,90 @@ DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
   for (std::size_t o = 0; o < sb.size(); ++o) {
     out.per_step.push_back({prep.step_ids[o].first, prep.step_ids[o].second, nrmse(sb[o], sn[o]),
                             nrmse(se[o], sn[o])});
+  }
+  return out;
+}
+
+}  // namespace
+
+DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
+                                   const DiscrepancySettings& settings,
+                                   const std::function<void(double)>& on_progress) {
+  return discrepancy_without(input, settings, on_progress, {});
+}
+
+DiscrepancyResult find_discrepancy_undoing_creep(const DiscrepancyInput& input,
+                                                 const ReadWithCreepUndone& read_with_creep_undone,
+                                                 const DiscrepancySettings& settings,
+                                                 const std::function<void(double)>& on_progress) {
+  // Reading the session again takes a tenth of a run; the two runs take about as long.
+  const auto share = [&](double from, double to) {
+    return [&on_progress, from, to](double fraction) {
+      if (on_progress) on_progress(from + (to - from) * fraction);
+    };
+  };
+  DiscrepancyResult out = find_discrepancy(input, settings, share(0.0, 0.5));
+  const auto creep = std::find_if(
+      out.named_effects.begin(), out.named_effects.end(), [&](const EffectEstimate& e) {
+        return effect_undone_in_readings(e, out.zero_gap_shrink_pct, settings.min_zero_shrink_pct);
+      });
+  if (creep == out.named_effects.end()) {
+    share(0.0, 1.0)(1.0);
+    return out;
+  }
+  const auto param = [&](std::string_view name) {
+    for (const ParamEstimate& p : creep->params) {
+      if (p.name == name) return p.value;
+    }
+    throw std::logic_error(fmt::format("sensor_creep without its {}", name));
+  };
+  const DiscrepancyInput undone_input =
+      read_with_creep_undone(CreepCorrection(param("gain"), param("tau_s")));
+  share(0.0, 1.0)(0.55);
+  // One effect on top of the creep, as a second effect on top of a first.
+  DiscrepancySettings on_top = settings;
+  on_top.second_effect = false;
+  const DiscrepancyResult undone =
+      discrepancy_without(undone_input, on_top, share(0.55, 1.0), "sensor_creep");
+
+  CreepUndoneInReadings& u = out.creep_undone.emplace();
+  u.creep = *creep;
+  u.steps = undone.steps;
+  u.baseline_heldout_nrmse_pct = undone.baseline_heldout_nrmse_pct;
+  u.most_likely_candidate = undone.most_likely_candidate;
+  u.not_named_reason = undone.not_named_reason;
+
+  out.named_effects = {u.creep};
+  out.named_effects.insert(out.named_effects.end(), undone.named_effects.begin(),
+                           undone.named_effects.end());
+  out.extended_heldout_nrmse_pct = undone.extended_heldout_nrmse_pct;
+  out.gap_shrink_pct = shrink(out.baseline_heldout_nrmse_pct, out.extended_heldout_nrmse_pct);
+  out.map_after = undone.map_after;
+  for (std::size_t i = 0; i < out.regions.size() && i < undone.regions.size(); ++i) {
+    out.regions[i].extended_heldout_nrmse_pct = undone.regions[i].extended_heldout_nrmse_pct;
+  }
+  for (StepComparison& s : out.per_step) {
+    const auto it =
+        std::find_if(undone.per_step.begin(), undone.per_step.end(),
+                     [&](const StepComparison& o) { return o.foot == s.foot && o.step == s.step; });
+    s.extended_nrmse_pct = it != undone.per_step.end() ? it->extended_nrmse_pct
+                                                       : std::numeric_limits<double>::quiet_NaN();
+  }
+  out.second_candidates = undone.candidates;
+  if (named_in(out.named_effects, out.most_likely_candidate)) {
+    out.not_named_reason.clear();
+  } else {
+    const auto there =
+        std::find_if(undone.candidates.begin(), undone.candidates.end(),
+                     [&](const CandidateResult& c) { return c.name == out.most_likely_candidate; });
+    const std::string why =
+        undone.most_likely_candidate == out.most_likely_candidate ? undone.not_named_reason
+        : there != undone.candidates.end()
+            ? fmt::format("its held-out gain there is {:.1f} % (the most likely there is {})",
+                          there->shrink_pct, undone.most_likely_candidate)
+            : std::string("it is not a candidate there");
+    out.not_named_reason =
+        fmt::format("with the sensor creep that the zeros show undone in the readings, {}", why);
   }
   return out;
 }

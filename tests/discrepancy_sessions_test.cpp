@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -69,14 +70,27 @@ std::filesystem::path simulated(const SessionCase& c, const std::filesystem::pat
   return csv;
 }
 
+// The session at `csv` as the workflow reads it, each frame corrected first where `correct` is set.
+DiscrepancyInput read_input(const std::filesystem::path& csv, InsoleSize size,
+                            const std::function<void(Frame&)>& correct = {}) {
+  const Config& config = shipped_config();
+  std::vector<Step> steps;
+  segment_session(
+      csv, config, [&](Step&& s) { steps.push_back(std::move(s)); }, {}, correct);
+  const InsoleLayout layout(config.insole(size), config.sensor);
+  return prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
+}
+
 DiscrepancyInput session_input(const SessionCase& c, const std::filesystem::path& dir,
                                SimulationTruth* truth = nullptr) {
-  const Config& config = shipped_config();
-  const auto csv = simulated(c, dir, truth);
-  std::vector<Step> steps;
-  segment_session(csv, config, [&](Step&& s) { steps.push_back(std::move(s)); });
-  const InsoleLayout layout(config.insole(c.size), config.sensor);
-  return prepare_discrepancy_input(steps, layout, config, discrepancy_analysis_settings());
+  return read_input(simulated(c, dir, truth), c.size);
+}
+
+// Reads `csv` again with a creep undone, as `gaitmon discrepancy` does.
+ReadWithCreepUndone reader_of(const std::filesystem::path& csv, InsoleSize size) {
+  return [csv, size](CreepCorrection creep) {
+    return read_input(csv, size, [&](Frame& frame) { creep.undo(frame); });
+  };
 }
 
 DiscrepancyResult run(const SessionCase& c, const std::filesystem::path& dir) {
@@ -126,6 +140,8 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   const auto dir = test::scratch_dir("discrepancy-sessions");
   std::map<std::string, std::map<std::string, int>> named_matrix, ranked_matrix;
   std::string shrinks;
+  // The sessions read again with the creep their zeros name undone.
+  std::string undone;
   int wrong_names = 0;
   int none_named = 0;
   int right_names = 0;
@@ -150,13 +166,16 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
     for (std::size_t i = 0; i < 3; ++i) {
       const SessionCase c{effect, strengths.at(effect)[i], sizes[i], ++seed,
                           effect == "thermal_drift" ? 60.0 : 12.0};
-      const DiscrepancyInput input = session_input(c, dir);
-      const DiscrepancyResult r = find_discrepancy(input);
+      const auto csv = simulated(c, dir);
+      const DiscrepancyInput input = read_input(csv, c.size);
+      const DiscrepancyResult r = find_discrepancy_undoing_creep(input, reader_of(csv, c.size));
       const std::string first = r.named_effects.empty() ? "none" : r.named_effects.front().name;
       ++named_matrix[effect][first];
       // Why the most likely candidate was not named, whenever it was not.
-      EXPECT_EQ(r.not_named_reason.empty(),
-                !r.named_effects.empty() && first == r.most_likely_candidate)
+      EXPECT_EQ(
+          r.not_named_reason.empty(),
+          std::any_of(r.named_effects.begin(), r.named_effects.end(),
+                      [&](const EffectEstimate& e) { return e.name == r.most_likely_candidate; }))
           << r.not_named_reason;
       std::size_t best = 0;
       for (std::size_t k = 1; k < r.candidates.size(); ++k) {
@@ -178,6 +197,19 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       std::string all_named;
       for (const EffectEstimate& e : r.named_effects) {
         all_named += (all_named.empty() ? "" : "+") + e.name;
+      }
+      // The creep the zeros name is undone in the readings and nothing is named on top of it
+      // there; no other session names it (measured: the baseline held out 1.14 / 1.18 / 3.06 % as
+      // read, 1.13 / 1.22 / 1.15 % with it undone).
+      EXPECT_EQ(r.creep_undone.has_value(), effect == "sensor_creep") << all_named << c.seed;
+      if (r.creep_undone) {
+        EXPECT_EQ(all_named, "sensor_creep") << c.seed;
+        undone += fmt::format(
+            "  {:<18} {:<6} seed {:>3}: {} steps, the baseline held out {:.2f} % ({:.2f} % as "
+            "read), most likely candidate there {}\n",
+            effect, insole_size_name(c.size), c.seed, r.creep_undone->steps,
+            r.creep_undone->baseline_heldout_nrmse_pct, r.baseline_heldout_nrmse_pct,
+            r.creep_undone->most_likely_candidate);
       }
       shrinks += fmt::format(
           "  {:<18} {:<6} seed {:>3}: named {:<34} held-out {:6.2f} % -> {:6.2f} % (gap shrink "
@@ -282,6 +314,7 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
   print("Confusion matrix (named effect; 3 sessions per row)", named_matrix);
   print("Best candidate by held-out likelihood (force and zero), named or not", ranked_matrix);
   fmt::print("Sessions:\n{}", shrinks);
+  fmt::print("Read again with the sensor creep undone:\n{}", undone);
   fmt::print("Fitted parameters of the first effect named:\n{}", fitted);
   // The naming threshold (5 %) is 2.6 times the largest false improvement seen on 15 sessions
   // without an effect (these three and twelve others, README: impact_transient 1.95 %;
@@ -440,6 +473,71 @@ TEST(DiscrepancySessions, NamesTheCreepOfAnInsoleFromItsZeros) {
   fmt::print("creep gain {} tau {}\n", params["gain"].dump(), params["tau_s"].dump());
   EXPECT_NEAR(params["gain"]["value"].get<double>(), 0.3, 0.06);
   EXPECT_NEAR(params["tau_s"]["value"].get<double>(), 2.0, 0.4);
+  // The session was read again with the creep undone, and nothing is named on top of it.
+  const auto& undone = j["creep_undone_in_readings"];
+  ASSERT_TRUE(undone.is_object()) << undone.dump();
+  EXPECT_EQ(undone["params"], params);
+  EXPECT_EQ(j["second_candidates_on"], "the readings with the sensor creep undone");
+  EXPECT_EQ(j["second_candidates"].size(), discrepancy_effect_names().size() - 1);
+  for (const auto& c : j["second_candidates"]) EXPECT_NE(c["name"], "sensor_creep");
+  EXPECT_NE(output.find("sensor creep undone in the readings (gain="), std::string::npos) << output;
+}
+
+// On cells that average, the creep's change of the footprint leaves the baseline a misfit that
+// stress relaxation took up, named first (the coverage raster's creep session of size 37-38, as
+// in the README's matrix on those cells). Read again with the creep its zeros name undone, the
+// session shows no other effect: the baseline held out falls from 1.94 to 1.51 % when measured.
+TEST(DiscrepancySessions, OnCellsThatAverageACreepUndoneInTheReadingsLeavesNoOtherEffect) {
+  if (test::kSanitized) {
+    GTEST_SKIP() << "two runs of the workflow on a simulated session take too long under the "
+                    "sanitizers; find_discrepancy_undoing_creep runs under them in "
+                    "discrepancy_test";
+  }
+  const auto dir = test::scratch_dir("discrepancy-coverage-creep");
+  SessionCase c{"sensor_creep", {{"gain", 0.2}, {"tau_s", 1.0}}, InsoleSize::S37_38, 116};
+  c.rasterisation = Rasterisation::Coverage;
+  const auto csv = simulated(c, dir);
+  const auto discrepancy = [&](const std::string& name, const std::string& options) {
+    std::string output;
+    const int status = test::run_command(
+        fmt::format("{} discrepancy {} --out {} {}", test::gaitmon_binary().string(), csv.string(),
+                    (dir / name).string(), options),
+        &output);
+    EXPECT_EQ(status, 0) << output;
+    std::ifstream in(dir / name / "discrepancy.json");
+    return std::pair{output, nlohmann::json::parse(in)};
+  };
+  const auto [kept_out, kept] = discrepancy("kept", "--keep-creep");
+  ASSERT_GE(kept["named_effects"].size(), 1u) << kept_out;
+  EXPECT_EQ(kept["named_effects"][0], "stress_relaxation") << kept_out;
+  EXPECT_TRUE(kept["creep_undone_in_readings"].is_null());
+  EXPECT_NE(kept_out.find("to the baseline (--keep-creep)"), std::string::npos) << kept_out;
+
+  const auto [out, j] = discrepancy("undone", "");
+  ASSERT_EQ(j["named_effects"].size(), 1u) << out;
+  EXPECT_EQ(j["named_effects"][0], "sensor_creep") << out;
+  const auto& undone = j["creep_undone_in_readings"];
+  ASSERT_TRUE(undone.is_object()) << out;
+  EXPECT_EQ(undone["params"], j["named_effect_params"][0]["params"]);
+  EXPECT_EQ(undone["params"], kept["named_effect_params"][1]["params"]) << kept_out;
+  // The same readings as read: the baseline and the zero channel do not change.
+  EXPECT_EQ(j["baseline_heldout_nrmse_pct"], kept["baseline_heldout_nrmse_pct"]);
+  EXPECT_EQ(j["zero_channel"], kept["zero_channel"]);
+  const double as_read = j["baseline_heldout_nrmse_pct"].get<double>();
+  const double there = undone["baseline_heldout_nrmse_pct"].get<double>();
+  EXPECT_LT(there, 0.85 * as_read) << out;
+  EXPECT_EQ(j["extended_heldout_nrmse_pct"].get<double>(), there);
+  EXPECT_LT(j["extended_heldout_nrmse_pct"].get<double>(),
+            kept["extended_heldout_nrmse_pct"].get<double>());
+  // The relaxation that was the most likely as read is not named, and why is said.
+  EXPECT_EQ(j["most_likely_candidate"], "stress_relaxation");
+  EXPECT_NE(j["not_named_reason"].get<std::string>().find(
+                "with the sensor creep that the zeros show undone in the readings"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("the extended figures above are of the readings with it undone"),
+            std::string::npos)
+      << out;
 }
 
 // Size 35-36 is not in the matrix. Without an effect its sessions gained 2.2-4.2 % with
@@ -855,10 +953,15 @@ TEST(DiscrepancySessions, ACandidateWhoseParametersTheDataDoNotDetermineIsNotNam
   EXPECT_EQ(j["named_effects"][0], "sensor_creep");
   EXPECT_GE(j["zero_channel"]["gap_shrink_pct"].get<double>(), 10.0) << j["zero_channel"].dump();
   EXPECT_NE(output.find("named: sensor_creep gain="), std::string::npos) << output;
-  EXPECT_NE(output.find("(the most likely candidate, crosstalk, is not named: the readings show "
-                        "no crosstalk"),
+  // The creep is undone in the readings and they are read again; crosstalk is a candidate there
+  // too, and not named for the same reason.
+  EXPECT_NE(output.find("(the most likely candidate, crosstalk, is not named: with the sensor "
+                        "creep that the zeros show undone in the readings, the readings show no "
+                        "crosstalk"),
             std::string::npos)
       << output;
+  ASSERT_TRUE(j["creep_undone_in_readings"].is_object()) << output;
+  EXPECT_EQ(j["creep_undone_in_readings"]["most_likely_candidate"], "crosstalk") << output;
   EXPECT_EQ(j["most_likely_candidate"], "crosstalk");
   EXPECT_LT(j["diagnostics"]["neighbour_share"]["floor"].get<double>(), 0.005);
   bool seen = false;

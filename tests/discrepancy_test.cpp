@@ -268,6 +268,95 @@ TEST(Discrepancy, NamesACreepThatTheZeroingMovedIntoTheZeros) {
   EXPECT_EQ(n.zero_changes, 26);
 }
 
+// Where the zeros name a creep, the workflow reads the session again with it undone and looks for
+// one effect there, the creep no candidate: the reader is handed the creep as named, and the
+// result puts it first, with the extended figures, second candidates and reasons of the second
+// reading. Here the second
+// reading is a session without creep of 12 steps (the first has 14): its last two steps have no
+// extended figure.
+TEST(Discrepancy, ReadsTheSessionAgainWithTheCreepItNamesUndone) {
+  CleanCase creep{"sensor_creep", {{"gain", 0.3}, {"tau_s", 1.0}}};
+  creep.zeroed = true;
+  CleanCase none{"none", {}};
+  none.zeroed = true;
+  const DiscrepancyInput as_read = clean_session(creep, 14, 7);
+  const DiscrepancyInput undone = clean_session(none, 12, 7);
+  const DiscrepancyResult plain = find_discrepancy(as_read);
+  const DiscrepancyResult alone = find_discrepancy(undone);
+  ASSERT_EQ(named(plain), "sensor_creep");
+  int reads = 0;
+  std::vector<double> progress;
+  const DiscrepancyResult r = find_discrepancy_undoing_creep(
+      as_read,
+      [&](const CreepCorrection& c) {
+        ++reads;
+        EXPECT_EQ(c.gain(), plain.named_effects.front().params.at(0).value);
+        EXPECT_EQ(c.tau_s(), plain.named_effects.front().params.at(1).value);
+        return undone;
+      },
+      {}, [&](double f) { progress.push_back(f); });
+  EXPECT_EQ(reads, 1);
+  ASSERT_TRUE(r.creep_undone.has_value());
+  EXPECT_EQ(named(r), "sensor_creep");
+  EXPECT_EQ(r.creep_undone->steps, 12);
+  EXPECT_EQ(r.creep_undone->baseline_heldout_nrmse_pct, alone.baseline_heldout_nrmse_pct);
+  EXPECT_NE(r.creep_undone->most_likely_candidate, "sensor_creep");
+  EXPECT_EQ(r.baseline_heldout_nrmse_pct, plain.baseline_heldout_nrmse_pct);
+  EXPECT_EQ(r.extended_heldout_nrmse_pct, alone.baseline_heldout_nrmse_pct);
+  EXPECT_NEAR(r.gap_shrink_pct,
+              100.0 * (1.0 - alone.baseline_heldout_nrmse_pct / plain.baseline_heldout_nrmse_pct),
+              1e-9);
+  EXPECT_EQ(r.zero_gap_shrink_pct, plain.zero_gap_shrink_pct);
+  // Every candidate but the creep, which is undone there.
+  std::vector<CandidateResult> others = alone.candidates;
+  std::erase_if(others, [](const CandidateResult& c) { return c.name == "sensor_creep"; });
+  ASSERT_EQ(others.size(), alone.candidates.size() - 1);
+  ASSERT_EQ(r.second_candidates.size(), others.size());
+  for (std::size_t i = 0; i < others.size(); ++i) {
+    EXPECT_EQ(r.second_candidates[i].name, others[i].name);
+    EXPECT_EQ(r.second_candidates[i].heldout_nrmse_pct, others[i].heldout_nrmse_pct);
+  }
+  ASSERT_EQ(r.regions.size(), alone.regions.size());
+  for (std::size_t i = 0; i < r.regions.size(); ++i) {
+    EXPECT_EQ(r.regions[i].baseline_heldout_nrmse_pct, plain.regions[i].baseline_heldout_nrmse_pct);
+    EXPECT_EQ(r.regions[i].extended_heldout_nrmse_pct, alone.regions[i].extended_heldout_nrmse_pct);
+  }
+  ASSERT_EQ(r.per_step.size(), 14u);
+  for (std::size_t i = 0; i < r.per_step.size(); ++i) {
+    EXPECT_EQ(r.per_step[i].baseline_nrmse_pct, plain.per_step[i].baseline_nrmse_pct);
+    if (i < 12) {
+      EXPECT_EQ(r.per_step[i].extended_nrmse_pct, alone.per_step[i].extended_nrmse_pct) << i;
+    } else {
+      EXPECT_TRUE(std::isnan(r.per_step[i].extended_nrmse_pct)) << i;
+    }
+  }
+  EXPECT_TRUE(r.not_named_reason.empty()) << r.not_named_reason;
+  EXPECT_TRUE(std::is_sorted(progress.begin(), progress.end()));
+  EXPECT_EQ(progress.back(), 1.0);
+
+  // Nothing to undo: the reader is not called, and the result is find_discrepancy's.
+  const DiscrepancyResult n = find_discrepancy_undoing_creep(undone, [&](const CreepCorrection&) {
+    ++reads;
+    return undone;
+  });
+  EXPECT_EQ(reads, 1);
+  EXPECT_FALSE(n.creep_undone.has_value());
+  EXPECT_EQ(n.extended_heldout_nrmse_pct, alone.extended_heldout_nrmse_pct);
+  EXPECT_EQ(n.second_candidates.size(), alone.second_candidates.size());
+  // A creep the zeros do not determine well enough (over a zero shrink of 95 %) is not undone.
+  DiscrepancySettings strict;
+  strict.min_zero_shrink_pct = 95.0;
+  EXPECT_FALSE(find_discrepancy_undoing_creep(
+                   as_read,
+                   [&](const CreepCorrection&) {
+                     ++reads;
+                     return undone;
+                   },
+                   strict)
+                   .creep_undone.has_value());
+  EXPECT_EQ(reads, 1);
+}
+
 // A ceiling is a reading several cells share: sensor_saturation is named only where, in enough
 // steps, two or more cells of one region read at the session's top in one frame. Series made
 // without cells carry no counts, and the rule does not apply to them (the test above).

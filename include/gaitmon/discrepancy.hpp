@@ -81,6 +81,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <stop_token>
@@ -341,6 +342,19 @@ inline constexpr double kZeroDriftPctOfPeak = 2.0;
 /// The zero levels of each foot with at least 3 steps, in time order of heel strike.
 std::vector<ZeroLevelDrift> zero_level_drift(const DiscrepancyInput& input);
 
+/// What the workflow found on a session read again with the sensor creep that its zeros name undone
+/// in every frame (find_discrepancy_undoing_creep).
+struct CreepUndoneInReadings {
+  EffectEstimate creep;  ///< as named on the readings as read
+  int steps = 0;         ///< complete steps of the readings with it undone
+  /// The baseline's held-out NRMSE there: how much of the gap undoing the creep closes by itself.
+  double baseline_heldout_nrmse_pct = 0.0;
+  /// The most likely candidate there (on top of the creep), and why it was not named; empty
+  /// where it was.
+  std::string most_likely_candidate;
+  std::string not_named_reason;
+};
+
 struct DiscrepancyResult {
   int steps = 0;
   int step_regions = 0;
@@ -383,8 +397,9 @@ struct DiscrepancyResult {
   /// likely of the candidates that pass, which is another one where this one does not.
   std::string most_likely_candidate;
   std::string not_named_reason;
-  std::vector<CandidateResult> candidates;         ///< each on top of the baseline
-  std::vector<CandidateResult> second_candidates;  ///< each on top of the first named effect
+  std::vector<CandidateResult> candidates;  ///< each on top of the baseline
+  /// Each on top of the first named effect, or of the creep undone in the readings (creep_undone).
+  std::vector<CandidateResult> second_candidates;
   std::vector<ResidualCell> where;  ///< top cells by excess over the noise floor, none under it
   ResidualMap map_before;
   ResidualMap map_after;
@@ -392,6 +407,8 @@ struct DiscrepancyResult {
   std::vector<StepComparison> per_step;
   ResidualDiagnostics diagnostics;
   std::vector<ZeroLevelDrift> zero_levels;  ///< per foot with at least 3 complete steps
+  /// Set by find_discrepancy_undoing_creep where it read the session again with the creep undone.
+  std::optional<CreepUndoneInReadings> creep_undone;
 };
 
 /// Runs the workflow. Deterministic. Throws std::invalid_argument for bad settings or fewer
@@ -402,6 +419,34 @@ struct DiscrepancyResult {
 DiscrepancyResult find_discrepancy(const DiscrepancyInput& input,
                                    const DiscrepancySettings& settings = {},
                                    const std::function<void(double)>& on_progress = {});
+
+/// Reads the session again with `creep` undoing the creep in every frame as it is read, and
+/// prepares those steps as the workflow's input was prepared (the same area source).
+using ReadWithCreepUndone = std::function<DiscrepancyInput(CreepCorrection creep)>;
+
+/// find_discrepancy on the readings as read, and where it names sensor_creep and
+/// effect_undone_in_readings admits it (its zero channel shows it, gain and tau are determined),
+/// the workflow once more on the session read again with that creep undone, which looks for one
+/// effect on top of it. Why: creep changes the shape of the readings over a region and so each
+/// step's footprint, which no map of the force gives back; the baseline then misfits and another
+/// candidate takes up the misfit (stress_relaxation on cells that average, seed 116; README,
+/// "Sensor creep undone in the readings"). The result is then:
+///   - named_effects: sensor_creep as named, then what the readings with it undone name;
+///   - baseline held-out NRMSE, where, map_before, candidates, the zero channel and the diagnostics
+///     as read; the extended held-out NRMSE, map_after and each region's and step's extended
+///     figure from the readings with the creep undone (against their own peaks; a step found in
+///     only one of the two readings has NaN there), the creep's gain and tau fitted on all steps;
+///   - second_candidates: those of the readings with the creep undone, where sensor_creep is no
+///     candidate (its fit there ran to a gain on every reading at a tau of a frame or two on a real
+///     recording, and a creep too small to move a reading by a bit is named again as it was);
+///   - most_likely_candidate as read, and where that is not named, why, from the readings with
+///     the creep undone;
+///   - creep_undone set.
+/// Otherwise the result of find_discrepancy. `on_progress` as find_discrepancy's, over both.
+/// Throws as find_discrepancy, and what `read_with_creep_undone` throws.
+DiscrepancyResult find_discrepancy_undoing_creep(
+    const DiscrepancyInput& input, const ReadWithCreepUndone& read_with_creep_undone,
+    const DiscrepancySettings& settings = {}, const std::function<void(double)>& on_progress = {});
 
 /// The extended model with the named effects (in the given order, each fitted on top of the
 /// previous, then each once more with all the others in place where that is kept:
@@ -440,9 +485,10 @@ ExtendedModelFit fit_extended_model(const DiscrepancyInput& input,
                                     const std::function<void(double)>& on_progress = {});
 
 /// Whether `analyze` undoes the fitted `effect` in the readings before it measures and fits each
-/// step again: sensor_creep (creep.hpp), which changes the shape of the readings over a region and
-/// so the footprint, which no map of the force can give back. Only where the data show it and
-/// determine it: the zero channel, where creep shows, predicts the held-out steps at least
+/// step again (and find_discrepancy_undoing_creep before it looks for further effects):
+/// sensor_creep (creep.hpp), which changes the shape of the readings over a region and so the
+/// footprint, which no map of the force can give back. Only where the data show it and determine
+/// it: the zero channel, where creep shows, predicts the held-out steps at least
 /// `min_zero_shrink_pct` better with the effects (`zero_shrink_pct`, the workflow's rule for
 /// naming an effect from it), and gain and tau both have a standard error. On sessions without
 /// creep its fit ran to gains of 0.14 and 1.16 at taus of 0.06 and 0.03 s (the first with

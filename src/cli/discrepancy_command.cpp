@@ -30,6 +30,7 @@ struct DiscrepancyArgs {
   std::filesystem::path out_dir;
   bool report = false;
   std::string area = "auto";
+  bool keep_creep = false;
   DiscrepancySettings settings;
 };
 
@@ -46,6 +47,17 @@ std::string params_text(const std::vector<ParamEstimate>& params) {
     text += fmt::format(" {}={}", p.name, estimate_text(p.value, p.se, "+-"));
   }
   return text;
+}
+
+// The parameters show why a candidate with a clear gain may still not be named: one without
+// a standard error (at a bound of its range, or along a flat direction) is not determined.
+void print_candidates(const std::vector<CandidateResult>& list) {
+  fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}  {}\n", "candidate", "held-out %", "shrink %",
+             "zero shr. %", "dBIC", "parameters");
+  for (const CandidateResult& c : list) {
+    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f} {}\n", c.name, c.heldout_nrmse_pct,
+               c.shrink_pct, c.zero_shrink_pct, c.delta_bic, params_text(c.params));
+  }
 }
 
 nlohmann::json params_json(const std::vector<ParamEstimate>& params) {
@@ -154,6 +166,23 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const AreaUsed& used,
   j["where"] = where;
   j["candidates"] = candidates_json(r.candidates);
   j["second_candidates"] = candidates_json(r.second_candidates);
+  j["second_candidates_on"] =
+      r.creep_undone ? "the readings with the sensor creep undone" : "the first named effect";
+  if (const auto& u = r.creep_undone) {
+    j["creep_undone_in_readings"] = {
+        {"params", params_json(u->creep.params)},
+        {"steps", u->steps},
+        {"baseline_heldout_nrmse_pct", u->baseline_heldout_nrmse_pct},
+        {"most_likely_candidate", u->most_likely_candidate},
+        {"not_named_reason", u->not_named_reason},
+        {"what",
+         "the zeros named a sensor creep: the session was read again with it undone in every "
+         "frame, and one effect on top of it was looked for there; extended_heldout_nrmse_pct, "
+         "residual_map_after and each region's and step's extended figure are of those readings, "
+         "against their own peaks"}};
+  } else {
+    j["creep_undone_in_readings"] = nullptr;
+  }
   nlohmann::json regions = nlohmann::json::object();
   for (const RegionComparison& c : r.regions) {
     regions[std::string(region_name(c.region))] = c;
@@ -208,31 +237,48 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   OutputSet outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"}, args.session);
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
-  std::vector<Step> steps;
-  DiscrepancyInput input;
   DiscrepancyResult result;
   AreaUsed used;
   {
     ProgressBar progress("discrepancy");
-    segment_session(
-        args.session, config,
-        [&](Step&& step) {
-          if (step.status == StepStatus::Ok) steps.push_back(std::move(step));
-        },
-        [&](double fraction) { progress.update(0.1 * fraction); });
-    if (static_cast<int>(steps.size()) < args.settings.folds) {
-      throw InputError(args.session.string(), 0,
-                       fmt::format("{} complete steps, need at least {} (one per fold of --folds)",
-                                   steps.size(), args.settings.folds));
-    }
+    // The complete steps of the session, each frame corrected first where `correct_frame` is set.
+    const auto read_steps = [&](const std::function<void(double)>& on_progress,
+                                const std::function<void(Frame&)>& correct_frame) {
+      std::vector<Step> steps;
+      segment_session(
+          args.session, config,
+          [&](Step&& step) {
+            if (step.status == StepStatus::Ok) steps.push_back(std::move(step));
+          },
+          on_progress, correct_frame);
+      if (static_cast<int>(steps.size()) < args.settings.folds) {
+        throw InputError(
+            args.session.string(), 0,
+            fmt::format("{} complete steps{}, need at least {} (one per fold of --folds)",
+                        steps.size(), correct_frame ? " with the sensor creep undone" : "",
+                        args.settings.folds));
+      }
+      return steps;
+    };
+    const std::vector<Step> steps =
+        read_steps([&](double fraction) { progress.update(0.1 * fraction); }, {});
     used.cells = cell_reading_evidence(steps, layout);
     used.area = args.area == "auto" ? footprint_for(used.cells) : *parse_area_source(args.area);
     AnalysisSettings analysis = discrepancy_analysis_settings();
     analysis.area = used.area;
-    input = prepare_discrepancy_input(steps, layout, config, analysis);
+    const DiscrepancyInput input = prepare_discrepancy_input(steps, layout, config, analysis);
     progress.update(0.3);
-    result = find_discrepancy(input, args.settings,
-                              [&](double fraction) { progress.update(0.3 + 0.7 * fraction); });
+    const auto on_progress = [&](double fraction) { progress.update(0.3 + 0.7 * fraction); };
+    result = args.keep_creep
+                 ? find_discrepancy(input, args.settings, on_progress)
+                 : find_discrepancy_undoing_creep(
+                       input,
+                       [&](CreepCorrection creep) {
+                         const std::vector<Step> undone =
+                             read_steps({}, [&](Frame& frame) { creep.undo(frame); });
+                         return prepare_discrepancy_input(undone, layout, config, analysis);
+                       },
+                       args.settings, on_progress);
   }
 
   std::filesystem::create_directories(args.out_dir);
@@ -253,13 +299,14 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   if (const std::string advice = cell_reading_advice(used.cells, used.area); !advice.empty()) {
     fmt::print("note: {}\n", advice);
   }
-  // The parameters show why a candidate with a clear gain may still not be named: one without
-  // a standard error (at a bound of its range, or along a flat direction) is not determined.
-  fmt::print("{:<20}{:>14}{:>12}{:>12}{:>12}  {}\n", "candidate", "held-out %", "shrink %",
-             "zero shr. %", "dBIC", "parameters");
-  for (const CandidateResult& c : result.candidates) {
-    fmt::print("{:<20}{:>14.2f}{:>12.1f}{:>12.1f}{:>12.0f} {}\n", c.name, c.heldout_nrmse_pct,
-               c.shrink_pct, c.zero_shrink_pct, c.delta_bic, params_text(c.params));
+  print_candidates(result.candidates);
+  if (const auto& u = result.creep_undone) {
+    fmt::print(
+        "sensor creep undone in the readings ({}): the session read again gives {} steps and a "
+        "baseline held-out NRMSE of {:.2f} % ({:.2f} % as read); one effect on top of it:\n",
+        params_text(u->creep.params).substr(1), u->steps, u->baseline_heldout_nrmse_pct,
+        result.baseline_heldout_nrmse_pct);
+    print_candidates(result.second_candidates);
   }
   if (result.ceiling_plateau_steps >= 0) {
     fmt::print(
@@ -301,9 +348,10 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
         "the zeroing at each step's swings takes it out of the force\n",
         foot_name(z.foot), z.first_bits, z.last_bits, z.steps, z.range_pct_of_peak, z.scatter_bits);
   }
-  fmt::print("held-out NRMSE {:.2f} % -> {:.2f} % (gap shrink {:.1f} %)\n",
+  fmt::print("held-out NRMSE {:.2f} % -> {:.2f} % (gap shrink {:.1f} %){}\n",
              result.baseline_heldout_nrmse_pct, result.extended_heldout_nrmse_pct,
-             result.gap_shrink_pct);
+             result.gap_shrink_pct,
+             result.creep_undone ? ", the second on the readings with the creep undone" : "");
   if (result.zero_changes > 0) {
     fmt::print(
         "zero channel ({} step-to-step changes of the zero): held-out NRMSE {:.3f} % -> "
@@ -312,12 +360,20 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
         result.zero_extended_heldout_nrmse_pct, result.zero_gap_shrink_pct);
   }
   for (const EffectEstimate& e : result.named_effects) {
-    if (effect_undone_in_readings(e, result.zero_gap_shrink_pct,
-                                  args.settings.min_zero_shrink_pct)) {
+    if (!effect_undone_in_readings(e, result.zero_gap_shrink_pct,
+                                   args.settings.min_zero_shrink_pct)) {
+      continue;
+    }
+    if (result.creep_undone) {
+      fmt::print(
+          "note: creep also reshapes each step's footprint; the extended figures above are of the "
+          "readings with it undone, and gaitmon analyze --effects sensor_creep measures and fits "
+          "every step from them\n");
+    } else {
       fmt::print(
           "note: creep also reshapes each step's footprint, which the force figures above leave "
-          "to the baseline; gaitmon analyze --effects sensor_creep undoes it in the readings and "
-          "measures every step again\n");
+          "to the baseline (--keep-creep); gaitmon analyze --effects sensor_creep undoes it in "
+          "the readings and measures every step again\n");
     }
   }
   for (const auto& path : written) fmt::print("wrote {}\n", path.string());
@@ -337,6 +393,10 @@ void add_discrepancy_command(CLI::App& app, const GlobalOptions& global) {
       ->check(session_file_read_twice());
   sub->add_option("--out,-o", args->out_dir, "Output folder")->required();
   sub->add_flag("--report", args->report, "Also write a self-contained HTML report");
+  sub->add_flag("--keep-creep", args->keep_creep,
+                "Where the zeros name a sensor creep, look for further effects on the readings as "
+                "read; by default the session is read again with the creep undone and they are "
+                "looked for there");
   sub->add_option("--area", args->area,
                   "Contact area given to the fits: auto (footprint-mean where the session's "
                   "readings fit cells that average the pressure better, else footprint, as "

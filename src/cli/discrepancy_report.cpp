@@ -94,11 +94,17 @@ std::string paired_bars(const std::vector<std::string>& labels, const std::vecto
 std::string step_plot(const std::vector<StepComparison>& steps) {
   constexpr int kW = 640, kH = 200, kPad = 40;
   double top = 1e-9;
-  for (const auto& s : steps) top = std::max({top, s.baseline_nrmse_pct, s.extended_nrmse_pct});
+  // NaN: a step found in only one of two readings (find_discrepancy_undoing_creep).
+  for (const auto& s : steps) {
+    for (double v : {s.baseline_nrmse_pct, s.extended_nrmse_pct}) {
+      if (std::isfinite(v)) top = std::max(top, v);
+    }
+  }
   const auto line = [&](bool extended, const char* colour) {
     std::string pts;
     for (std::size_t i = 0; i < steps.size(); ++i) {
       const double v = extended ? steps[i].extended_nrmse_pct : steps[i].baseline_nrmse_pct;
+      if (!std::isfinite(v)) continue;
       const double x =
           kPad + (kW - 2 * kPad) * (steps.size() > 1 ? double(i) / (steps.size() - 1) : 0.5);
       const double y = kH - kPad + 10 - (kH - kPad) * v / top;
@@ -209,10 +215,16 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
   candidates += "</table>";
   std::string seconds;
   if (!r.second_candidates.empty()) {
-    candidates +=
-        "<h3>On top of the first named effect</h3><table><tr><th>candidate</th>"
+    candidates += fmt::format(
+        "<h3>{}</h3><table><tr><th>candidate</th>"
         "<th>held-out NRMSE %</th><th>shrink %</th><th>in-sample NRMSE %</th>"
-        "<th>zero channel shrink %</th><th>&Delta;BIC</th><th>parameters</th></tr>";
+        "<th>zero channel shrink %</th><th>&Delta;BIC</th><th>parameters</th></tr>",
+        r.creep_undone
+            ? fmt::format("On the readings with the sensor creep undone ({} steps; the baseline's "
+                          "held-out NRMSE {:.2f} % there, {:.2f} % as read)",
+                          r.creep_undone->steps, r.creep_undone->baseline_heldout_nrmse_pct,
+                          r.baseline_heldout_nrmse_pct)
+            : std::string("On top of the first named effect"));
     rows(r.second_candidates);
     candidates += "</table>";
   }
@@ -294,8 +306,12 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
   }
   html += "<h2>Named effects</h2><ul>" + named + "</ul>";
   html += fmt::format(
-      "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.</p>",
-      r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct);
+      "<p>Held-out NRMSE {:.2f} % &rarr; {:.2f} %: the gap shrinks by <b>{:.1f} %</b>.{}</p>",
+      r.baseline_heldout_nrmse_pct, r.extended_heldout_nrmse_pct, r.gap_shrink_pct,
+      r.creep_undone ? " The zeros name a sensor creep: every figure after is of the session "
+                       "read again with it undone in every frame (a step found in only one of the "
+                       "two readings has none), each step-region against its own peak there."
+                     : "");
   if (r.zero_changes > 0) {
     html += fmt::format(
         "<p>Zero channel ({} step-to-step changes of the step-regions' zeros, which the model "
@@ -313,7 +329,10 @@ th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;marg
       "<h2>Residual maps</h2><p>Residual RMS / noise floor per region and normalised stance "
       "time (heel strike 0, toe off 1); 1 is noise, 3 or more is deep red.</p>";
   html += heat_map(r.map_before, "Before (baseline model)");
-  html += heat_map(r.map_after, "After (with the named effects)");
+  html +=
+      heat_map(r.map_after, r.creep_undone
+                                ? "After (with the named effects, the creep undone in the readings)"
+                                : "After (with the named effects)");
   html += "<h2>Where: the cells furthest above the noise floor</h2>" + where;
   html += "<h2>Candidates (each on top of the baseline)</h2>" +
           paired_bars(cand_labels, cand_values, {}, " %") + candidates;
