@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "gaitmon/batch.hpp"
@@ -84,6 +85,20 @@ DiscrepancyInput read_input(const std::filesystem::path& csv, InsoleSize size,
 DiscrepancyInput session_input(const SessionCase& c, const std::filesystem::path& dir,
                                SimulationTruth* truth = nullptr) {
   return read_input(simulated(c, dir, truth), c.size);
+}
+
+// `gaitmon discrepancy csv --out out options`: its stdout and DIR/discrepancy.json.
+std::pair<std::string, nlohmann::json> discrepancy_cli(const std::filesystem::path& csv,
+                                                       const std::filesystem::path& out,
+                                                       const std::string& options) {
+  std::string output;
+  const int status = test::run_command(
+      fmt::format("{} discrepancy {} --out {} {}", test::gaitmon_binary().string(), csv.string(),
+                  out.string(), options),
+      &output);
+  EXPECT_EQ(status, 0) << output;
+  std::ifstream in(out / "discrepancy.json");
+  return {output, nlohmann::json::parse(in)};
 }
 
 // Reads `csv` again with a creep undone, as `gaitmon discrepancy` does.
@@ -498,14 +513,7 @@ TEST(DiscrepancySessions, OnCellsThatAverageACreepUndoneInTheReadingsLeavesNoOth
   c.rasterisation = Rasterisation::Coverage;
   const auto csv = simulated(c, dir);
   const auto discrepancy = [&](const std::string& name, const std::string& options) {
-    std::string output;
-    const int status = test::run_command(
-        fmt::format("{} discrepancy {} --out {} {}", test::gaitmon_binary().string(), csv.string(),
-                    (dir / name).string(), options),
-        &output);
-    EXPECT_EQ(status, 0) << output;
-    std::ifstream in(dir / name / "discrepancy.json");
-    return std::pair{output, nlohmann::json::parse(in)};
+    return discrepancy_cli(csv, dir / name, options);
   };
   const auto [kept_out, kept] = discrepancy("kept", "--keep-creep");
   ASSERT_GE(kept["named_effects"].size(), 1u) << kept_out;
@@ -606,14 +614,7 @@ TEST(DiscrepancySessions, OnCellsThatAverageTheAreaTheyCallForLeavesCrosstalkUnn
   c.rasterisation = Rasterisation::Coverage;
   const auto csv = simulated(c, dir);
   const auto discrepancy = [&](const std::string& name, const std::string& options) {
-    std::string output;
-    const int status = test::run_command(
-        fmt::format("{} discrepancy {} --out {} {}", test::gaitmon_binary().string(), csv.string(),
-                    (dir / name).string(), options),
-        &output);
-    EXPECT_EQ(status, 0) << output;
-    std::ifstream in(dir / name / "discrepancy.json");
-    return std::pair{output, nlohmann::json::parse(in)};
+    return discrepancy_cli(csv, dir / name, options);
   };
   const std::string unseen = "the cells show no crosstalk (their readings fit their caps best";
   const auto [auto_out, chosen] = discrepancy("auto", "");
