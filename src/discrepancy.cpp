@@ -1683,6 +1683,37 @@ std::optional<CreepCorrection> creep_to_undo(const ExtendedModelFit& fit,
   return std::nullopt;
 }
 
+ExtendedModelFit with_creep_undone(const ExtendedModelFit& as_read,
+                                   const ExtendedModelFit& undone) {
+  std::vector<std::string> others, fitted;
+  bool creep = false;
+  for (const EffectEstimate& e : as_read.effects) {
+    if (e.name == "sensor_creep") {
+      creep = true;
+    } else {
+      others.push_back(e.name);
+    }
+  }
+  for (const EffectEstimate& e : undone.effects) fitted.push_back(e.name);
+  if (!creep || others != fitted) {
+    throw std::invalid_argument(fmt::format(
+        "with_creep_undone: the effects as read ({}) are not sensor_creep and those with it undone "
+        "({})",
+        fmt::join(others, ", "), fmt::join(fitted, ", ")));
+  }
+  ExtendedModelFit out = as_read;
+  auto next = undone.effects.begin();
+  for (EffectEstimate& e : out.effects) {
+    if (e.name != "sensor_creep") e = *next++;
+  }
+  out.extended_nrmse_pct = undone.extended_nrmse_pct;
+  out.extended_heldout_nrmse_pct = undone.extended_heldout_nrmse_pct;
+  for (std::size_t i = 0; i < out.regions.size() && i < undone.regions.size(); ++i) {
+    out.regions[i].extended_heldout_nrmse_pct = undone.regions[i].extended_heldout_nrmse_pct;
+  }
+  return out;
+}
+
 namespace {
 
 // fit_steps_with_effects for the steps of `input` that `wanted` (by their index in input.steps)

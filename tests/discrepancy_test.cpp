@@ -357,6 +357,57 @@ TEST(Discrepancy, ReadsTheSessionAgainWithTheCreepItNamesUndone) {
   EXPECT_EQ(reads, 1);
 }
 
+// analyze's extended model with the creep undone: the creep, baseline and zero channel as read,
+// the other effects and the extended figures from the readings with it undone.
+TEST(Discrepancy, TheEffectsOnTopOfAnUndoneCreepComeFromTheReadingsWithoutIt) {
+  ExtendedModelFit as_read;
+  as_read.effects = {{"stress_relaxation", {{"strength", 0.17, 0.01}, {"tau_s", 0.33, 0.03}}},
+                     {"sensor_creep", {{"gain", 0.38, 0.01}, {"tau_s", 0.45, 0.02}}}};
+  as_read.baseline_nrmse_pct = 4.0;
+  as_read.extended_nrmse_pct = 3.7;
+  as_read.baseline_heldout_nrmse_pct = 4.1;
+  as_read.extended_heldout_nrmse_pct = 3.8;
+  as_read.zero_changes = 133;
+  as_read.zero_baseline_heldout_nrmse_pct = 0.59;
+  as_read.zero_extended_heldout_nrmse_pct = 0.14;
+  as_read.regions = {{Region::Heel, 20, 3.0, 2.9}, {Region::Met1_2, 20, 5.0, 4.5}};
+  ExtendedModelFit undone;
+  undone.effects = {{"stress_relaxation", {{"strength", 0.02, 0.004}, {"tau_s", 0.67, 0.2}}}};
+  undone.baseline_nrmse_pct = 1.8;
+  undone.extended_nrmse_pct = 1.75;
+  undone.baseline_heldout_nrmse_pct = 1.8;
+  undone.extended_heldout_nrmse_pct = 1.78;
+  undone.zero_baseline_heldout_nrmse_pct = 0.1;
+  undone.regions = {{Region::Heel, 20, 1.5, 1.4}, {Region::Met1_2, 20, 2.0, 1.9}};
+
+  const ExtendedModelFit r = with_creep_undone(as_read, undone);
+  ASSERT_EQ(r.effects.size(), 2u);
+  EXPECT_EQ(r.effects[0].name, "stress_relaxation");
+  EXPECT_EQ(r.effects[0].params[0].value, 0.02);
+  EXPECT_EQ(r.effects[1].name, "sensor_creep");
+  EXPECT_EQ(r.effects[1].params[0].value, 0.38);
+  EXPECT_EQ(r.baseline_nrmse_pct, 4.0);
+  EXPECT_EQ(r.baseline_heldout_nrmse_pct, 4.1);
+  EXPECT_EQ(r.extended_nrmse_pct, 1.75);
+  EXPECT_EQ(r.extended_heldout_nrmse_pct, 1.78);
+  EXPECT_EQ(r.zero_changes, 133);
+  EXPECT_EQ(r.zero_extended_heldout_nrmse_pct, 0.14);
+  ASSERT_EQ(r.regions.size(), 2u);
+  EXPECT_EQ(r.regions[1].baseline_heldout_nrmse_pct, 5.0);
+  EXPECT_EQ(r.regions[1].extended_heldout_nrmse_pct, 1.9);
+  // The creep is undone as before: its zero channel is the one as read.
+  EXPECT_TRUE(effect_undone_in_readings(r, r.effects[1]));
+
+  ExtendedModelFit creep_alone = as_read;
+  creep_alone.effects.erase(creep_alone.effects.begin());
+  ExtendedModelFit baseline = undone;
+  baseline.effects.clear();
+  baseline.extended_heldout_nrmse_pct = baseline.baseline_heldout_nrmse_pct;
+  EXPECT_EQ(with_creep_undone(creep_alone, baseline).extended_heldout_nrmse_pct, 1.8);
+  EXPECT_THROW(with_creep_undone(creep_alone, undone), std::invalid_argument);
+  EXPECT_THROW(with_creep_undone(undone, baseline), std::invalid_argument);
+}
+
 // A ceiling is a reading several cells share: sensor_saturation is named only where, in enough
 // steps, two or more cells of one region read at the session's top in one frame. Series made
 // without cells carry no counts, and the rule does not apply to them (the test above).

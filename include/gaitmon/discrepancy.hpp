@@ -509,6 +509,17 @@ std::optional<CreepCorrection> creep_to_undo(
     const ExtendedModelFit& fit,
     double min_zero_shrink_pct = DiscrepancySettings{}.min_zero_shrink_pct);
 
+/// `analyze`'s extended model where creep_to_undo(as_read) undid the creep in the readings:
+/// `undone` is fit_extended_model of the other effects of as_read (all but sensor_creep, in its
+/// order; none gives the baseline) on the session read again with the creep undone. The result
+/// keeps as_read's sensor_creep, baseline and zero channel and takes the other effects' estimates
+/// and the extended NRMSEs, overall and per region, from `undone`: as
+/// find_discrepancy_undoing_creep composes its result, the effects on top of a creep are those of
+/// the readings without it (fitted as read, a relaxation took up what the creep did to the
+/// footprints). Throws std::invalid_argument where as_read has no sensor_creep or undone's effects
+/// are not as_read's others.
+ExtendedModelFit with_creep_undone(const ExtendedModelFit& as_read, const ExtendedModelFit& undone);
+
 /// The effects that sit between the tissue and the cells and are affine in the tissue's force:
 /// fit_steps_with_effects puts these inside each step's tissue fit.
 bool effect_inside_tissue_fit(std::string_view name);

@@ -352,7 +352,8 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
            "effect parameters are shared by all steps; each step and region keeps its own "
            "tissue amplitudes and stiffness exponent (include/gaitmon/discrepancy.hpp); NRMSE "
            "pooled over step-regions, of the readings as read; an effect undone_in_readings was "
-           "undone in every cell's readings before the steps were measured and fitted again"},
+           "undone in every cell's readings before the steps were measured and fitted again, and "
+           "then the other effects' parameters and the extended NRMSEs are of those readings"},
           {"baseline_nrmse_pct", fit->baseline_nrmse_pct},
           {"extended_nrmse_pct", fit->extended_nrmse_pct},
           {"baseline_heldout_nrmse_pct", fit->baseline_heldout_nrmse_pct},
@@ -753,9 +754,13 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
         total_nrmse_as_read_pct = spread_of(std::move(totals)).median;
         segment({}, [&](Frame& frame) { creep->undo(frame); });
         analyses = analyse_steps(ok_steps, layout, config, settings, [](double) {});
-        analyses = fit_steps_with_effects(
-            extended_model_input(ok_steps, analyses, layout, config, names, settings.area),
-            extended->effects, config, settings);
+        const DiscrepancyInput undone =
+            extended_model_input(ok_steps, analyses, layout, config, names, settings.area);
+        // The effects on top of the creep are those of the readings without it.
+        std::vector<std::string> others = names;
+        std::erase(others, "sensor_creep");
+        extended = with_creep_undone(*extended, fit_extended_model(undone, others));
+        analyses = fit_steps_with_effects(undone, extended->effects, config, settings);
       } else {
         analyses = fit_steps_with_effects(input, extended->effects, config, settings);
       }
@@ -837,11 +842,20 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
           fmt::join(inside, " and "));
     }
     if (const auto creep = creep_to_undo(*extended)) {
+      std::vector<std::string> others;
+      for (const EffectEstimate& e : extended->effects) {
+        if (e.name != "sensor_creep") others.push_back(e.name);
+      }
       fmt::print(
           "note: each step above and in regions.csv is measured and fitted from readings with "
-          "the sensor creep undone (gain {:.4g}, tau {:.4g} s); the total force's median NRMSE "
-          "over the steps as read was {:.1f} %\n",
-          creep->gain(), creep->tau_s(), total_nrmse_as_read_pct);
+          "the sensor creep undone (gain {:.4g}, tau {:.4g} s){}, as are the extended model's "
+          "NRMSEs after the arrows; the total force's median NRMSE over the steps as read was "
+          "{:.1f} %\n",
+          creep->gain(), creep->tau_s(),
+          others.empty()
+              ? ""
+              : fmt::format(", and {} fitted on those readings", fmt::join(others, " and ")),
+          total_nrmse_as_read_pct);
     }
     for (const EffectEstimate& e : extended->effects) {
       if (e.name == "sensor_creep" && !effect_undone_in_readings(*extended, e)) {

@@ -646,9 +646,11 @@ std::string effects_section(const ExtendedModelFit& fit) {
   if (!placed.undone.empty()) {
     fmt::format_to(std::back_inserter(out),
                    "<p class=\"note\"><b>{}</b> {} undone in the readings at the parameters "
-                   "below, and every step measured again from them, before each step's fit. The "
-                   "pooled NRMSE at the end of this section compares the models on the readings "
-                   "as read, where creep is fitted from the steps' zeros.</p>",
+                   "below, and every step measured again from them, before each step's fit; the "
+                   "other effects are fitted on those readings. The pooled NRMSE at the end of "
+                   "this section compares the model without the effects on the readings as read, "
+                   "where creep is fitted from the steps' zeros, with the model with them on the "
+                   "readings with it undone.</p>",
                    escape(fmt::format("{}", fmt::join(placed.undone, " and "))),
                    placed.undone.size() == 1 ? "is" : "are");
   }
