@@ -7,6 +7,7 @@
 #include <optional>
 #include <vector>
 
+#include "gaitmon/creep.hpp"
 #include "gaitmon/error.hpp"
 #include "gaitmon/insole.hpp"
 
@@ -43,6 +44,7 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
         foot, info.header.sensors, config.segmentation, spec.adaptive_threshold_pct,
         newtons_per_bit, limits);
   }
+  std::optional<CreepCorrection> insoles_creep = creep_correction_of(config.sensor_creep);
   const auto file_bytes = static_cast<double>(std::filesystem::file_size(path));
   std::vector<Step> finalised;
   Frame frame;
@@ -53,6 +55,7 @@ SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Co
   while (reader.next(frame)) {
     const auto foot = static_cast<std::size_t>(frame.foot);
     try {
+      if (insoles_creep) insoles_creep->undo(frame);
       if (correct_frame) correct_frame(frame);
       segmenters[foot]->push(frame, finalised);
     } catch (const std::invalid_argument& e) {

@@ -110,6 +110,14 @@ void read_calibration(TableReader table, Calibration& calibration) {
   table.finish();
 }
 
+// The ranges the discrepancy workflow fits the creep in, which measures it (README, "Sensor creep
+// undone in the readings").
+void read_sensor_creep(TableReader table, SensorCreepSettings& creep) {
+  creep.gain = number_in(table, "gain", 0.0, 2.0);
+  creep.tau_s = number_in(table, "tau_s", 0.02, 60.0);
+  table.finish();
+}
+
 void read_segmentation(TableReader table, double sample_rate_hz,
                        SegmentationSettings& segmentation) {
   // The largest summed reading the biggest insole can give: 255 bits on each of 161 sensors.
@@ -647,6 +655,7 @@ Config load_config(const fs::path& main_file) {
   const fs::path tissue_file = named_file(root, "tissue_file", main_file);
   read_sensor(root.table("sensor"), config.sensor);
   read_calibration(root.table("calibration"), config.calibration);
+  read_sensor_creep(root.table("sensor_creep"), config.sensor_creep);
   read_segmentation(root.table("segmentation"), config.sample_rate_hz, config.segmentation);
   read_fit(root.table("fit"), config.fit_bounds);
   read_model(root.table("model"), file, config.model);

@@ -43,4 +43,9 @@ void CreepCorrection::undo(Frame& frame) {
   }
 }
 
+std::optional<CreepCorrection> creep_correction_of(const SensorCreepSettings& creep) {
+  if (creep.gain == 0.0) return std::nullopt;
+  return CreepCorrection(creep.gain, creep.tau_s);
+}
+
 }  // namespace gaitmon

@@ -1513,14 +1513,7 @@ DiscrepancyResult find_discrepancy_undoing_creep(const DiscrepancyInput& input,
     share(0.0, 1.0)(1.0);
     return out;
   }
-  const auto param = [&](std::string_view name) {
-    for (const ParamEstimate& p : creep->params) {
-      if (p.name == name) return p.value;
-    }
-    throw std::logic_error(fmt::format("sensor_creep without its {}", name));
-  };
-  const DiscrepancyInput undone_input =
-      read_with_creep_undone(CreepCorrection(param("gain"), param("tau_s")));
+  const DiscrepancyInput undone_input = read_with_creep_undone(creep_correction(*creep));
   share(0.0, 1.0)(0.55);
   // One effect on top of the creep, as a second effect on top of a first.
   DiscrepancySettings on_top = settings;
@@ -1669,18 +1662,21 @@ bool effect_undone_in_readings(const ExtendedModelFit& fit, const EffectEstimate
 std::optional<CreepCorrection> creep_to_undo(const ExtendedModelFit& fit,
                                              double min_zero_shrink_pct) {
   for (const EffectEstimate& e : fit.effects) {
-    if (!effect_undone_in_readings(fit, e, min_zero_shrink_pct)) continue;
-    const auto param = [&](std::string_view name) {
-      const auto it = std::find_if(e.params.begin(), e.params.end(),
-                                   [&](const ParamEstimate& p) { return p.name == name; });
-      if (it == e.params.end()) {
-        throw std::invalid_argument(fmt::format("{} without its {}", e.name, name));
-      }
-      return it->value;
-    };
-    return CreepCorrection(param("gain"), param("tau_s"));
+    if (effect_undone_in_readings(fit, e, min_zero_shrink_pct)) return creep_correction(e);
   }
   return std::nullopt;
+}
+
+CreepCorrection creep_correction(const EffectEstimate& sensor_creep) {
+  const auto param = [&](std::string_view name) {
+    const auto it = std::find_if(sensor_creep.params.begin(), sensor_creep.params.end(),
+                                 [&](const ParamEstimate& p) { return p.name == name; });
+    if (it == sensor_creep.params.end()) {
+      throw std::invalid_argument(fmt::format("{} without its {}", sensor_creep.name, name));
+    }
+    return it->value;
+  };
+  return CreepCorrection(param("gain"), param("tau_s"));
 }
 
 ExtendedModelFit with_creep_undone(const ExtendedModelFit& as_read,

@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "gaitmon/batch.hpp"
+#include "gaitmon/creep.hpp"
 #include "gaitmon/device_clock.hpp"
 #include "gaitmon/discrepancy.hpp"
 #include "gaitmon/frame_ring.hpp"
@@ -271,7 +272,8 @@ struct Monitor::Impl {
         ring(config.ring.capacity_frames),
         status_period(std::chrono::duration_cast<Clock::duration>(
             std::chrono::duration<double>(config.monitor.status_period_s))),
-        pool(static_cast<std::size_t>(config.monitor.workers)) {
+        pool(static_cast<std::size_t>(config.monitor.workers)),
+        insoles_creep(creep_correction_of(config.sensor_creep)) {
     latencies.reserve(kLatencyWindow);
     if (!config.model.effects.empty()) effects_thread.emplace(1);
     if (config.model.m_per_session) exponent_thread.emplace(1);
@@ -353,6 +355,7 @@ struct Monitor::Impl {
       foot.frame.t_s = foot.clock->t_s();
       foot.frame.foot = in.foot;
       foot.frame.bits.assign(in.bits.begin(), in.bits.begin() + in.sensor_count);
+      if (insoles_creep) insoles_creep->undo(foot.frame);
       finalised.clear();
       foot.segmenter->push(foot.frame, finalised);
       processed.fetch_add(1, std::memory_order_relaxed);
@@ -1363,6 +1366,8 @@ struct Monitor::Impl {
   EffectWindow effect_window;
 
   boost::asio::thread_pool pool;
+  /// The config's [sensor_creep], undone by the detector in every frame before it is segmented.
+  std::optional<CreepCorrection> insoles_creep;
   /// With [model] effects: one thread for the extended model's fits, which take tenths of a
   /// second, so that a step finalised meanwhile waits for no fit but its own.
   std::optional<boost::asio::thread_pool> effects_thread;
@@ -1415,12 +1420,20 @@ Monitor::Monitor(const Config& config, MonitorOptions options, Publisher& publis
         "Monitor: [model] m_per_session needs the default fit (identifiable parameters, P "
         "declared) and no [model] effects");
   }
+  if (config.sensor_creep.gain > 0.0) {
+    spdlog::info(
+        "monitor: undoing the insoles' sensor creep of [sensor_creep] (gain {:.4g}, tau {:.4g} s) "
+        "in every frame before it is segmented",
+        config.sensor_creep.gain, config.sensor_creep.tau_s);
+  }
   if (std::find(config.model.effects.begin(), config.model.effects.end(), "sensor_creep") !=
       config.model.effects.end()) {
     spdlog::info(
         "monitor: sensor_creep is estimated from the steps' zeros and published; each step is "
-        "fitted from the readings as read (gaitmon analyze --effects sensor_creep undoes the "
-        "creep in the readings and measures every step again)");
+        "fitted from the readings as read{} (gaitmon analyze --effects sensor_creep undoes the "
+        "creep it measures in the readings and measures every step again, and prints the "
+        "[sensor_creep] that undoes it here)",
+        config.sensor_creep.gain > 0.0 ? " with [sensor_creep] undone" : "");
   }
   // Checked once here: a segmenter that cannot be built would reject every frame.
   (void)StepSegmenter(Foot::Left, 1, config.segmentation, 0.0,

@@ -418,6 +418,25 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
   if (!out) throw std::runtime_error("cannot write the simulation truth " + path.string());
 }
 
+// The config's [sensor_creep] is the creep of the insoles it describes, which every reader
+// undoes: simulated cells creep so too, unless the options give sensor_creep themselves. It goes
+// where the effects' registry orders it (a sensor stage, before the effects on a whole frame).
+SimulationOptions with_insoles_creep(const Config& config, SimulationOptions options) {
+  constexpr std::string_view kCreep = "sensor_creep";
+  if (config.sensor_creep.gain == 0.0 ||
+      std::ranges::find(options.effects, kCreep) != options.effects.end()) {
+    return options;
+  }
+  const std::vector<std::string_view> order = simulation_effect_names();
+  const auto rank = [&](std::string_view name) { return std::ranges::find(order, name); };
+  const auto after = std::ranges::find_if(
+      options.effects, [&](const std::string& name) { return rank(name) > rank(kCreep); });
+  options.effects.insert(after, std::string(kCreep));
+  options.effect_params[std::string(kCreep)] = {{"gain", config.sensor_creep.gain},
+                                                {"tau_s", config.sensor_creep.tau_s}};
+  return options;
+}
+
 }  // namespace
 
 std::string_view rasterisation_name(Rasterisation mode) {
@@ -463,10 +482,11 @@ std::vector<double> rasterise_region(const InsoleLayout& layout, Region region,
   return loads;
 }
 
-SimulationTruth simulate_session(const Config& config, const SimulationOptions& options,
+SimulationTruth simulate_session(const Config& config, const SimulationOptions& requested,
                                  const std::filesystem::path& csv_out,
                                  const std::filesystem::path& truth_json_out) {
-  validate(options);
+  validate(requested);
+  const SimulationOptions options = with_insoles_creep(config, requested);
   std::vector<std::unique_ptr<SimulationEffect>> effects;
   for (const std::string& name : options.effects) {
     const auto params = options.effect_params.find(name);

@@ -205,8 +205,9 @@ TEST(SegmentSession, AGapRestartsEachFootsSegmentationAndIsCounted) {
 
 // A correction reaches every frame before the segmenter sees it: the creep undone at its own
 // gain and tau, the same walk's steps come back as without creep, their heel strikes to the frame
-// and every reading of their stances to the bit that the second rounding can move.
-TEST(SegmentSession, CorrectsEachFrameBeforeItIsSegmented) {
+// and every reading of their stances to the bit that the second rounding can move. The config's
+// [sensor_creep] is that creep for both the simulator and the reader.
+TEST(SegmentSession, UndoesTheConfigsCreepAndACorrectionBeforeSegmenting) {
   const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
   const auto dir = test::scratch_dir("batch-correct-frame");
   SimulationOptions options;
@@ -218,10 +219,11 @@ TEST(SegmentSession, CorrectsEachFrameBeforeItIsSegmented) {
   options.effect_params["sensor_creep"] = {{"gain", 0.3}, {"tau_s", 1.0}};
   simulate_session(config, options, dir / "creep.csv", dir / "creep.json");
 
-  const auto steps_of = [&](const char* name, const std::function<void(Frame&)>& correct) {
+  const auto steps_of = [&](const char* name, const std::function<void(Frame&)>& correct,
+                            const Config& reader) {
     std::vector<Step> steps;
     segment_session(
-        dir / name, config,
+        dir / name, reader,
         [&](Step&& s) {
           if (s.status == StepStatus::Ok) steps.push_back(std::move(s));
         },
@@ -232,9 +234,10 @@ TEST(SegmentSession, CorrectsEachFrameBeforeItIsSegmented) {
     return steps;
   };
   CreepCorrection undo(0.3, 1.0);
-  const std::vector<Step> clean = steps_of("clean.csv", {});
-  const std::vector<Step> undone = steps_of("creep.csv", [&](Frame& f) { undo.undo(f); });
-  const std::vector<Step> as_read = steps_of("creep.csv", {});
+  const std::vector<Step> clean = steps_of("clean.csv", {}, config);
+  const std::vector<Step> undone = steps_of(
+      "creep.csv", [&](Frame& f) { undo.undo(f); }, config);
+  const std::vector<Step> as_read = steps_of("creep.csv", {}, config);
   ASSERT_GE(clean.size(), 8u);
   ASSERT_EQ(undone.size(), clean.size());
   for (std::size_t i = 0; i < clean.size(); ++i) {
@@ -261,6 +264,25 @@ TEST(SegmentSession, CorrectsEachFrameBeforeItIsSegmented) {
   // roundings could add up to two bits now and then, hence the margin.
   EXPECT_LT(off_by_more_than_a_bit(undone), 0.002);
   EXPECT_GT(off_by_more_than_a_bit(as_read), 0.05);
+
+  Config insoles = config;
+  insoles.sensor_creep = {0.3, 1.0};
+  options.effects.clear();
+  options.effect_params.clear();
+  const SimulationTruth truth =
+      simulate_session(insoles, options, dir / "insoles.csv", dir / "insoles.json");
+  EXPECT_EQ(truth.options.effects, std::vector<std::string>{"sensor_creep"});
+  EXPECT_EQ(test::read_text(dir / "insoles.csv"), test::read_text(dir / "creep.csv"));
+  const std::vector<Step> configured = steps_of("insoles.csv", {}, insoles);
+  ASSERT_EQ(configured.size(), undone.size());
+  for (std::size_t i = 0; i < undone.size(); ++i) {
+    EXPECT_EQ(configured[i].heel_strike_frame, undone[i].heel_strike_frame);
+    ASSERT_EQ(configured[i].stance.size(), undone[i].stance.size());
+    for (std::size_t f = 0; f < undone[i].stance.size(); ++f) {
+      ASSERT_EQ(configured[i].stance[f].bits, undone[i].stance[f].bits) << "step " << i;
+    }
+  }
+  EXPECT_LT(off_by_more_than_a_bit(configured), 0.002);
 }
 
 }  // namespace

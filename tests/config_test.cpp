@@ -32,13 +32,7 @@ fs::path shipped_config() {
   return test::source_dir() / "config" / kMain;
 }
 
-std::string read_text(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot read " + path.string());
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
+using test::read_text;
 
 // The three shipped files copied into a fresh folder, so that one can be edited.
 fs::path copy_config(const std::string& name) {
@@ -121,6 +115,8 @@ TEST(Config, ShippedConfigHasTheDocumentedDefaults) {
   EXPECT_EQ(config.sensor.alignment, RowAlignment::Centred);
   EXPECT_DOUBLE_EQ(config.calibration.full_scale_bits, 255.0);
   EXPECT_DOUBLE_EQ(config.calibration.full_scale_n_per_cm2, 64.0);
+  EXPECT_DOUBLE_EQ(config.sensor_creep.gain, 0.0) << "no creep undone unless measured";
+  EXPECT_DOUBLE_EQ(config.sensor_creep.tau_s, 1.0);
   EXPECT_EQ(config.segmentation.event_threshold_bits, 142);
   EXPECT_EQ(config.segmentation.debounce_frames, 5);
   EXPECT_EQ(config.segmentation.swing_window_frames, 5);
@@ -270,6 +266,8 @@ TEST(Config, AcceptsBoundaryValuesAndAnAbsoluteInsolesPath) {
   edit_file(main, replace("pitch_x_mm = 7.5", "pitch_x_mm = 10"));
   edit_file(main, replace("pitch_y_mm = 15.0", "pitch_y_mm = 20"));
   edit_file(main, replace("row_alignment = \"centred\"", "row_alignment = \"medial\""));
+  edit_file(main, replace("[sensor_creep]", "\ngain = 0\n", "\ngain = 2\n"));
+  edit_file(main, replace("[sensor_creep]", "tau_s = 1.0", "tau_s = 60"));
   edit_file(main, replace("event_threshold_bits = 142", "event_threshold_bits = 41055"));
   edit_file(main, replace("debounce_frames = 5", "debounce_frames = 100"));
   edit_file(main, replace("swing_window_frames = 5", "swing_window_frames = 1"));
@@ -283,6 +281,8 @@ TEST(Config, AcceptsBoundaryValuesAndAnAbsoluteInsolesPath) {
   EXPECT_DOUBLE_EQ(config.sensor.pitch_x_mm, 10.0);
   EXPECT_DOUBLE_EQ(config.sensor.pitch_y_mm, 20.0);
   EXPECT_EQ(config.sensor.alignment, RowAlignment::Medial);
+  EXPECT_DOUBLE_EQ(config.sensor_creep.gain, 2.0);
+  EXPECT_DOUBLE_EQ(config.sensor_creep.tau_s, 60.0);
   EXPECT_EQ(config.segmentation.event_threshold_bits, 41055);
   EXPECT_EQ(config.segmentation.debounce_frames, 100);
   EXPECT_EQ(config.segmentation.swing_window_frames, 1);
@@ -424,6 +424,17 @@ const Refusal kRefusals[] = {
     {"FullScalePressureNegative", kMain,
      replace("full_scale_n_per_cm2 = 64.0", "full_scale_n_per_cm2 = -64.0"),
      "calibration.full_scale_n_per_cm2", "must be > 0"},
+    {"CreepGainNegative", kMain, replace("[sensor_creep]", "\ngain = 0\n", "\ngain = -0.1\n"),
+     "sensor_creep.gain", "must be in [0, 2], got -0.1"},
+    {"CreepGainAboveWhatIsFitted", kMain,
+     replace("[sensor_creep]", "\ngain = 0\n", "\ngain = 2.5\n"), "sensor_creep.gain",
+     "must be in [0, 2], got 2.5"},
+    {"CreepTauZero", kMain, replace("[sensor_creep]", "tau_s = 1.0", "tau_s = 0"),
+     "sensor_creep.tau_s", "must be in [0.02, 60], got 0"},
+    {"CreepTauNan", kMain, replace("[sensor_creep]", "tau_s = 1.0", "tau_s = nan"),
+     "sensor_creep.tau_s", "finite"},
+    {"CreepWithoutTau", kMain, replace("[sensor_creep]", "tau_s = 1.0\n", ""),
+     "sensor_creep.tau_s", "missing"},
     {"EventThresholdZero", kMain, replace("event_threshold_bits = 142", "event_threshold_bits = 0"),
      "segmentation.event_threshold_bits", "must be in [1, 41055]"},
     {"EventThresholdTooHigh", kMain,

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -72,6 +73,16 @@ TEST(CreepCorrection, RefusesAGainOrTauOutsideItsRangeAndTimeGoingBack) {
   // Each foot and cell keeps its own time.
   EXPECT_NO_THROW(undo.undo(Foot::Right, 0, 0.5, 5.0));
   EXPECT_NO_THROW(undo.undo(Foot::Left, 1, 0.5, 5.0));
+}
+
+// The config's [sensor_creep]: gain 0 is no correction at all, so a config without creep leaves
+// every reading as it was read rather than rounding it again.
+TEST(CreepCorrection, OfTheConfigIsNoneAtGainZero) {
+  EXPECT_FALSE(creep_correction_of(SensorCreepSettings{0.0, 3.0}).has_value());
+  const std::optional<CreepCorrection> creep = creep_correction_of(SensorCreepSettings{0.3, 2.0});
+  ASSERT_TRUE(creep.has_value());
+  EXPECT_DOUBLE_EQ(creep->gain(), 0.3);
+  EXPECT_DOUBLE_EQ(creep->tau_s(), 2.0);
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 #include <vector>
 
@@ -64,6 +65,12 @@ std::filesystem::path write_text(const std::filesystem::path& path, const std::s
   out << text;
   if (!out) throw std::runtime_error("cannot write " + path.string());
   return path;
+}
+
+std::string read_text(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read " + path.string());
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
 std::string session_head(const std::string& rate_hz) {

@@ -31,6 +31,8 @@ std::filesystem::path gaitmon_binary();
 std::filesystem::path scratch_dir(const std::string& name);
 /// Writes `text` to `path`, creating folders; returns path.
 std::filesystem::path write_text(const std::filesystem::path& path, const std::string& text);
+/// The whole of the file at `path`; throws std::runtime_error if it cannot be read.
+std::string read_text(const std::filesystem::path& path);
 /// The header and column line of a hand-made 35-36 session (93 sensors) at `rate_hz`.
 std::string session_head(const std::string& rate_hz = "100");
 /// One row of such a session: `time_and_foot` (e.g. "0.01,L") and `cells` readings of `value`.

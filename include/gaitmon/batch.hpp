@@ -28,10 +28,10 @@ void check_session_rate(const std::filesystem::path& path, double sample_rate_hz
 /// Streams the session at `path` through one StepSegmenter per foot and hands every step to
 /// `on_step` as soon as it is final (feet interleave as in the file; within a foot in time
 /// order). `on_progress`, if set, receives the fraction of the file read, now and then.
-/// `correct_frame`, if set, changes each frame as read, before it is segmented (as
-/// CreepCorrection::undo does). Warns when the header's rate disagrees with the times
-/// (warn_on_rate_mismatch). Throws InputError for a bad session or one without frames,
-/// std::invalid_argument if the config lacks the size.
+/// The config's [sensor_creep] is undone in each frame as read; then `correct_frame`, if set,
+/// changes it further, before it is segmented (as CreepCorrection::undo does). Warns when the
+/// header's rate disagrees with the times (warn_on_rate_mismatch). Throws InputError for a bad
+/// session or one without frames, std::invalid_argument if the config lacks the size.
 SegmentedSessionInfo segment_session(const std::filesystem::path& path, const Config& config,
                                      const std::function<void(Step&&)>& on_step,
                                      const std::function<void(double)>& on_progress = {},

@@ -44,6 +44,15 @@ struct Calibration {
   }
 };
 
+/// Sensor creep of the insoles: a cell reads its load plus gain times its load low-passed with
+/// time constant tau_s (creep.hpp). Every reader of frames undoes it before segmenting them
+/// (segment_session, the live monitor), and simulate_session gives it to the cells it simulates,
+/// so that the config describes one kind of insole throughout. gain 0 undoes nothing.
+struct SensorCreepSettings {
+  double gain = 0.0;
+  double tau_s = 1.0;
+};
+
 /// Step segmentation (seed 3.3.1) settings.
 struct SegmentationSettings {
   int event_threshold_bits = 142;  ///< summed bits above the dc bias that mean contact (40 N)
@@ -198,6 +207,7 @@ struct Config {
   double sample_rate_hz = 100.0;
   SensorGeometry sensor;
   Calibration calibration;
+  SensorCreepSettings sensor_creep;  ///< [sensor_creep]
   SegmentationSettings segmentation;
   std::array<InsoleSpec, kInsoleSizeCount> insoles;  ///< indexed by index_of(InsoleSize)
   std::array<std::array<SeedTissueStats, kRegionCount>, kInsoleSizeCount> seed_tissue;

@@ -22,8 +22,10 @@
 
 #include <array>
 #include <cstddef>
+#include <optional>
 #include <vector>
 
+#include "gaitmon/config.hpp"
 #include "gaitmon/frame.hpp"
 
 namespace gaitmon {
@@ -56,5 +58,9 @@ class CreepCorrection {
   double tau_s_;
   std::array<std::vector<Lag>, 2> lags_;  ///< indexed by Foot, then sensor
 };
+
+/// The correction that undoes a config's [sensor_creep], or none when its gain is 0 (the readings
+/// are then passed on untouched, not rounded again).
+std::optional<CreepCorrection> creep_correction_of(const SensorCreepSettings& creep);
 
 }  // namespace gaitmon

@@ -509,6 +509,10 @@ std::optional<CreepCorrection> creep_to_undo(
     const ExtendedModelFit& fit,
     double min_zero_shrink_pct = DiscrepancySettings{}.min_zero_shrink_pct);
 
+/// The correction of a fitted sensor_creep at its gain and tau. Throws std::invalid_argument for
+/// an estimate without them or outside CreepCorrection's range.
+CreepCorrection creep_correction(const EffectEstimate& sensor_creep);
+
 /// `analyze`'s extended model where creep_to_undo(as_read) undid the creep in the readings:
 /// `undone` is fit_extended_model of the other effects of as_read (all but sensor_creep, in its
 /// order; none gives the baseline) on the session read again with the creep undone. The result

@@ -185,7 +185,9 @@ struct SimulationTruth {
   std::uint64_t clipped_low_samples = 0;  ///< readings below 0 before clipping (noise at rest)
 };
 
-/// Simulates a session: writes the session CSV and the truth JSON, returns the truth. Throws
+/// Simulates a session: writes the session CSV and the truth JSON, returns the truth. The cells
+/// creep as the config's [sensor_creep] says unless `options` name sensor_creep themselves; the
+/// truth's options then list it among the effects. Throws
 /// std::invalid_argument naming the option for an out-of-range option or unknown effect, and
 /// std::runtime_error if a file cannot be written.
 SimulationTruth simulate_session(const Config& config, const SimulationOptions& options,

@@ -408,7 +408,9 @@ std::string session_json(const AnalyzeArgs& args, const SessionHeader& header, c
       {"m_per_session", args.m_per_session},
       {"starts", settings.fit.starts},
       {"max_iterations", settings.fit.max_iterations},
-      {"bounds", bounds_json(config.fit_bounds)}};
+      {"bounds", bounds_json(config.fit_bounds)},
+      {"sensor_creep_of_config",
+       {{"gain", config.sensor_creep.gain}, {"tau_s", config.sensor_creep.tau_s}}}};
   j["note"] = declared_note(settings.fit);
   j["cell_reading"] = cell_reading_json(cells);
   j["nrmse_total_pct_across_steps"] = spread_json(session.nrmse_total_pct);
@@ -701,6 +703,11 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   double total_nrmse_as_read_pct = 0.0;
   {
     ProgressBar progress("analyze");
+    const auto share = [&](double from, double to) {
+      return [&progress, from, to](double fraction) {
+        progress.update(from + (to - from) * fraction);
+      };
+    };
     auto on_step = [&](Step&& step) {
       steps.push_back({step.foot, step.index, step.t_heel_strike_s, step.t_toe_off_s,
                        step.peak_force_n, step.status, std::nullopt});
@@ -723,7 +730,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
                         correct_frame ? ", with the sensor creep undone" : ""));
       }
     };
-    segment([&](double fraction) { progress.update(0.1 * fraction); }, {});
+    segment(share(0.0, 0.1), {});
     const auto cells_start = std::chrono::steady_clock::now();
     cells = cell_reading_evidence(ok_steps, layout);
     spdlog::debug(
@@ -732,11 +739,13 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
     if (args.area_auto()) settings.area = footprint_for(cells);
     // The shares of the time measured on a 60-s session: one effect's fit takes about seven
     // times as long as all the steps' fits, and the session-level fits a twentieth of those.
+    // A creep the zeros show is undone and the steps measured and fitted again (a third of the
+    // time).
+    const bool may_undo_creep = std::ranges::find(names, "sensor_creep") != names.end();
     const double steps_end = names.empty() ? 0.95 : 0.25;
+    const double effects_end = may_undo_creep ? 0.6 : 0.95;
     const auto start = std::chrono::steady_clock::now();
-    analyses = analyse_steps(ok_steps, layout, config, settings, [&](double fraction) {
-      progress.update(0.1 + (steps_end - 0.1) * fraction);
-    });
+    analyses = analyse_steps(ok_steps, layout, config, settings, share(0.1, steps_end));
     if (args.m_per_session)
       m_per_session = fit_damping_exponent_per_session(analyses, config, settings);
     spdlog::debug("analysed {} steps in {:.2f} s", analyses.size(),
@@ -745,21 +754,24 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
       const auto effects_start = std::chrono::steady_clock::now();
       const DiscrepancyInput input =
           extended_model_input(ok_steps, analyses, layout, config, names, settings.area);
-      extended = fit_extended_model(input, names, {}, {}, [&](double fraction) {
-        progress.update(steps_end + (0.95 - steps_end) * fraction);
-      });
+      extended = fit_extended_model(input, names, {}, {}, share(steps_end, effects_end));
       if (auto creep = creep_to_undo(*extended)) {
+        spdlog::debug(
+            "fitted the extended model to the readings as read in {:.2f} s",
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - effects_start)
+                .count());
         std::vector<double> totals;
         for (const StepAnalysis& a : analyses) totals.push_back(a.nrmse_total_pct);
         total_nrmse_as_read_pct = spread_of(std::move(totals)).median;
-        segment({}, [&](Frame& frame) { creep->undo(frame); });
-        analyses = analyse_steps(ok_steps, layout, config, settings, [](double) {});
+        segment(share(effects_end, 0.65), [&](Frame& frame) { creep->undo(frame); });
+        analyses = analyse_steps(ok_steps, layout, config, settings, share(0.65, 0.72));
         const DiscrepancyInput undone =
             extended_model_input(ok_steps, analyses, layout, config, names, settings.area);
         // The effects on top of the creep are those of the readings without it.
         std::vector<std::string> others = names;
         std::erase(others, "sensor_creep");
-        extended = with_creep_undone(*extended, fit_extended_model(undone, others));
+        extended = with_creep_undone(*extended,
+                                     fit_extended_model(undone, others, {}, {}, share(0.72, 0.95)));
         analyses = fit_steps_with_effects(undone, extended->effects, config, settings);
       } else {
         analyses = fit_steps_with_effects(input, extended->effects, config, settings);
@@ -856,6 +868,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
               ? ""
               : fmt::format(", and {} fitted on those readings", fmt::join(others, " and ")),
           total_nrmse_as_read_pct);
+      fmt::print("{}\n", sensor_creep_advice(config, creep->gain(), creep->tau_s()));
     }
     for (const EffectEstimate& e : extended->effects) {
       if (e.name == "sensor_creep" && !effect_undone_in_readings(*extended, e)) {

@@ -25,6 +25,20 @@ Config load_global_config(const GlobalOptions& global) {
   return config;
 }
 
+std::string sensor_creep_advice(const Config& config, double gain, double tau_s) {
+  if (config.sensor_creep.gain > 0.0) {
+    return fmt::format(
+        "note: that creep is what the readings still show with the config's [sensor_creep] "
+        "(gain {:.4g}, tau {:.4g} s) undone; to measure the insoles' creep anew, run again with "
+        "its gain set to 0",
+        config.sensor_creep.gain, config.sensor_creep.tau_s);
+  }
+  return fmt::format(
+      "to undo this creep in every frame of these insoles, live (run, replay) and in every "
+      "command, put in the config ({}):\n[sensor_creep]\ngain = {:.4g}\ntau_s = {:.4g}",
+      config.source.string(), gain, tau_s);
+}
+
 CLI::Validator number_in(double min, double max, bool open_min) {
   const std::string range = fmt::format("{}{}, {}]", open_min ? "(" : "[", min, max);
   return CLI::Validator(

@@ -34,6 +34,11 @@ Config load_global_config(const GlobalOptions& global);
 /// "nan".
 std::string estimate_text(double value, double se, std::string_view plus_minus);
 
+/// What analyze and discrepancy print after undoing a creep of `gain` and `tau_s` they measured
+/// from a session's zeros: the [sensor_creep] lines that undo it in every frame of these insoles,
+/// or, where the config's creep was undone first, that this one is what remains on top of it.
+std::string sensor_creep_advice(const Config& config, double gain, double tau_s);
+
 /// Opens the LCM connection of --lcm-url (from_command_line) or of [lcm] url: a URL LCM cannot
 /// open is a command-line error (CLI::ValidationError) or a config error (ConfigError), exit 2.
 std::shared_ptr<lcm::LCM> open_lcm_url(const GlobalOptions& global, const std::string& url,

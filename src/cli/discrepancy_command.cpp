@@ -110,8 +110,8 @@ nlohmann::json map_json(const ResidualMap& map) {
   return j;
 }
 
-std::string discrepancy_json(const DiscrepancyArgs& args, const AreaUsed& used,
-                             const DiscrepancyResult& r) {
+std::string discrepancy_json(const DiscrepancyArgs& args, const Config& config,
+                             const AreaUsed& used, const DiscrepancyResult& r) {
   nlohmann::json j;
   j["session"] = args.session.filename().string();
   nlohmann::json named = nlohmann::json::array();
@@ -155,6 +155,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const AreaUsed& used,
       {"second_effect", args.settings.second_effect},
       {"area", area_source_name(used.area)},
       {"area_auto", args.area == "auto"},
+      {"sensor_creep_of_config",
+       {{"gain", config.sensor_creep.gain}, {"tau_s", config.sensor_creep.tau_s}}},
       {"nrmse", "pooled eq 58: sqrt(sum r^2 / sum frames x peak^2) over step-regions"}};
   j["cell_reading"] = cell_reading_json(used.cells);
   j["data"] = {{"steps", r.steps},
@@ -282,7 +284,7 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   }
 
   std::filesystem::create_directories(args.out_dir);
-  outputs.add("discrepancy.json", discrepancy_json(args, used, result));
+  outputs.add("discrepancy.json", discrepancy_json(args, config, used, result));
   if (args.report) {
     outputs.add("discrepancy.html",
                 render_discrepancy_html(args.session.filename().string(), result));
@@ -369,6 +371,8 @@ void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
           "note: creep also reshapes each step's footprint; the extended figures above are of the "
           "readings with it undone, and gaitmon analyze --effects sensor_creep measures and fits "
           "every step from them\n");
+      const CreepCorrection creep = creep_correction(e);
+      fmt::print("{}\n", sensor_creep_advice(config, creep.gain(), creep.tau_s()));
     } else {
       fmt::print(
           "note: creep also reshapes each step's footprint, which the force figures above leave "

@@ -189,6 +189,10 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
   fmt::print("simulated {:.1f} s, insole {}, {} frames per foot at {} Hz, seed {}, model {}\n",
              options.duration_s, insole_size_name(options.size), truth.frames_per_foot,
              truth.sample_rate_hz, options.seed, model_variant_name(options.model));
+  if (truth.options.effects != options.effects) {
+    fmt::print("the cells creep as the config's [sensor_creep] says: gain {:.4g}, tau {:.4g} s\n",
+               config.sensor_creep.gain, config.sensor_creep.tau_s);
+  }
   fmt::print("{} steps ({} cut by the recording's ends); {} readings clipped at 255\n",
              truth.steps.size(), partial, truth.clipped_high_samples);
   fmt::print("wrote {} and {}\n", args.out.string(), args.truth.string());

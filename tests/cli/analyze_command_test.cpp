@@ -1082,6 +1082,17 @@ std::string run_on_terminal(const std::vector<std::string>& args, int* status) {
   return shown;
 }
 
+// Every percentage analyze's bar drew in `shown`, in order.
+std::vector<int> percents_shown(const std::string& shown) {
+  std::vector<int> percents;
+  const std::regex bar(R"(analyze \[[# ]{40}\] +([0-9]+)%)");
+  for (auto it = std::sregex_iterator(shown.begin(), shown.end(), bar);
+       it != std::sregex_iterator(); ++it) {
+    percents.push_back(std::stoi((*it)[1].str()));
+  }
+  return percents;
+}
+
 // With a tissue effect each step's tissue is fitted with it inside, and the summary says which
 // effects are inside and which on top of the baseline's fits; the per-step parameters in
 // regions.csv move with it. The seed's fit cannot take an effect inside: refused before any work.
@@ -1145,13 +1156,9 @@ TEST(AnalyzeCommand, WithEffectsItSaysWhichAreInsideEachStepsFit) {
   EXPECT_FALSE(fs::exists(dir / "r" / "regions.csv"));
 }
 
-// Creep changes the shape of the readings over a region, so each step's footprint, which no map
-// of the force can give back: the steps are measured again from readings with the fitted creep
-// undone (creep.hpp). On cells that average, gain 0.4 and tau 1 s (the strong end of the
-// simulator's range), the medians over the steps were 51-123 % off the truth as read and 0.4-5.5 %
-// with the creep undone.
-TEST(AnalyzeCommand, WithSensorCreepEachStepIsMeasuredFromReadingsWithTheCreepUndone) {
-  const auto dir = test::scratch_dir("analyze-creep-undone");
+// A session whose cells (averaging) creep by a gain of 0.4 at tau 1 s, the strong end of the
+// simulator's default range: size 41-42, seed 117, 12 s, as DIR/c.csv.
+std::string creeping_session(const fs::path& dir) {
   const std::string session = (dir / "c.csv").string();
   int status = -1;
   const std::string simulated =
@@ -1159,7 +1166,19 @@ TEST(AnalyzeCommand, WithSensorCreepEachStepIsMeasuredFromReadingsWithTheCreepUn
           "sensor_creep --effect-params '{\"gain\":0.4,\"tau_s\":1.0}' --out " +
               session,
           &status);
-  ASSERT_EQ(status, 0) << simulated;
+  if (status != 0) throw std::runtime_error("simulate failed: " + simulated);
+  return session;
+}
+
+// Creep changes the shape of the readings over a region, so each step's footprint, which no map
+// of the force can give back: the steps are measured again from readings with the fitted creep
+// undone (creep.hpp). On cells that average, gain 0.4 and tau 1 s (the strong end of the
+// simulator's range), the medians over the steps were 51-123 % off the truth as read and 0.4-5.5 %
+// with the creep undone.
+TEST(AnalyzeCommand, WithSensorCreepEachStepIsMeasuredFromReadingsWithTheCreepUndone) {
+  const auto dir = test::scratch_dir("analyze-creep-undone");
+  const std::string session = creeping_session(dir);
+  int status = -1;
   const std::string as_read =
       run("analyze " + session + " --out " + (dir / "read").string() + " --effects none", &status);
   ASSERT_EQ(status, 0) << as_read;
@@ -1264,6 +1283,73 @@ TEST(AnalyzeCommand, WithSensorCreepEachStepIsMeasuredFromReadingsWithTheCreepUn
             false);
 }
 
+// The creep analyze measures and undoes is printed as the config's [sensor_creep], ready to
+// paste; under that config every frame is undone as read, so that even the ellipsoid alone
+// (--effects none) measures the steps from readings without the creep, and the zeros show none
+// left to undo. The progress bar covers the second reading of the session.
+TEST(AnalyzeCommand, TheCreepItUndoesGoesIntoTheConfigWhichUndoesItInEveryFrame) {
+  const auto dir = test::scratch_dir("analyze-creep-config");
+  const std::string session = creeping_session(dir);
+  int status = -1;
+  const std::string shown = run(
+      "analyze " + session + " --out " + (dir / "measured").string() + " --effects sensor_creep",
+      &status);
+  ASSERT_EQ(status, 0) << shown;
+  const std::smatch lines = [&] {
+    std::smatch m;
+    std::regex_search(
+        shown, m,
+        std::regex(R"(put in the config \([^)]*gaitmon\.toml\):\r?\n)"
+                   R"((\[sensor_creep\]\r?\ngain = ([0-9.]+)\r?\ntau_s = ([0-9.]+)))"));
+    return m;
+  }();
+  ASSERT_EQ(lines.size(), 4u) << shown;
+  const double gain = std::stod(lines[2].str());
+  const double tau_s = std::stod(lines[3].str());
+  EXPECT_NEAR(gain, 0.4, 0.04) << shown;
+  EXPECT_NEAR(tau_s, 1.0, 0.25) << shown;
+  const std::string bar = run_on_terminal(
+      {"analyze", session, "--out", (dir / "bar").string(), "--effects", "sensor_creep"}, &status);
+  ASSERT_EQ(status, 0) << bar;
+  const std::vector<int> percents = percents_shown(bar);
+  EXPECT_TRUE(std::is_sorted(percents.begin(), percents.end())) << bar;
+  EXPECT_TRUE(std::any_of(percents.begin(), percents.end(), [](int p) { return p > 65 && p < 95; }))
+      << "the steps measured again from the readings with the creep undone: " << bar;
+
+  // The keys below the section's comments, as a user pastes them.
+  std::string pasted = lines[1].str();
+  std::erase(pasted, '\r');
+  pasted.erase(0, pasted.find('\n') + 1);
+  const fs::path config =
+      shipped_config_with("analyze-creep-config-file", "gain = 0\ntau_s = 1.0", pasted);
+  const std::string with_config = "--config " + (config / "gaitmon.toml").string() + " ";
+  const std::string plain = run(
+      with_config + "analyze " + session + " --out " + (dir / "plain").string() + " --effects none",
+      &status);
+  ASSERT_EQ(status, 0) << plain;
+  const auto settings = settings_of(dir / "plain").at("sensor_creep_of_config");
+  EXPECT_DOUBLE_EQ(settings.at("gain").get<double>(), gain);
+  const auto truth = nlohmann::json::parse(read_all(dir / "c.truth.json")).at("regions");
+  const auto plain_json = nlohmann::json::parse(read_all(dir / "plain" / "session.json"));
+  for (const char* region : {"heel", "met1_2", "met3_5"}) {
+    const double n =
+        plain_json.at("regions").at(region).at("across_steps").at("n").at("median").get<double>();
+    EXPECT_NEAR(n / truth.at(region).at("n").get<double>(), 1.0, 0.15) << region;
+  }
+  EXPECT_LT(plain_json.at("nrmse_total_pct_across_steps").at("median").get<double>(), 2.0);
+
+  const std::string again = run(with_config + "analyze " + session + " --out " +
+                                    (dir / "again").string() + " --effects sensor_creep",
+                                &status);
+  ASSERT_EQ(status, 0) << again;
+  EXPECT_EQ(again.find("put in the config"), std::string::npos) << again;
+  const auto left = nlohmann::json::parse(read_all(dir / "again" / "session.json"))
+                        .at("extended_model")
+                        .at("effects")
+                        .at(0);
+  EXPECT_LT(left.at("params").at("gain").at("value").get<double>(), 0.05) << again;
+}
+
 // The bar covers the whole job, the extended model's fit and the session-level fits too: it
 // ended at 95 % before.
 TEST(AnalyzeCommand, ProgressBarOnATerminalRisesToAHundredPercent) {
@@ -1274,12 +1360,7 @@ TEST(AnalyzeCommand, ProgressBarOnATerminalRisesToAHundredPercent) {
                        (dir / "o").string(), "--effects", "impact_transient"},
                       &status);
   EXPECT_EQ(status, 0) << shown;
-  std::vector<int> percents;
-  const std::regex bar(R"(analyze \[[# ]{40}\] +([0-9]+)%)");
-  for (auto it = std::sregex_iterator(shown.begin(), shown.end(), bar);
-       it != std::sregex_iterator(); ++it) {
-    percents.push_back(std::stoi((*it)[1].str()));
-  }
+  const std::vector<int> percents = percents_shown(shown);
   ASSERT_GE(percents.size(), 3u) << shown;
   EXPECT_TRUE(std::is_sorted(percents.begin(), percents.end())) << shown;
   EXPECT_EQ(percents.back(), 100) << shown;

@@ -177,6 +177,49 @@ TEST(SimulateCommand, EffectParamsAreCheckedAndRecordedInTheTruth) {
   EXPECT_EQ(effects[0]["params"]["strength"], 0.12);  // the default
 }
 
+// The config's [sensor_creep] is the creep of the insoles it describes: simulated cells creep so,
+// in the effects' order (after hysteresis, before crosstalk), and say so, unless --effect
+// sensor_creep gives a creep of the run's own.
+TEST(SimulateCommand, CellsCreepAsTheConfigsSensorCreepSays) {
+  const auto dir = test::scratch_dir("simulate-config-creep");
+  for (const char* file : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / file, dir / file);
+  }
+  std::string config = test::read_text(dir / "gaitmon.toml");
+  const std::string shipped = "\ngain = 0\ntau_s = 1.0\n";
+  ASSERT_NE(config.find(shipped), std::string::npos);
+  config.replace(config.find(shipped), shipped.size(), "\ngain = 0.25\ntau_s = 3\n");
+  test::write_text(dir / "gaitmon.toml", config);
+  const std::string with_config = "--config " + (dir / "gaitmon.toml").string() + " ";
+
+  int status = -1;
+  std::string out =
+      simulate(dir / "c.csv", with_config + "--effect hysteresis --effect crosstalk", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("the cells creep as the config's [sensor_creep] says: gain 0.25, tau 3 s"),
+            std::string::npos)
+      << out;
+  auto effects = truth_of(dir / "c.csv").at("options").at("effects");
+  ASSERT_EQ(effects.size(), 3u) << effects.dump();
+  EXPECT_EQ(effects[0]["name"], "hysteresis");
+  EXPECT_EQ(effects[1]["name"], "sensor_creep");
+  EXPECT_EQ(effects[1]["params"]["gain"], 0.25);
+  EXPECT_EQ(effects[1]["params"]["tau_s"], 3.0);
+  EXPECT_EQ(effects[2]["name"], "crosstalk");
+
+  out = simulate(dir / "own.csv",
+                 with_config + R"(--effect sensor_creep --effect-params '{"gain":0.1}')", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_EQ(out.find("[sensor_creep]"), std::string::npos) << out;
+  effects = truth_of(dir / "own.csv").at("options").at("effects");
+  ASSERT_EQ(effects.size(), 1u) << effects.dump();
+  EXPECT_EQ(effects[0]["params"]["gain"], 0.1);
+
+  out = simulate(dir / "plain.csv", "", &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_TRUE(truth_of(dir / "plain.csv").at("options").at("effects").empty());
+}
+
 // An empty --effect-params was taken for the defaults, and of two equal keys nlohmann::json kept
 // the last without a word; a subject the session header cannot hold failed only at the writing.
 TEST(SimulateCommand, EmptyOrDuplicateEffectParamsAndAMultiLineSubjectAreUsageErrors) {
