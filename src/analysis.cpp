@@ -138,6 +138,24 @@ StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Co
   return out;
 }
 
+std::vector<StepAnalysis> analyse_steps(std::span<const Step> steps, const InsoleLayout& layout,
+                                        const Config& config, const AnalysisSettings& settings,
+                                        const std::function<void(double)>& on_progress) {
+  std::vector<StepAnalysis> out(steps.size());
+  std::vector<ContactEllipseCache> caches(detail::parallel_workers(steps.size()));
+  detail::parallel_for_workers(
+      steps.size(),
+      [&](std::size_t i, std::size_t worker) {
+        out[i] = analyse_step(steps[i], layout, config, settings, &caches[worker]);
+      },
+      [&](std::size_t done) {
+        if (on_progress) {
+          on_progress(static_cast<double>(done) / static_cast<double>(steps.size()));
+        }
+      });
+  return out;
+}
+
 SharedExponents shared_damping_exponents(std::span<const StepAnalysis> steps, const Config& config,
                                          const AnalysisSettings& settings) {
   SharedExponents out;

@@ -1,10 +1,13 @@
-// Undoes sensor creep in the readings (the inverse of the simulator's lag; see creep.hpp).
+// Undoes sensor creep in the readings (the inverse of the simulator's lag; see creep.hpp), and
+// weighs whether several recordings show one creep.
 #include "gaitmon/creep.hpp"
 
 #include <algorithm>
+#include <boost/math/distributions/chi_squared.hpp>
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 namespace gaitmon {
 
@@ -46,6 +49,48 @@ void CreepCorrection::undo(Frame& frame) {
 std::optional<CreepCorrection> creep_correction_of(const SensorCreepSettings& creep) {
   if (creep.gain == 0.0) return std::nullopt;
   return CreepCorrection(creep.gain, creep.tau_s);
+}
+
+CreepAgreement creep_agreement(std::span<const MeasuredCreep> creeps, double min_p) {
+  if (creeps.size() < 2) {
+    throw std::invalid_argument("creep agreement: needs two recordings or more, got " +
+                                std::to_string(creeps.size()));
+  }
+  if (!(min_p > 0.0 && min_p <= 1.0)) {
+    throw std::invalid_argument("creep agreement: min_p must be in (0, 1], not " +
+                                std::to_string(min_p));
+  }
+  const auto good_se = [](double se) { return std::isfinite(se) && se > 0.0; };
+  for (const MeasuredCreep& c : creeps) {
+    if (!good_se(c.gain_se) || !good_se(c.tau_se_s)) {
+      throw std::invalid_argument("creep agreement: a recording's creep has no standard error");
+    }
+  }
+  // The weighted mean of one parameter, its standard error, and the chi-square about it.
+  const auto pool = [&](double MeasuredCreep::*value, double MeasuredCreep::*se) {
+    double weights = 0.0;
+    double sum = 0.0;
+    for (const MeasuredCreep& c : creeps) {
+      const double w = 1.0 / (c.*se * c.*se);
+      weights += w;
+      sum += w * c.*value;
+    }
+    const double mean = sum / weights;
+    double chi2 = 0.0;
+    for (const MeasuredCreep& c : creeps) chi2 += std::pow((c.*value - mean) / c.*se, 2);
+    return std::tuple{mean, 1.0 / std::sqrt(weights), chi2};
+  };
+  CreepAgreement out;
+  out.recordings = creeps.size();
+  std::tie(out.mean.gain, out.mean.gain_se, out.gain_chi2) =
+      pool(&MeasuredCreep::gain, &MeasuredCreep::gain_se);
+  std::tie(out.mean.tau_s, out.mean.tau_se_s, out.tau_chi2) =
+      pool(&MeasuredCreep::tau_s, &MeasuredCreep::tau_se_s);
+  const boost::math::chi_squared chi2(static_cast<double>(creeps.size() - 1));
+  out.gain_p = boost::math::cdf(boost::math::complement(chi2, out.gain_chi2));
+  out.tau_p = boost::math::cdf(boost::math::complement(chi2, out.tau_chi2));
+  out.agree = out.gain_p >= min_p && out.tau_p >= min_p;
+  return out;
 }
 
 }  // namespace gaitmon

@@ -1109,13 +1109,8 @@ DiscrepancyInput prepare_discrepancy_input(std::span<const Step> steps, const In
   for (const Step& s : steps) {
     if (s.status == StepStatus::Ok && !s.stance.empty()) ok.push_back(s);
   }
-  std::vector<StepAnalysis> analyses(ok.size());
-  parallel_for(ok.size(), [&](std::size_t i) {
-    // One cache per step keeps the threads apart; the ellipses do not depend on it.
-    ContactEllipseCache cache;
-    analyses[i] = analyse_step(ok[i], layout, config, settings, &cache);
-  });
-  DiscrepancyInput input = make_discrepancy_input(ok, std::move(analyses), layout, config);
+  DiscrepancyInput input =
+      make_discrepancy_input(ok, analyse_steps(ok, layout, config, settings), layout, config);
   measure_crosstalk_views(input, ok, layout, config, settings.area);
   return input;
 }

@@ -85,5 +85,51 @@ TEST(CreepCorrection, OfTheConfigIsNoneAtGainZero) {
   EXPECT_DOUBLE_EQ(creep->tau_s(), 2.0);
 }
 
+// Two recordings, worked by hand: weights 1 / se^2 of 100 and 25 give a mean gain of
+// (100 x 1 + 25 x 2) / 125 = 1.2 with se 1 / sqrt(125); chi-square 100 x 0.2^2 + 25 x 0.8^2 = 20
+// on one degree of freedom, whose upper tail is erfc(sqrt(20 / 2)) = 7.74e-6.
+TEST(CreepAgreement, WeighsEachRecordingByItsErrorAndTestsTheSpreadAgainstThem) {
+  const std::vector<MeasuredCreep> two{{1.0, 0.1, 3.0, 0.5}, {2.0, 0.2, 3.0, 1.0}};
+  const CreepAgreement a = creep_agreement(two);
+  EXPECT_EQ(a.recordings, 2u);
+  EXPECT_NEAR(a.mean.gain, 1.2, 1e-12);
+  EXPECT_NEAR(a.mean.gain_se, 1.0 / std::sqrt(125.0), 1e-12);
+  EXPECT_NEAR(a.gain_chi2, 20.0, 1e-9);
+  EXPECT_NEAR(a.gain_p, std::erfc(std::sqrt(10.0)), 1e-12);
+  EXPECT_NEAR(a.mean.tau_s, 3.0, 1e-12);
+  EXPECT_NEAR(a.mean.tau_se_s, 1.0 / std::sqrt(5.0), 1e-12);
+  EXPECT_NEAR(a.tau_chi2, 0.0, 1e-12);
+  EXPECT_NEAR(a.tau_p, 1.0, 1e-12);
+  EXPECT_FALSE(a.agree) << "the gains are 4.5 of their combined errors apart";
+
+  // Three within their errors: chi-square 0.5 + 0 + 0.5 = 1 on two degrees of freedom, whose
+  // upper tail is exp(-1 / 2).
+  const std::vector<MeasuredCreep> three{{0.29, 0.01 * std::sqrt(2.0), 2.0, 0.1},
+                                         {0.30, 0.01, 2.0, 0.1},
+                                         {0.31, 0.01 * std::sqrt(2.0), 2.0, 0.1}};
+  const CreepAgreement b = creep_agreement(three);
+  EXPECT_NEAR(b.mean.gain, 0.30, 1e-12);
+  EXPECT_NEAR(b.gain_chi2, 1.0, 1e-9);
+  EXPECT_NEAR(b.gain_p, std::exp(-0.5), 1e-9);
+  EXPECT_TRUE(b.agree);
+  EXPECT_FALSE(creep_agreement(three, 0.7).agree) << "p 0.61 under a min_p of 0.7";
+}
+
+TEST(CreepAgreement, RefusesOneRecordingOrOneWithoutAStandardError) {
+  const MeasuredCreep one{0.3, 0.01, 2.0, 0.1};
+  EXPECT_THROW(creep_agreement(std::vector<MeasuredCreep>{one}), std::invalid_argument);
+  MeasuredCreep undetermined = one;
+  undetermined.tau_se_s = INFINITY;
+  EXPECT_THROW(creep_agreement(std::vector<MeasuredCreep>{one, undetermined}),
+               std::invalid_argument);
+  undetermined.tau_se_s = 0.0;
+  EXPECT_THROW(creep_agreement(std::vector<MeasuredCreep>{one, undetermined}),
+               std::invalid_argument);
+  EXPECT_THROW(creep_agreement(std::vector<MeasuredCreep>{one, one}, 0.0), std::invalid_argument);
+  EXPECT_THROW(creep_agreement(std::vector<MeasuredCreep>{one, one}, 1.5), std::invalid_argument);
+  EXPECT_TRUE(creep_agreement(std::vector<MeasuredCreep>{one, one}, 1.0).agree)
+      << "two equal recordings: chi-square 0, p 1";
+}
+
 }  // namespace
 }  // namespace gaitmon

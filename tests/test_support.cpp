@@ -100,6 +100,12 @@ int run_command(const std::string& command, std::string* output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+std::string run_gaitmon(const std::string& args, int* status) {
+  std::string output;
+  *status = run_command(gaitmon_binary().string() + " " + args, &output);
+  return output;
+}
+
 double sample_sd(const std::vector<double>& values) {
   double mean = 0.0;
   for (double x : values) mean += x / static_cast<double>(values.size());

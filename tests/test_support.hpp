@@ -39,6 +39,9 @@ std::string session_head(const std::string& rate_hz = "100");
 std::string session_row(const std::string& time_and_foot, int cells = 93, int value = 0);
 /// Runs a shell command, returns its exit status, and captures stdout+stderr into `output`.
 int run_command(const std::string& command, std::string* output = nullptr);
+/// Runs the gaitmon binary with `args` (a shell command line's rest), sets its exit status and
+/// returns its stdout and stderr together.
+std::string run_gaitmon(const std::string& args, int* status);
 /// The sample standard deviation (n - 1); needs at least two values.
 double sample_sd(const std::vector<double>& values);
 /// Active cells of the default 7.5 x 15 mm size from a picture, most anterior row first: '#'

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -105,6 +106,13 @@ std::pair<std::vector<double>, AreaSource> fit_areas_mm2(const StanceSeries& sta
 /// model force to the total. Deterministic; no I/O. Pass one cache for many steps.
 StepAnalysis analyse_step(const Step& step, const InsoleLayout& layout, const Config& config,
                           const AnalysisSettings& settings, ContactEllipseCache* cache = nullptr);
+
+/// analyse_step of every step, on every core (the steps are independent, and fits dominate), each
+/// thread with an ellipse cache of its own; the result does not depend on the threads.
+/// `on_progress`, if set, receives the fraction of the steps done, on the calling thread only.
+std::vector<StepAnalysis> analyse_steps(std::span<const Step> steps, const InsoleLayout& layout,
+                                        const Config& config, const AnalysisSettings& settings,
+                                        const std::function<void(double)>& on_progress = {});
 
 /// The step's model total per frame and its NRMSE from its regions' fits, as analyse_step sets
 /// them: for a caller that fits regions again.

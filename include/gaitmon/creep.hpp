@@ -23,6 +23,7 @@
 #include <array>
 #include <cstddef>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "gaitmon/config.hpp"
@@ -58,6 +59,35 @@ class CreepCorrection {
   double tau_s_;
   std::array<std::vector<Lag>, 2> lags_;  ///< indexed by Foot, then sensor
 };
+
+/// One recording's fitted creep: gain and tau with their standard errors.
+struct MeasuredCreep {
+  double gain = 0.0;
+  double gain_se = 0.0;
+  double tau_s = 0.0;
+  double tau_se_s = 0.0;
+};
+
+/// Whether several recordings of one pair of insoles show one creep. A creep of the insoles is the
+/// same in every walk made on them; a creep that differs beyond the recordings' standard errors is
+/// something else (a subject's loading, another pair).
+struct CreepAgreement {
+  std::size_t recordings = 0;
+  /// Inverse-variance weighted means and their standard errors.
+  MeasuredCreep mean;
+  /// sum ((x_i - mean) / se_i)^2 over the recordings, for gain and tau, and the chance of one as
+  /// large or larger from recordings of one creep: chi-square with recordings - 1 degrees of
+  /// freedom.
+  double gain_chi2 = 0.0;
+  double tau_chi2 = 0.0;
+  double gain_p = 1.0;
+  double tau_p = 1.0;
+  bool agree = false;  ///< both chances at least min_p
+};
+
+/// Throws std::invalid_argument for fewer than two creeps, a standard error that is not finite and
+/// positive, or min_p outside (0, 1].
+CreepAgreement creep_agreement(std::span<const MeasuredCreep> creeps, double min_p = 0.01);
 
 /// The correction that undoes a config's [sensor_creep], or none when its gain is 0 (the readings
 /// are then passed on untouched, not rounded again).

@@ -30,7 +30,6 @@
 #include "output_file.hpp"
 #include "progress.hpp"
 #include "report_html.hpp"
-#include "src/parallel_for.hpp"
 
 namespace gaitmon::cli {
 namespace {
@@ -642,24 +641,6 @@ void print_summary(const AnalyzeArgs& args, const SessionHeader& header,
     }
   }
   for (const auto& path : written) fmt::print("wrote {}\n", path.string());
-}
-
-/// Analyses the steps on every core (fits dominate; steps are independent), each worker with
-/// its own ellipse cache. `on_progress` is called from the calling thread only.
-std::vector<StepAnalysis> analyse_steps(const std::vector<Step>& steps, const InsoleLayout& layout,
-                                        const Config& config, const AnalysisSettings& settings,
-                                        const std::function<void(double)>& on_progress) {
-  std::vector<StepAnalysis> out(steps.size());
-  std::vector<ContactEllipseCache> caches(detail::parallel_workers(steps.size()));
-  detail::parallel_for_workers(
-      steps.size(),
-      [&](std::size_t i, std::size_t worker) {
-        out[i] = analyse_step(steps[i], layout, config, settings, &caches[worker]);
-      },
-      [&](std::size_t done) {
-        on_progress(static_cast<double>(done) / static_cast<double>(steps.size()));
-      });
-  return out;
 }
 
 void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {

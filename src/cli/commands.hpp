@@ -34,9 +34,10 @@ Config load_global_config(const GlobalOptions& global);
 /// "nan".
 std::string estimate_text(double value, double se, std::string_view plus_minus);
 
-/// What analyze and discrepancy print after undoing a creep of `gain` and `tau_s` they measured
-/// from a session's zeros: the [sensor_creep] lines that undo it in every frame of these insoles,
-/// or, where the config's creep was undone first, that this one is what remains on top of it.
+/// What analyze, discrepancy and creep print after measuring a creep of `gain` and `tau_s` from
+/// the zeros of a session (or of several that agree): the [sensor_creep] lines that undo it in
+/// every frame of these insoles, or, where the config's creep was undone first, that this one is
+/// what remains on top of it.
 std::string sensor_creep_advice(const Config& config, double gain, double tau_s);
 
 /// Opens the LCM connection of --lcm-url (from_command_line) or of [lcm] url: a URL LCM cannot
@@ -64,6 +65,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 void add_segment_command(CLI::App& app, const GlobalOptions& global);
 void add_analyze_command(CLI::App& app, const GlobalOptions& global);
 void add_discrepancy_command(CLI::App& app, const GlobalOptions& global);
+void add_creep_command(CLI::App& app, const GlobalOptions& global);
 void add_calibrate_command(CLI::App& app, const GlobalOptions& global);
 void add_fake_insole_command(CLI::App& app, const GlobalOptions& global);
 void add_spy_command(CLI::App& app, const GlobalOptions& global);

@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   add_segment_command(app, global);
   add_analyze_command(app, global);
   add_discrepancy_command(app, global);
+  add_creep_command(app, global);
   add_calibrate_command(app, global);
   add_fake_insole_command(app, global);
   add_spy_command(app, global);

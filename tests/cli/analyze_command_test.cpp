@@ -30,11 +30,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string run(const std::string& args, int* status) {
-  std::string output;
-  *status = test::run_command(test::gaitmon_binary().string() + " " + args, &output);
-  return output;
-}
+const auto run = &test::run_gaitmon;
 
 std::vector<std::string> lines_of(const fs::path& path) {
   std::ifstream in(path);

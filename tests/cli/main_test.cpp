@@ -12,11 +12,7 @@
 namespace gaitmon {
 namespace {
 
-std::string run(const std::string& args, int* status) {
-  std::string output;
-  *status = test::run_command(test::gaitmon_binary().string() + " " + args, &output);
-  return output;
-}
+const auto run = &test::run_gaitmon;
 
 std::string first_line(const std::filesystem::path& path) {
   std::ifstream in(path);

@@ -1,0 +1,176 @@
+// `gaitmon creep` as a lab engineer runs it: recordings of one pair agree on the creep the
+// simulator gave them and print the section to paste, under which little is left; recordings of
+// two pairs, and the three real recordings, do not; bad input is a clear error.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+#include <regex>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "test_support.hpp"
+
+namespace gaitmon {
+namespace {
+
+namespace fs = std::filesystem;
+
+const auto run = &test::run_gaitmon;
+
+// A 20-s walk on insoles of size 41-42 whose cells creep by `gain` at `tau_s`, as DIR/NAME.
+std::string walk(const fs::path& dir, const std::string& name, int seed, double gain,
+                 double tau_s) {
+  const std::string session = (dir / name).string();
+  int status = -1;
+  const std::string out =
+      run("simulate --size 41-42 --duration 20 --seed " + std::to_string(seed) +
+              " --effect sensor_creep --effect-params '{\"gain\":" + std::to_string(gain) +
+              ",\"tau_s\":" + std::to_string(tau_s) + "}' --out " + session,
+          &status);
+  if (status != 0) throw std::runtime_error("simulate failed: " + out);
+  return session;
+}
+
+// One row of the table: the recording's fitted gain, its zero channel's held-out NRMSE without and
+// with the creep, and whether the zeros show it.
+struct Row {
+  double gain = 0.0;
+  double zero_before_pct = 0.0;
+  double zero_after_pct = 0.0;
+  bool shown = false;
+};
+
+std::map<std::string, Row> rows_of(const std::string& out) {
+  std::map<std::string, Row> rows;
+  const std::regex row(
+      R"((\S+\.csv) +[0-9]+ +([0-9.e-]+) (?:\+- \S+|\(no SE\)) +[0-9.e-]+ (?:\+- \S+|\(no SE\)) +)"
+      R"(([0-9.]+) -> ([0-9.]+) % +(yes|no))");
+  for (auto it = std::sregex_iterator(out.begin(), out.end(), row); it != std::sregex_iterator();
+       ++it) {
+    const std::smatch& m = *it;
+    rows[m[1].str()] = {std::stod(m[2].str()), std::stod(m[3].str()), std::stod(m[4].str()),
+                        m[5].str() == "yes"};
+  }
+  return rows;
+}
+
+// Three walks of one pair (gain 0.3, tau 2 s): each shows the creep, their spread is within their
+// errors (p 0.04: one walk fits 0.37 +- 0.025), and the mean goes into the config. Under it each
+// walk's zeros, before any creep is fitted, lose most of what that walk's own creep took off as
+// read (89-92 %), and what creep a walk still shows on top is under a quarter of the pasted one
+// (0.059 at 1.1 s). A fourth walk on a pair that creeps by 0.15 at 0.5 s makes them disagree, and
+// nothing is printed to paste.
+TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
+  const auto dir = test::scratch_dir("creep-command");
+  const std::string one_pair = walk(dir, "a.csv", 7, 0.3, 2.0) + " " +
+                               walk(dir, "b.csv", 8, 0.3, 2.0) + " " +
+                               walk(dir, "c.csv", 9, 0.3, 2.0);
+  int status = -1;
+  const std::string agreed = run("creep " + one_pair, &status);
+  ASSERT_EQ(status, 0) << agreed;
+  const std::map<std::string, Row> as_read = rows_of(agreed);
+  ASSERT_EQ(as_read.size(), 3u) << agreed;
+  for (const auto& [name, row] : as_read) {
+    EXPECT_TRUE(row.shown) << name;
+    EXPECT_NEAR(row.gain, 0.3, 0.1) << name;
+  }
+  EXPECT_NE(agreed.find("they agree on one creep"), std::string::npos) << agreed;
+  std::smatch section;
+  ASSERT_TRUE(std::regex_search(
+      agreed, section, std::regex(R"(\[sensor_creep\]\ngain = ([0-9.]+)\ntau_s = ([0-9.]+))")))
+      << agreed;
+  const double pasted_gain = std::stod(section[1].str());
+  EXPECT_NEAR(pasted_gain, 0.3, 0.03) << agreed;
+  EXPECT_NEAR(std::stod(section[2].str()), 2.0, 0.3) << agreed;
+
+  const fs::path config_dir = test::scratch_dir("creep-command-config");
+  for (const char* file : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
+    fs::copy_file(test::source_dir() / "config" / file, config_dir / file);
+  }
+  std::string config = test::read_text(config_dir / "gaitmon.toml");
+  const std::string shipped = "\ngain = 0\ntau_s = 1.0\n";
+  ASSERT_NE(config.find(shipped), std::string::npos);
+  config.replace(config.find(shipped), shipped.size(),
+                 "\ngain = " + section[1].str() + "\ntau_s = " + section[2].str() + "\n");
+  test::write_text(config_dir / "gaitmon.toml", config);
+  const std::string left =
+      run("--config " + (config_dir / "gaitmon.toml").string() + " creep " + one_pair, &status);
+  ASSERT_EQ(status, 0) << left;
+  EXPECT_NE(left.find("on top of the config's [sensor_creep] (gain " + section[1].str()),
+            std::string::npos)
+      << left;
+  const std::map<std::string, Row> undone = rows_of(left);
+  ASSERT_EQ(undone.size(), 3u) << left;
+  for (const auto& [name, row] : undone) {
+    const Row& read = as_read.at(name);
+    EXPECT_LT(row.zero_before_pct,
+              read.zero_before_pct - 0.8 * (read.zero_before_pct - read.zero_after_pct))
+        << name << "\n"
+        << left;
+    if (row.shown) {
+      EXPECT_LT(row.gain, 0.25 * pasted_gain) << name << "\n" << left;
+    }
+  }
+
+  const std::string two_pairs =
+      run("creep " + one_pair + " " + walk(dir, "other.csv", 10, 0.15, 0.5), &status);
+  ASSERT_EQ(status, 0) << two_pairs;
+  EXPECT_NE(two_pairs.find("they disagree"), std::string::npos) << two_pairs;
+  EXPECT_EQ(two_pairs.find("[sensor_creep]"), std::string::npos) << two_pairs;
+
+  const std::string alone = run("creep " + (dir / "a.csv").string(), &status);
+  ASSERT_EQ(status, 0) << alone;
+  EXPECT_NE(alone.find("one recording shows a creep"), std::string::npos) << alone;
+  EXPECT_EQ(alone.find("[sensor_creep]"), std::string::npos) << alone;
+}
+
+// The three real recordings each show a creep (gains 0.003-0.08), far apart against their
+// errors: three subjects, perhaps three pairs, not one creep.
+TEST(CreepCommand, TheRealRecordingsDisagree) {
+  if (test::kSanitized) {
+    GTEST_SKIP() << "five and a half minutes of real walking take too long under the sanitizers; "
+                    "the command's code runs under them in "
+                    "WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot";
+  }
+  const fs::path real = test::shared_dir() / "real-data" / "gaitpdb";
+  std::string sessions;
+  for (const char* name : {"GaCo01_01", "JuPt01_01", "SiCo01_01"}) {
+    sessions += " " + (real / ("gaitpdb_" + std::string(name) + ".csv")).string();
+  }
+  int status = -1;
+  const std::string out = run("creep" + sessions, &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("the 3 recordings that show it"), std::string::npos) << out;
+  EXPECT_NE(out.find("they disagree"), std::string::npos) << out;
+}
+
+TEST(CreepCommand, BadInputIsAClearErrorNamingIt) {
+  const auto dir = test::scratch_dir("creep-command-bad");
+  const std::string a = walk(dir, "a.csv", 7, 0.3, 2.0);
+  int status = -1;
+  std::string out = run("creep " + a + " " + a, &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("is given twice"), std::string::npos) << out;
+
+  out = run("creep " + a + " " + (dir / "missing.csv").string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("missing.csv"), std::string::npos) << out;
+
+  // Two steps a foot: too few to hold the creep out over five folds.
+  const std::string short_walk = (dir / "short.csv").string();
+  run("simulate --size 41-42 --duration 3 --seed 7 --out " + short_walk, &status);
+  ASSERT_EQ(status, 0);
+  out = run("creep " + a + " " + short_walk, &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("short.csv"), std::string::npos) << out;
+  EXPECT_NE(out.find("need at least 5"), std::string::npos) << out;
+
+  out = run("creep " + a + " --min-p 1.5", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--min-p"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace gaitmon
