@@ -73,6 +73,15 @@ std::string read_text(const std::filesystem::path& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
+std::size_t count(std::string_view text, std::string_view what) {
+  std::size_t n = 0;
+  for (std::size_t at = text.find(what); at != std::string_view::npos;
+       at = text.find(what, at + what.size())) {
+    ++n;
+  }
+  return n;
+}
+
 std::string session_head(const std::string& rate_hz) {
   std::string text = "# gaitmon-session: 1\n# insole_size: 35-36\n# sample_rate_hz: " + rate_hz +
                      "\n# sensors: 93\nt_s,foot";

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "gaitmon/contact_ellipse.hpp"
@@ -33,6 +34,8 @@ std::filesystem::path scratch_dir(const std::string& name);
 std::filesystem::path write_text(const std::filesystem::path& path, const std::string& text);
 /// The whole of the file at `path`; throws std::runtime_error if it cannot be read.
 std::string read_text(const std::filesystem::path& path);
+/// How often `what` (not empty) occurs in `text`, without overlaps.
+std::size_t count(std::string_view text, std::string_view what);
 /// The header and column line of a hand-made 35-36 session (93 sensors) at `rate_hz`.
 std::string session_head(const std::string& rate_hz = "100");
 /// One row of such a session: `time_and_foot` (e.g. "0.01,L") and `cells` readings of `value`.

@@ -669,7 +669,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
   }
   check_output_dir(args.out_dir, "--out");
   OutputSet outputs(args.out_dir, {"steps.csv", "regions.csv", "session.json", "report.html"},
-                    args.session);
+                    std::span(&args.session, 1));
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
 

@@ -604,7 +604,7 @@ void run_calibrate(const GlobalOptions& global, CalibrateArgs& args) {
   if (!args.out_dir.empty()) {
     outputs.emplace(args.out_dir,
                     std::initializer_list<std::string_view>{"calibration.json", "calibration.toml"},
-                    std::filesystem::path());
+                    std::span<const std::filesystem::path>());
   }
 
   // The sessions are written, segmented from their files and removed one by one.

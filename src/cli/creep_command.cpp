@@ -1,6 +1,6 @@
 // `gaitmon creep`: the sensor creep of one pair of insoles, measured on several of its recordings
 // as `analyze --effects sensor_creep` measures it, and whether they agree on one creep before it
-// goes into the config's [sensor_creep].
+// goes into the config's [sensor_creep]; with --out, creep.json and (--report) creep.html.
 #include <fmt/format.h>
 
 #include <cmath>
@@ -8,9 +8,11 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "commands.hpp"
+#include "creep_report.hpp"
 #include "gaitmon/analysis.hpp"
 #include "gaitmon/batch.hpp"
 #include "gaitmon/creep.hpp"
@@ -18,6 +20,7 @@
 #include "gaitmon/error.hpp"
 #include "gaitmon/insole.hpp"
 #include "gaitmon/session.hpp"
+#include "output_file.hpp"
 #include "progress.hpp"
 
 namespace gaitmon::cli {
@@ -25,19 +28,14 @@ namespace {
 
 namespace fs = std::filesystem;
 
+constexpr std::string_view kJson = "creep.json";
+constexpr std::string_view kHtml = "creep.html";
+
 struct CreepArgs {
   std::vector<fs::path> sessions;
   double min_p = 0.01;
-};
-
-/// One recording's creep on top of the config's, and whether its zeros show it.
-struct RecordingCreep {
-  fs::path session;
-  std::size_t steps = 0;
-  MeasuredCreep creep;
-  double zero_before_pct = 0.0;  ///< the zero channel's held-out NRMSE without and with it
-  double zero_after_pct = 0.0;
-  bool shown = false;  ///< effect_undone_in_readings: the zeros show it and the data determine it
+  fs::path out_dir;  ///< empty: stdout only
+  bool report = false;
 };
 
 RecordingCreep measure_creep(const fs::path& session, const Config& config) {
@@ -92,71 +90,60 @@ void run_creep(const GlobalOptions& global, const CreepArgs& args) {
       }
     }
   }
-  std::vector<RecordingCreep> recordings;
+  std::optional<OutputSet> outputs;
+  if (!args.out_dir.empty()) {
+    check_output_dir(args.out_dir, "--out");
+    outputs.emplace(args.out_dir, std::initializer_list<std::string_view>{kJson, kHtml},
+                    args.sessions);
+  }
+  CreepFindings found;
+  found.config_creep = config.sensor_creep;
+  found.min_p = args.min_p;
   {
     ProgressBar progress("creep");
     for (const fs::path& session : args.sessions) {
-      recordings.push_back(measure_creep(session, config));
-      progress.update(static_cast<double>(recordings.size()) /
+      found.recordings.push_back(measure_creep(session, config));
+      progress.update(static_cast<double>(found.recordings.size()) /
                       static_cast<double>(args.sessions.size()));
     }
   }
+  std::vector<MeasuredCreep> shown;
+  for (const RecordingCreep& r : found.recordings) {
+    if (r.shown) shown.push_back(r.creep);
+  }
+  if (shown.size() >= 2) found.agreement = creep_agreement(shown, args.min_p);
+  if (found.verdict() == CreepVerdict::Agree) {
+    found.advice =
+        sensor_creep_advice(config, found.agreement->mean.gain, found.agreement->mean.tau_s);
+  }
 
-  const std::string on_top =
-      config.sensor_creep.gain > 0.0
-          ? fmt::format(" on top of the config's [sensor_creep] (gain {:.4g}, tau {:.4g} s)",
-                        config.sensor_creep.gain, config.sensor_creep.tau_s)
-          : "";
   fmt::print("sensor creep of each recording{}, as analyze --effects sensor_creep fits it:\n",
-             on_top);
+             on_top_of_config(found.config_creep));
   fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {}\n", "recording", "steps", "gain", "tau_s",
              "zero channel held out", "shows it");
-  std::vector<MeasuredCreep> shown;
-  for (const RecordingCreep& r : recordings) {
+  for (const RecordingCreep& r : found.recordings) {
     fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {}\n", r.session.filename().string(), r.steps,
                estimate_text(r.creep.gain, r.creep.gain_se, " +- "),
                estimate_text(r.creep.tau_s, r.creep.tau_se_s, " +- "),
                fmt::format("{:.3f} -> {:.3f} %", r.zero_before_pct, r.zero_after_pct),
                r.shown ? "yes" : "no");
-    if (r.shown) shown.push_back(r.creep);
   }
-  const DiscrepancySettings rule;
-  if (shown.size() < recordings.size()) {
+  if (shown.size() < found.recordings.size()) {
     fmt::print(
         "note: \"shows it\" is no where the zero channel predicts the held-out steps less than "
         "{:.0f} % better with the creep, or its gain or tau has no standard error: analyze would "
         "not undo it there\n",
-        rule.min_zero_shrink_pct);
+        DiscrepancySettings{}.min_zero_shrink_pct);
   }
-  if (shown.empty()) {
-    fmt::print("no recording shows a creep{}: nothing to put in the config\n", on_top);
-    return;
+  if (found.agreement) fmt::print("{}\n", agreement_text(*found.agreement, found.recordings));
+  fmt::print("{}\n", verdict_text(found));
+  if (!found.advice.empty()) fmt::print("{}\n", found.advice);
+  if (outputs) {
+    fs::create_directories(args.out_dir);
+    outputs->add(kJson, creep_json_text(found));
+    if (args.report) outputs->add(kHtml, render_creep_html(found));
+    for (const fs::path& written : outputs->commit()) fmt::print("wrote {}\n", written.string());
   }
-  if (shown.size() == 1) {
-    fmt::print(
-        "one recording shows a creep{}: one walk cannot tell a creep of the insoles from one of "
-        "that walk; measure it on another recording of the same pair\n",
-        on_top);
-    return;
-  }
-  const CreepAgreement a = creep_agreement(shown, args.min_p);
-  fmt::print(
-      "the {} recordings that show it, weighted by their standard errors: gain {}, tau {} s\n"
-      "  spread against those errors: gain chi-square {:.3g} on {} degrees of freedom (p {:.3g}), "
-      "tau chi-square {:.3g} (p {:.3g})\n",
-      a.recordings, estimate_text(a.mean.gain, a.mean.gain_se, " +- "),
-      estimate_text(a.mean.tau_s, a.mean.tau_se_s, " +- "), a.gain_chi2, a.recordings - 1, a.gain_p,
-      a.tau_chi2, a.tau_p);
-  if (!a.agree) {
-    fmt::print(
-        "they disagree (p under {:.3g}): not one creep of the insoles, so nothing to put in the "
-        "config; what differs between the walks (the subject, the pair, how long the insoles had "
-        "been worn) may be what the zeros follow\n",
-        args.min_p);
-    return;
-  }
-  fmt::print("they agree on one creep{}\n", on_top);
-  fmt::print("{}\n", sensor_creep_advice(config, a.mean.gain, a.mean.tau_s));
 }
 
 }  // namespace
@@ -177,6 +164,14 @@ void add_creep_command(CLI::App& app, const GlobalOptions& global) {
                   "standard errors, says they are not one creep")
       ->check(number_in(0.0, 1.0, true))
       ->capture_default_str();
+  CLI::Option* out = sub->add_option(
+      "--out,-o", args->out_dir,
+      "Output folder for creep.json (each recording's creep, their agreement and the section to "
+      "paste)");
+  sub->add_flag("--report", args->report,
+                "Also write creep.html there: each recording's gain and tau with their 95 % "
+                "intervals beside the weighted mean")
+      ->needs(out);
   sub->callback([&global, args] { run_creep(global, *args); });
 }
 

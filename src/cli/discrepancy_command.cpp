@@ -236,7 +236,8 @@ std::string discrepancy_json(const DiscrepancyArgs& args, const Config& config,
 void run_discrepancy(const GlobalOptions& global, const DiscrepancyArgs& args) {
   const Config config = load_global_config(global);
   check_output_dir(args.out_dir, "--out");
-  OutputSet outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"}, args.session);
+  OutputSet outputs(args.out_dir, {"discrepancy.json", "discrepancy.html"},
+                    std::span(&args.session, 1));
   const SessionHeader header = SessionReader(args.session).header();
   const InsoleLayout layout(config.insole(header.insole_size), config.sensor);
   DiscrepancyResult result;

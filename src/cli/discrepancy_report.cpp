@@ -270,12 +270,7 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
   std::string bias;
   for (double b : r.diagnostics.bias_per_phase_pct) bias += fmt::format("{:+.2f} ", b);
 
-  std::string html = R"(<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">)";
-  html += "<title>gaitmon discrepancy: " + escape(session_name) + "</title>";
-  html += R"(<style>body{font-family:sans-serif;margin:20px;max-width:1000px}
-table{border-collapse:collapse;margin:8px 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px}
-th{background:#f3f3f3}.key span{display:inline-block;width:14px;height:10px;margin:0 4px}</style>)";
-  html += "</head><body>";
+  std::string html = page_head("gaitmon discrepancy: " + session_name);
   html += "<h1>Model-data discrepancy: " + escape(session_name) + "</h1>";
   html += fmt::format(
       "<p>{} steps, {} step-regions, {} frames ({} step-regions left out: their cells give no "

@@ -61,10 +61,12 @@ void check_output_dir(const std::filesystem::path& dir, const std::string& optio
 
 void remove_earlier_outputs(const std::filesystem::path& dir,
                             std::initializer_list<std::string_view> names,
-                            const std::filesystem::path& input) {
+                            std::span<const std::filesystem::path> inputs) {
   for (const std::string_view name : names) {
     std::error_code ec;
-    if (std::filesystem::equivalent(dir / name, input, ec)) {
+    if (std::any_of(inputs.begin(), inputs.end(), [&](const std::filesystem::path& input) {
+          return std::filesystem::equivalent(dir / name, input, ec);
+        })) {
       throw CLI::ValidationError("--out", (dir / name).string() +
                                               " is the file this command reads, and a run "
                                               "replaces it with its own output: give another "
@@ -142,9 +144,9 @@ void OutputFile::commit_all(std::span<OutputFile* const> files) {
 }
 
 OutputSet::OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names,
-                     const std::filesystem::path& input)
+                     std::span<const std::filesystem::path> inputs)
     : dir_(std::move(dir)), names_(names.begin(), names.end()) {
-  remove_earlier_outputs(dir_, names, input);
+  remove_earlier_outputs(dir_, names, inputs);
 }
 
 void OutputSet::add(std::string_view name, std::string_view text) {

@@ -28,12 +28,12 @@ void check_output_dir(const std::filesystem::path& dir, const std::string& optio
 /// Removes the files `names` (a command's whole set of outputs) that an earlier run left in `dir`,
 /// before this run starts: a run that fails then leaves none of them, where the earlier run's
 /// complete set would look like its own. Logs what it removed. Throws CLI::ValidationError
-/// naming --out, before removing anything, where one of them is `input`, the file the command
-/// reads (a session copied in as steps.csv would be deleted), and std::runtime_error naming a
-/// file that cannot be removed.
+/// naming --out, before removing anything, where one of them is one of `inputs`, the files the
+/// command reads (a session copied in as steps.csv would be deleted), and std::runtime_error naming
+/// a file that cannot be removed.
 void remove_earlier_outputs(const std::filesystem::path& dir,
                             std::initializer_list<std::string_view> names,
-                            const std::filesystem::path& input);
+                            std::span<const std::filesystem::path> inputs);
 
 class OutputFile {
  public:
@@ -71,9 +71,9 @@ class OutputFile {
 /// removes and what it writes is one list.
 class OutputSet {
  public:
-  /// remove_earlier_outputs(dir, names, input).
+  /// remove_earlier_outputs(dir, names, inputs).
   OutputSet(std::filesystem::path dir, std::initializer_list<std::string_view> names,
-            const std::filesystem::path& input);
+            std::span<const std::filesystem::path> inputs);
   /// Creates dir/name.partial holding `text`; throws std::runtime_error naming the file, and
   /// std::logic_error for a name the set was not made with.
   void add(std::string_view name, std::string_view text);

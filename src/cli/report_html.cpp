@@ -15,14 +15,6 @@
 namespace gaitmon::cli {
 namespace {
 
-/// A tick spacing of 1, 2 or 5 x 10^k giving about `count` ticks over the range.
-double nice_step(double range, int count) {
-  const double raw = range / count;
-  const double mag = std::pow(10.0, std::floor(std::log10(raw)));
-  const double f = raw / mag;
-  return (f < 1.5 ? 1.0 : f < 3.5 ? 2.0 : f < 7.5 ? 5.0 : 10.0) * mag;
-}
-
 struct Range {
   double lo = std::numeric_limits<double>::infinity();
   double hi = -std::numeric_limits<double>::infinity();

@@ -164,7 +164,7 @@ void segment_into_out_dir(const SegmentArgs& args, const Config& config,
 void run_segment(const GlobalOptions& global, const SegmentArgs& args) {
   const Config config = load_global_config(global);
   check_output_dir(args.out_dir, "--out");
-  remove_earlier_outputs(args.out_dir, {kStepsCsv, kFramesCsv}, args.session);
+  remove_earlier_outputs(args.out_dir, {kStepsCsv, kFramesCsv}, std::span(&args.session, 1));
   // The layout follows the session's insole size, so read its header first.
   const InsoleLayout layout(config.insole(SessionReader(args.session).header().insole_size),
                             config.sensor);

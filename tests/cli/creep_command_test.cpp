@@ -1,10 +1,12 @@
 // `gaitmon creep` as a lab engineer runs it: recordings of one pair agree on the creep the
 // simulator gave them and print the section to paste, under which little is left; recordings of
-// two pairs, and the three real recordings, do not; bad input is a clear error.
+// two pairs, and the three real recordings, do not; the standard errors cover the spread of ten
+// walks; creep.json and creep.html say the same; bad input is a clear error.
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <stdexcept>
 #include <string>
@@ -68,7 +70,9 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
                                walk(dir, "b.csv", 8, 0.3, 2.0) + " " +
                                walk(dir, "c.csv", 9, 0.3, 2.0);
   int status = -1;
-  const std::string agreed = run("creep " + one_pair, &status);
+  const fs::path out_dir = dir / "out";
+  const std::string agreed =
+      run("creep " + one_pair + " --out " + out_dir.string() + " --report", &status);
   ASSERT_EQ(status, 0) << agreed;
   const std::map<std::string, Row> as_read = rows_of(agreed);
   ASSERT_EQ(as_read.size(), 3u) << agreed;
@@ -84,6 +88,21 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
   const double pasted_gain = std::stod(section[1].str());
   EXPECT_NEAR(pasted_gain, 0.3, 0.03) << agreed;
   EXPECT_NEAR(std::stod(section[2].str()), 2.0, 0.3) << agreed;
+  // creep.json holds what stdout says, and creep.html draws each walk in both panels.
+  const nlohmann::json found = nlohmann::json::parse(test::read_text(out_dir / "creep.json"));
+  EXPECT_EQ(found["verdict"], "agree");
+  ASSERT_EQ(found["recordings"].size(), 3u);
+  for (const nlohmann::json& r : found["recordings"]) {
+    EXPECT_TRUE(r["shows_creep"].get<bool>()) << r;
+    EXPECT_NEAR(r["gain"].get<double>(), as_read.at(fs::path(r["session"]).filename()).gain, 1e-3)
+        << r;
+  }
+  EXPECT_EQ(found["agreement"]["degrees_of_freedom"], 2);
+  EXPECT_NEAR(found["sensor_creep_to_paste"]["gain"].get<double>(), pasted_gain, 1e-4);
+  const std::string page = test::read_text(out_dir / "creep.html");
+  EXPECT_EQ(test::count(page, "class=\"estimate\""), 6u);
+  EXPECT_EQ(test::count(page, "class=\"mean\""), 2u);
+  EXPECT_NE(page.find("they agree on one creep"), std::string::npos);
 
   const fs::path config_dir = test::scratch_dir("creep-command-config");
   for (const char* file : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
@@ -115,14 +134,26 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
   }
 
   const std::string two_pairs =
-      run("creep " + one_pair + " " + walk(dir, "other.csv", 10, 0.15, 0.5), &status);
+      run("creep " + one_pair + " " + walk(dir, "other.csv", 10, 0.15, 0.5) + " --out " +
+              out_dir.string(),
+          &status);
   ASSERT_EQ(status, 0) << two_pairs;
   EXPECT_NE(two_pairs.find("they disagree"), std::string::npos) << two_pairs;
   EXPECT_EQ(two_pairs.find("[sensor_creep]"), std::string::npos) << two_pairs;
+  const nlohmann::json disagreed = nlohmann::json::parse(test::read_text(out_dir / "creep.json"));
+  EXPECT_EQ(disagreed["verdict"], "disagree");
+  EXPECT_FALSE(disagreed["agreement"]["agree"].get<bool>());
+  EXPECT_TRUE(disagreed["sensor_creep_to_paste"].is_null());
+  // Without --report this run writes no page, and the earlier run's is gone.
+  EXPECT_FALSE(fs::exists(out_dir / "creep.html"));
 
-  const std::string alone = run("creep " + (dir / "a.csv").string(), &status);
+  const std::string alone =
+      run("creep " + (dir / "a.csv").string() + " --out " + out_dir.string(), &status);
   ASSERT_EQ(status, 0) << alone;
   EXPECT_NE(alone.find("one recording shows a creep"), std::string::npos) << alone;
+  const nlohmann::json one = nlohmann::json::parse(test::read_text(out_dir / "creep.json"));
+  EXPECT_EQ(one["verdict"], "one_shows");
+  EXPECT_TRUE(one["agreement"].is_null());
   EXPECT_EQ(alone.find("[sensor_creep]"), std::string::npos) << alone;
 }
 
@@ -146,6 +177,30 @@ TEST(CreepCommand, TheRealRecordingsDisagree) {
   EXPECT_NE(out.find("they disagree"), std::string::npos) << out;
 }
 
+// The agreement test is only as good as the standard errors it weighs: over ten walks of one pair
+// (size 41-42, gain 0.3, tau 2 s, seeds 11-20) their spread must look like those errors, neither
+// wider (chi-square above 23.6, the 99.5th percentile on 9 degrees of freedom: too small errors
+// would call one pair two) nor much narrower (below 1.73, the 0.5th). Measured: 3.74 and 10.2.
+// At size 45-46 with a fast creep (gain 0.4, tau 0.5 s) they are not: 22.3 and 41.5 (README).
+TEST(CreepCommand, TheStandardErrorsCoverTheSpreadOfTenWalksOfOnePair) {
+  const auto dir = test::scratch_dir("creep-command-ten");
+  std::string walks;
+  for (int seed = 11; seed <= 20; ++seed) {
+    walks += " " + walk(dir, "w" + std::to_string(seed) + ".csv", seed, 0.3, 2.0);
+  }
+  int status = -1;
+  const std::string out = run("creep" + walks + " --out " + (dir / "out").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  const nlohmann::json found = nlohmann::json::parse(test::read_text(dir / "out" / "creep.json"));
+  ASSERT_FALSE(found["agreement"].is_null()) << out;
+  ASSERT_EQ(found["agreement"]["degrees_of_freedom"], 9) << out;
+  for (const char* chi2 : {"gain_chi2", "tau_chi2"}) {
+    EXPECT_GT(found["agreement"][chi2].get<double>(), 1.73) << chi2 << "\n" << out;
+    EXPECT_LT(found["agreement"][chi2].get<double>(), 23.6) << chi2 << "\n" << out;
+  }
+  EXPECT_EQ(found["verdict"], "agree") << out;
+}
+
 TEST(CreepCommand, BadInputIsAClearErrorNamingIt) {
   const auto dir = test::scratch_dir("creep-command-bad");
   const std::string a = walk(dir, "a.csv", 7, 0.3, 2.0);
@@ -162,10 +217,31 @@ TEST(CreepCommand, BadInputIsAClearErrorNamingIt) {
   const std::string short_walk = (dir / "short.csv").string();
   run("simulate --size 41-42 --duration 3 --seed 7 --out " + short_walk, &status);
   ASSERT_EQ(status, 0);
-  out = run("creep " + a + " " + short_walk, &status);
+  // An earlier run's creep.json is removed before the work, so a failed run leaves none.
+  const fs::path out_dir = dir / "out";
+  test::write_text(out_dir / "creep.json", "{}\n");
+  out = run("creep " + a + " " + short_walk + " --out " + out_dir.string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("short.csv"), std::string::npos) << out;
   EXPECT_NE(out.find("need at least 5"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(out_dir / "creep.json"));
+  EXPECT_FALSE(fs::exists(out_dir / "creep.json.partial"));
+
+  out = run("creep " + a + " --report", &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--report requires --out"), std::string::npos) << out;
+
+  out = run("creep " + a + " --out " + a, &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("--out"), std::string::npos) << out;
+
+  // A recording kept in the output folder under an output's name is never removed as one.
+  const fs::path kept = out_dir / "creep.json";
+  fs::copy_file(a, kept);
+  out = run("creep " + a + " " + kept.string() + " --out " + out_dir.string(), &status);
+  EXPECT_EQ(status, 2) << out;
+  EXPECT_NE(out.find("is the file this command reads"), std::string::npos) << out;
+  EXPECT_TRUE(fs::exists(kept));
 
   out = run("creep " + a + " --min-p 1.5", &status);
   EXPECT_EQ(status, 2) << out;

@@ -9,19 +9,14 @@
 #include <string>
 #include <string_view>
 
+#include "test_support.hpp"
+
 namespace gaitmon::cli {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-std::size_t count(std::string_view text, std::string_view what) {
-  std::size_t n = 0;
-  for (std::size_t at = text.find(what); at != std::string_view::npos;
-       at = text.find(what, at + what.size())) {
-    ++n;
-  }
-  return n;
-}
+using test::count;
 
 // Every region x bin cell at the noise floor (ratio 1), apart from the three given here.
 ResidualMap sample_map() {

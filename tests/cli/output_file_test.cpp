@@ -166,7 +166,7 @@ TEST(OutputFile, TheFileACommandReadsIsNeverRemovedAsAnEarlierOutput) {
   fs::create_symlink(session, link);
   for (const fs::path& input : {session, link}) {
     try {
-      remove_earlier_outputs(dir, {"session.json", "steps.csv"}, input);
+      remove_earlier_outputs(dir, {"session.json", "steps.csv"}, std::span(&input, 1));
       FAIL() << "removed the input " << input;
     } catch (const CLI::ValidationError& e) {
       EXPECT_NE(std::string(e.what()).find((dir / "steps.csv").string() +
@@ -177,7 +177,8 @@ TEST(OutputFile, TheFileACommandReadsIsNeverRemovedAsAnEarlierOutput) {
     EXPECT_EQ(read(session), "a session\n");
   }
   // Through the link the input is also an output's name there: that one goes neither.
-  EXPECT_THROW(OutputSet(dir / "other", {"session.json"}, session), CLI::ValidationError);
+  EXPECT_THROW(OutputSet(dir / "other", {"session.json"}, std::span(&session, 1)),
+               CLI::ValidationError);
   EXPECT_EQ(read(session), "a session\n");
   EXPECT_TRUE(fs::is_symlink(fs::symlink_status(link)));
 }

@@ -104,13 +104,7 @@ struct Fixture {
   }
 };
 
-std::size_t count(const std::string& html, std::string_view what) {
-  std::size_t n = 0;
-  for (std::size_t at = html.find(what); at != std::string::npos; at = html.find(what, at + 1)) {
-    ++n;
-  }
-  return n;
-}
+using test::count;
 
 bool has(const std::string& html, std::string_view what) {
   return html.find(what) != std::string::npos;
