@@ -35,6 +35,7 @@ using detail::parallel_for;
 using discrepancy_detail::Applied;
 using discrepancy_detail::candidate_specs;
 using discrepancy_detail::CandidateSpec;
+using discrepancy_detail::clustered_sandwich_se;
 using discrepancy_detail::diagnose;
 using discrepancy_detail::kCrosstalk;
 using discrepancy_detail::ParamSpec;
@@ -501,10 +502,11 @@ double bic(const Costs& c, const Pooled& p, int params) {
 
 struct CandidateOutcome {
   const CandidateSpec* spec = nullptr;
-  std::vector<double> theta;  // full data, refined
-  std::vector<double> se;     // of theta
-  Costs heldout;              // per unit, under the parameters fitted on the other folds
-  Costs in_sample;            // per unit at theta
+  std::vector<double> theta;      // full data, refined
+  std::vector<double> se;         // of theta
+  std::vector<double> robust_se;  // of theta, the step-clustered sandwich's
+  Costs heldout;                  // per unit, under the parameters fitted on the other folds
+  Costs in_sample;                // per unit at theta
 };
 
 // Every combination of the parameters' grid values; a parameter in `fixed` takes that value only.
@@ -579,6 +581,40 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     check_stop();
     return unit_costs(units, with_candidate(th));
   };
+  // The sandwich's standard errors with the units of one step as a cluster (its regions share the
+  // step's loading and swing windows). Each unit's gradient of the deviance is a central
+  // difference over one model standard error, where the deviance rises by about 1 and the kinks
+  // of the profile (a unit's n moving on its grid) are averaged over; none where the model has
+  // none or the difference would leave the box.
+  const auto step_clustered_se = [&](const std::vector<double>& theta,
+                                     const std::vector<double>& model_se,
+                                     const std::vector<double>& model_cov, const auto& costs_of) {
+    const std::size_t q = theta.size();
+    std::vector<double> none(q, std::numeric_limits<double>::quiet_NaN());
+    const Costs at = costs_of(theta);
+    const double force_weight = effective_frames(pooled) / std::max(at.force_sse(), 1e-300);
+    const double zero_weight = pooled.zero_channel ? static_cast<double>(pooled.zero_changes) /
+                                                         std::max(at.zero_sse(), 1e-300)
+                                                   : 0.0;
+    std::vector<std::vector<double>> gradients(units.size(), std::vector<double>(q));
+    for (std::size_t p = 0; p < q; ++p) {
+      if (!std::isfinite(model_se[p])) return none;
+      std::vector<double> up = theta, down = theta;
+      up[p] += model_se[p];
+      down[p] -= model_se[p];
+      if (up[p] > spec.params[p].hi || down[p] < spec.params[p].lo) return none;
+      const Costs cu = costs_of(up);
+      const Costs cd = costs_of(down);
+      for (std::size_t ui = 0; ui < units.size(); ++ui) {
+        gradients[ui][p] = (force_weight * (cu.force[ui] - cd.force[ui]) +
+                            zero_weight * (cu.zero[ui] - cd.zero[ui])) /
+                           (2 * model_se[p]);
+      }
+    }
+    std::vector<int> step_of(units.size());
+    for (std::size_t ui = 0; ui < units.size(); ++ui) step_of[ui] = units[ui].ordinal;
+    return clustered_sandwich_se(model_cov, gradients, step_of);
+  };
   SearchBox box;
   for (const ParamSpec& p : spec.params) {
     box.lo.push_back(p.lo);
@@ -609,13 +645,18 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     }
     SearchPoint at = pattern_search({grid[best], deviance_without(costs[best], held_out)},
                                     std::move(step), box, objective);
-    std::vector<double> se;
+    std::vector<double> se, robust_se;
     if (held_out < 0) {
       SettledMinimum settled = settle_on_stencil(std::move(at), box, objective);
       at = std::move(settled.at);
       se = std::move(settled.se);
+      robust_se = step_clustered_se(at.theta, se, settled.cov, [&](const std::vector<double>& th) {
+        auto it = seen.find(th);
+        if (it == seen.end()) it = seen.emplace(th, costs_at(th)).first;
+        return it->second;
+      });
     }
-    return std::tuple{at.theta, seen.at(at.theta), se};
+    return std::tuple{at.theta, seen.at(at.theta), se, robust_se};
   };
   CandidateOutcome out;
   out.spec = &spec;
@@ -623,7 +664,8 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
   // Each fold's held-out error under the parameters fitted (grid, then refined) on the other
   // folds; and the fit on all steps (the last slot).
   const auto folds = static_cast<std::size_t>(pooled.folds);
-  std::vector<std::tuple<std::vector<double>, Costs, std::vector<double>>> fits(folds + 1);
+  std::vector<std::tuple<std::vector<double>, Costs, std::vector<double>, std::vector<double>>>
+      fits(folds + 1);
   parallel_for(fits.size(),
                [&](std::size_t f) { fits[f] = refine(f < folds ? static_cast<int>(f) : -1); });
   for (std::size_t ui = 0; ui < units.size(); ++ui) {
@@ -631,12 +673,13 @@ CandidateOutcome fit_candidate(const std::vector<Unit>& units, const Pooled& poo
     out.heldout.force[ui] = c.force[ui];
     out.heldout.zero[ui] = c.zero[ui];
   }
-  std::tie(out.theta, out.in_sample, out.se) = std::move(fits[folds]);
+  std::tie(out.theta, out.in_sample, out.se, out.robust_se) = std::move(fits[folds]);
   // At a bound the minimum is the constraint's, not the data's: the curvature says nothing of
   // how well the parameter is determined.
   for (std::size_t p = 0; p < out.theta.size(); ++p) {
     if (out.theta[p] <= spec.params[p].lo || out.theta[p] >= spec.params[p].hi) {
       out.se[p] = std::numeric_limits<double>::quiet_NaN();
+      out.robust_se[p] = std::numeric_limits<double>::quiet_NaN();
     }
   }
   return out;
@@ -947,7 +990,7 @@ EffectEstimate estimate_of(const CandidateOutcome& c) {
   EffectEstimate e;
   e.name = c.spec->name;
   for (std::size_t p = 0; p < c.theta.size(); ++p) {
-    e.params.push_back({c.spec->params[p].name, c.theta[p], c.se[p]});
+    e.params.push_back({c.spec->params[p].name, c.theta[p], c.se[p], c.robust_se[p]});
   }
   return e;
 }

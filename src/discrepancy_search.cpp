@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstddef>
 #include <limits>
+#include <map>
 #include <stdexcept>
 #include <utility>
 
@@ -80,9 +81,10 @@ std::vector<std::vector<double>> principal_directions(const std::vector<double>&
 constexpr double kRise = 2.0;
 constexpr int kMaxDoublings = 5;
 
-std::vector<double> secant_standard_errors(const SearchPoint& at, const std::vector<double>& h,
-                                           const std::vector<double>& stencil_H,
-                                           const SearchBox& box, const SearchObjective& objective) {
+// cov = 2 H^-1 in the parameters' units, q x q by rows; all NaN where a curvature is not positive.
+std::vector<double> secant_covariance(const SearchPoint& at, const std::vector<double>& h,
+                                      const std::vector<double>& stencil_H, const SearchBox& box,
+                                      const SearchObjective& objective) {
   const std::size_t q = h.size();
   const auto directions = principal_directions(stencil_H, q);
   const auto along = [&](const std::vector<double>& v, double s) {
@@ -90,7 +92,7 @@ std::vector<double> secant_standard_errors(const SearchPoint& at, const std::vec
     for (std::size_t p = 0; p < q; ++p) th[p] += s * v[p] * h[p];
     return th;
   };
-  // cov = 2 H^-1 = V diag(2 / c) V' in the steps' units.
+  // cov = 2 H^-1 = V diag(2 / c) V' in the steps' units, scaled to the parameters'.
   std::vector<double> cov(q * q, 0.0);
   for (const auto& v : directions) {
     double s = 1.0;
@@ -104,14 +106,12 @@ std::vector<double> secant_standard_errors(const SearchPoint& at, const std::vec
       s *= 2;
     }
     const double c = 2 * rise / (s * s);
-    if (!(c > 0)) return std::vector<double>(q, std::numeric_limits<double>::quiet_NaN());
+    if (!(c > 0)) return std::vector<double>(q * q, std::numeric_limits<double>::quiet_NaN());
     for (std::size_t i = 0; i < q; ++i) {
-      for (std::size_t j = 0; j < q; ++j) cov[i * q + j] += 2.0 / c * v[i] * v[j];
+      for (std::size_t j = 0; j < q; ++j) cov[i * q + j] += 2.0 / c * v[i] * v[j] * h[i] * h[j];
     }
   }
-  std::vector<double> se(q);
-  for (std::size_t i = 0; i < q; ++i) se[i] = std::sqrt(cov[i * q + i]) * h[i];
-  return se;
+  return cov;
 }
 
 // The step of the standard errors' difference stencil.
@@ -167,7 +167,7 @@ SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
                                  const SearchObjective& objective) {
   const std::size_t q = start.theta.size();
   if (q == 0 || q > 2) throw std::invalid_argument("settle_on_stencil: one or two parameters");
-  SettledMinimum out{std::move(start), {}, 0};
+  SettledMinimum out{std::move(start), {}, {}, 0};
   const auto offsets = poll_offsets(q);
   std::vector<double> values(offsets.size());
   for (;;) {
@@ -180,13 +180,56 @@ SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
       if (inside(point, box) && values[k] < best) lowest = k;
     }
     if (lowest == offsets.size() || out.moves == kSettleMoves) {
-      out.se = secant_standard_errors(out.at, h, stencil_hessian(out.at.value, values, q), box,
-                                      objective);
+      out.cov =
+          secant_covariance(out.at, h, stencil_hessian(out.at.value, values, q), box, objective);
+      out.se.resize(q);
+      for (std::size_t i = 0; i < q; ++i) out.se[i] = std::sqrt(out.cov[i * q + i]);
       return out;
     }
     out.at = {offset_point(out.at.theta, offsets[lowest], h), values[lowest]};
     ++out.moves;
   }
+}
+
+std::vector<double> clustered_sandwich_se(const std::vector<double>& model_cov,
+                                          const std::vector<std::vector<double>>& unit_gradients,
+                                          const std::vector<int>& cluster_of) {
+  const std::size_t q2 = model_cov.size();
+  const auto q = static_cast<std::size_t>(std::lround(std::sqrt(static_cast<double>(q2))));
+  if (q == 0 || q * q != q2 || unit_gradients.size() != cluster_of.size()) {
+    throw std::invalid_argument("clustered_sandwich_se: a q x q covariance and one cluster a unit");
+  }
+  const std::vector<double> none(q, std::numeric_limits<double>::quiet_NaN());
+  if (!std::all_of(model_cov.begin(), model_cov.end(), [](double v) { return std::isfinite(v); })) {
+    return none;
+  }
+  std::map<int, std::vector<double>> sums;
+  for (std::size_t u = 0; u < unit_gradients.size(); ++u) {
+    if (unit_gradients[u].size() != q) {
+      throw std::invalid_argument("clustered_sandwich_se: q gradients a unit");
+    }
+    std::vector<double>& d = sums.try_emplace(cluster_of[u], q, 0.0).first->second;
+    for (std::size_t p = 0; p < q; ++p) d[p] += unit_gradients[u][p];
+  }
+  if (sums.size() < 2) return none;
+  const auto g = static_cast<double>(sums.size());
+  std::vector<double> B(q * q, 0.0);
+  for (const auto& [cluster, d] : sums) {
+    for (std::size_t i = 0; i < q; ++i) {
+      for (std::size_t j = 0; j < q; ++j) B[i * q + j] += g / (g - 1) * d[i] * d[j];
+    }
+  }
+  std::vector<double> se(q);
+  for (std::size_t p = 0; p < q; ++p) {
+    double v = 0.0;
+    for (std::size_t i = 0; i < q; ++i) {
+      for (std::size_t j = 0; j < q; ++j) {
+        v += 0.5 * model_cov[p * q + i] * B[i * q + j] * 0.5 * model_cov[j * q + p];
+      }
+    }
+    se[p] = std::sqrt(v);
+  }
+  return se;
 }
 
 }  // namespace gaitmon::discrepancy_detail

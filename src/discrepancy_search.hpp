@@ -36,6 +36,8 @@ struct SettledMinimum {
   /// box). NaN where a secant's curvature is not positive. Not told apart for a parameter on a
   /// bound: the caller knows its ranges.
   std::vector<double> se;
+  /// The same cov in the parameters' units, q x q by rows; NaN where se is.
+  std::vector<double> cov;
   int moves = 0;  ///< how often the stencil's centre moved
 };
 
@@ -45,5 +47,15 @@ struct SettledMinimum {
 /// parameters.
 SettledMinimum settle_on_stencil(SearchPoint start, const SearchBox& box,
                                  const SearchObjective& objective);
+
+/// Standard errors that hold where the model's residuals are not independent, or the model not the
+/// data's: the sandwich H^-1 B H^-1 with H^-1 = model_cov / 2 (model_cov = 2 H^-1, H the
+/// deviance's Hessian) and B = G / (G - 1) sum over clusters of d_c d_c', d_c the sum of the
+/// deviance's gradients of the cluster's units (`unit_gradients`, q each; `cluster_of` one per
+/// unit). Units of one cluster may be correlated, clusters not. NaN for all where model_cov is, or
+/// there are fewer than two clusters.
+std::vector<double> clustered_sandwich_se(const std::vector<double>& model_cov,
+                                          const std::vector<std::vector<double>>& unit_gradients,
+                                          const std::vector<int>& cluster_of);
 
 }  // namespace gaitmon::discrepancy_detail

@@ -1,6 +1,8 @@
 // JSON forms of the model's value types.
 #include "gaitmon/json.hpp"
 
+#include <cmath>
+
 namespace gaitmon {
 
 void to_json(nlohmann::json& j, const EllipsoidParams& p) {
@@ -19,6 +21,11 @@ void to_json(nlohmann::json& j, const RegionComparison& c) {
   j = {{"step_regions", c.step_regions},
        {"baseline_heldout_nrmse_pct", nrmse(c.baseline_heldout_nrmse_pct)},
        {"extended_heldout_nrmse_pct", nrmse(c.extended_heldout_nrmse_pct)}};
+}
+
+void to_json(nlohmann::json& j, const ParamEstimate& p) {
+  const auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nullptr; };
+  j = {{"value", p.value}, {"se", finite(p.se)}, {"robust_se", finite(p.robust_se)}};
 }
 
 std::string json_file_text(const nlohmann::json& j) {

@@ -1,12 +1,15 @@
 // The candidates' parameter search on objectives whose minimum and curvature are known in closed
 // form: the pattern search follows an oblique valley and keeps to its box, and the settling
-// takes the curvature at a minimum of the stencil's own scale, not on a slope.
+// takes the curvature at a minimum of the stencil's own scale, not on a slope; the clustered
+// sandwich's errors worked by hand.
 #include "src/discrepancy_search.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
+#include <stdexcept>
 #include <vector>
 
 namespace gaitmon::discrepancy_detail {
@@ -67,6 +70,12 @@ TEST(SettleOnStencil, AtTheMinimumOfAQuadraticGivesItsCovarianceExactly) {
   // Central differences are exact on a quadratic; what is left is rounding.
   EXPECT_NEAR(s.se[0], q.se(0), 1e-9 * q.se(0));
   EXPECT_NEAR(s.se[1], q.se(1), 1e-9 * q.se(1));
+  // cov = A^-1 = [[c, -b], [-b, a]] / (a c - b^2) = [[250, 300], [300, 400]] / 10000.
+  ASSERT_EQ(s.cov.size(), 4u);
+  EXPECT_NEAR(s.cov[0], 0.025, 1e-9);
+  EXPECT_NEAR(s.cov[1], 0.03, 1e-9);
+  EXPECT_NEAR(s.cov[2], 0.03, 1e-9);
+  EXPECT_NEAR(s.cov[3], 0.04, 1e-9);
 }
 
 TEST(SettleOnStencil, OneParameter) {
@@ -143,6 +152,33 @@ TEST(SettleOnStencil, NeverMovesOutOfItsBox) {
   EXPECT_EQ(s.moves, 0);
   EXPECT_EQ(s.at.theta, (std::vector<double>{1.0, 0.5}));
   EXPECT_GT(outside, 0);  // evaluated there for the curvature, not moved to
+}
+
+// model_cov = 2 H^-1, so H^-1 is half of it; B = G / (G - 1) sum_c d_c d_c'.
+TEST(ClusteredSandwich, OneParameterByHand) {
+  // H^-1 = 1. Clusters {1, -1} and {2, 0} sum to 0 and 2: B = 2 / 1 x 4 = 8, var = 8.
+  const auto se = clustered_sandwich_se({2.0}, {{1.0}, {-1.0}, {2.0}, {0.0}}, {0, 0, 1, 1});
+  ASSERT_EQ(se.size(), 1u);
+  EXPECT_DOUBLE_EQ(se[0], std::sqrt(8.0));
+  // Each unit its own cluster: B = 4 / 3 x (1 + 1 + 4) = 8 as well; the same four units as one
+  // cluster give no error (one cluster cannot show a spread).
+  EXPECT_DOUBLE_EQ(clustered_sandwich_se({2.0}, {{1.0}, {-1.0}, {2.0}, {0.0}}, {0, 1, 2, 3})[0],
+                   std::sqrt(8.0));
+  EXPECT_TRUE(std::isnan(clustered_sandwich_se({2.0}, {{1.0}, {2.0}}, {5, 5})[0]));
+}
+
+TEST(ClusteredSandwich, TwoParametersByHand) {
+  // H^-1 = diag(1, 4). Three clusters (1, 0), (0, 1), (-1, -1): sum d d' = [[2, 1], [1, 2]],
+  // B = 3 / 2 of it = [[3, 1.5], [1.5, 3]]; H^-1 B H^-1 = [[3, 6], [6, 48]].
+  const auto se = clustered_sandwich_se({2.0, 0.0, 0.0, 8.0},
+                                        {{1.0, 0.0}, {0.0, 1.0}, {-1.0, -1.0}}, {7, 8, 9});
+  ASSERT_EQ(se.size(), 2u);
+  EXPECT_NEAR(se[0], std::sqrt(3.0), 1e-12);
+  EXPECT_NEAR(se[1], std::sqrt(48.0), 1e-12);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_TRUE(std::isnan(clustered_sandwich_se({nan, nan, nan, nan}, {{1, 0}, {0, 1}}, {0, 1})[1]));
+  EXPECT_THROW(clustered_sandwich_se({2.0, 0.0, 0.0}, {{1.0}}, {0}), std::invalid_argument);
+  EXPECT_THROW(clustered_sandwich_se({2.0}, {{1.0}, {1.0}}, {0}), std::invalid_argument);
 }
 
 TEST(SettleOnStencil, RefusesThreeParameters) {

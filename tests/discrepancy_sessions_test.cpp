@@ -239,7 +239,8 @@ TEST(DiscrepancySessions, ConfusionMatrixAndGapShrinkOnSimulatedSessions) {
       std::string values;
       if (!r.named_effects.empty()) {
         for (const ParamEstimate& p : r.named_effects.front().params) {
-          values += fmt::format(" {}={:.4g}+-{:.2g}", p.name, p.value, p.se);
+          values += fmt::format(" {}={:.4g}+-{:.2g} (sandwich {:.2g})", p.name, p.value, p.se,
+                                p.robust_se);
         }
       }
       std::string truths;

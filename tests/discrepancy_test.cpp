@@ -537,6 +537,18 @@ TEST(Discrepancy, ExtendedModelReportsTheSharedParametersWithStandardErrors) {
   EXPECT_NEAR(params[0].value, 120.0, 18.0);
   EXPECT_NEAR(params[1].value, 0.05, 0.0075);
   EXPECT_GT(params[0].se, 0.0);
+  // Where the model is the data's the step-clustered sandwich estimates the amplitude's error as
+  // the curvature does, from the spread of the steps' gradients instead: the same size, not the
+  // same value. The duration's SE is a fifteenth of a frame, and each unit's cost moves in steps
+  // as the pulse's end crosses a frame: a difference over one SE sees few of them, and the
+  // sandwich comes out small (0.0002 for 0.00067 s).
+  for (const ParamEstimate& p : params) {
+    ASSERT_TRUE(std::isfinite(p.robust_se)) << p.name;
+    EXPECT_GT(p.robust_se, 0.0) << p.name;
+    EXPECT_NE(p.robust_se, p.se) << p.name;
+  }
+  EXPECT_GT(params[0].robust_se, params[0].se / 2);
+  EXPECT_LT(params[0].robust_se, params[0].se * 2);
   EXPECT_LT(fit.extended_nrmse_pct, 0.5 * fit.baseline_nrmse_pct);
   EXPECT_LT(fit.extended_heldout_nrmse_pct, 0.5 * fit.baseline_heldout_nrmse_pct);
 

@@ -19,6 +19,9 @@ void to_json(nlohmann::json& j, const EllipsoidParams& p);
 /// without error).
 void to_json(nlohmann::json& j, const RegionComparison& c);
 
+/// {"value": ..., "se": ..., "robust_se": ...}, an error null where it is not finite.
+void to_json(nlohmann::json& j, const ParamEstimate& p);
+
 /// `j` as the text of a file, indented by 2, with bytes that are not UTF-8 (a file name or a
 /// header's subject given in another encoding) replaced by U+FFFD rather than thrown on after
 /// all the work.

@@ -336,7 +336,7 @@ nlohmann::json effects_json(const std::optional<ExtendedModelFit>& fit) {
   nlohmann::json effects = nlohmann::json::array();
   for (const EffectEstimate& e : fit->effects) {
     nlohmann::json params = nlohmann::json::object();
-    for (const ParamEstimate& p : e.params) params[p.name] = {{"value", p.value}, {"se", p.se}};
+    for (const ParamEstimate& p : e.params) params[p.name] = p;
     effects.push_back({{"name", e.name},
                        {"inside_tissue_fit", effect_inside_tissue_fit(e.name)},
                        {"undone_in_readings", effect_undone_in_readings(*fit, e)},
@@ -818,7 +818,7 @@ void run_analyze(const GlobalOptions& global, AnalyzeArgs args) {
     for (const EffectEstimate& e : extended->effects) {
       std::string params;
       for (const ParamEstimate& p : e.params) {
-        params += fmt::format(" {} = {};", p.name, estimate_text(p.value, p.se, " +- "));
+        params += fmt::format(" {} = {};", p.name, param_text(p, " +- "));
       }
       fmt::print("effect {}:{}\n", e.name, params);
     }

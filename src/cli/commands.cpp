@@ -97,6 +97,14 @@ std::string estimate_text(double value, double se, std::string_view plus_minus) 
                            : fmt::format("{:.4g} (no SE)", value);
 }
 
+std::string param_text(const ParamEstimate& p, std::string_view plus_minus) {
+  std::string text = estimate_text(p.value, p.se, plus_minus);
+  if (std::isfinite(p.se) && std::isfinite(p.robust_se)) {
+    text += fmt::format(" (sandwich{}{:.2g})", plus_minus, p.robust_se);
+  }
+  return text;
+}
+
 std::shared_ptr<lcm::LCM> open_lcm_url(const GlobalOptions& global, const std::string& url,
                                        bool from_command_line) {
   try {

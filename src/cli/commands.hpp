@@ -12,6 +12,7 @@
 
 #include "drivers/byte_source.hpp"
 #include "gaitmon/config.hpp"
+#include "gaitmon/discrepancy.hpp"
 
 namespace lcm {
 class LCM;
@@ -33,6 +34,10 @@ Config load_global_config(const GlobalOptions& global);
 /// and "(no SE)" where the data do not determine it (a non-finite se), so that no report prints
 /// "nan".
 std::string estimate_text(double value, double se, std::string_view plus_minus);
+
+/// estimate_text of an effect's parameter, then " (sandwich" plus_minus robust_se ")" where the
+/// step-clustered sandwich gives an error too.
+std::string param_text(const ParamEstimate& p, std::string_view plus_minus);
 
 /// What analyze, discrepancy and creep print after measuring a creep of `gain` and `tau_s` from
 /// the zeros of a session (or of several that agree): the [sensor_creep] lines that undo it in

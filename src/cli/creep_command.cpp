@@ -64,15 +64,11 @@ RecordingCreep measure_creep(const fs::path& session, const Config& config) {
   RecordingCreep out;
   out.session = session;
   out.steps = steps.size();
-  for (const ParamEstimate& p : fit.effects.front().params) {
-    if (p.name == "gain") {
-      out.creep.gain = p.value;
-      out.creep.gain_se = p.se;
-    } else if (p.name == "tau_s") {
-      out.creep.tau_s = p.value;
-      out.creep.tau_se_s = p.se;
-    }
-  }
+  ParamEstimate gain, tau;
+  for (const ParamEstimate& p : fit.effects.front().params) (p.name == "gain" ? gain : tau) = p;
+  out.creep = larger_errors(gain, tau);
+  out.curvature = {gain.value, gain.se, tau.value, tau.se};
+  out.sandwich = {gain.value, gain.robust_se, tau.value, tau.robust_se};
   out.zero_before_pct = fit.zero_baseline_heldout_nrmse_pct;
   out.zero_after_pct = fit.zero_extended_heldout_nrmse_pct;
   out.shown = effect_undone_in_readings(fit, fit.effects.front());
@@ -117,8 +113,10 @@ void run_creep(const GlobalOptions& global, const CreepArgs& args) {
         sensor_creep_advice(config, found.agreement->mean.gain, found.agreement->mean.tau_s);
   }
 
-  fmt::print("sensor creep of each recording{}, as analyze --effects sensor_creep fits it:\n",
-             on_top_of_config(found.config_creep));
+  fmt::print(
+      "sensor creep of each recording{}, as analyze --effects sensor_creep fits it (+- the larger "
+      "of the curvature's and the step-clustered sandwich's standard errors):\n",
+      on_top_of_config(found.config_creep));
   fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {}\n", "recording", "steps", "gain", "tau_s",
              "zero channel held out", "shows it");
   for (const RecordingCreep& r : found.recordings) {

@@ -125,6 +125,13 @@ std::string_view verdict_name(CreepVerdict v) {
   return "";
 }
 
+MeasuredCreep larger_errors(const ParamEstimate& gain, const ParamEstimate& tau) {
+  const auto larger = [](const ParamEstimate& p) {
+    return std::isfinite(p.robust_se) ? std::max(p.se, p.robust_se) : p.se;
+  };
+  return {gain.value, larger(gain), tau.value, larger(tau)};
+}
+
 std::string on_top_of_config(const SensorCreepSettings& config_creep) {
   return config_creep.gain > 0.0
              ? fmt::format(" on top of the config's [sensor_creep] (gain {:.4g}, tau {:.4g} s)",
@@ -177,6 +184,10 @@ std::string creep_json_text(const CreepFindings& f) {
   nlohmann::json recordings = nlohmann::json::array();
   for (const RecordingCreep& r : f.recordings) {
     nlohmann::json j = measured_json(r.creep);
+    j["gain_se_curvature"] = finite_or_null(r.curvature.gain_se);
+    j["gain_se_sandwich"] = finite_or_null(r.sandwich.gain_se);
+    j["tau_se_curvature_s"] = finite_or_null(r.curvature.tau_se_s);
+    j["tau_se_sandwich_s"] = finite_or_null(r.sandwich.tau_se_s);
     j["session"] = r.session.string();
     j["steps"] = r.steps;
     j["zero_baseline_heldout_nrmse_pct"] = r.zero_before_pct;
@@ -218,7 +229,8 @@ std::string render_creep_html(const CreepFindings& f) {
   html += fmt::format(
       "<p>Each recording's creep{}, as <code>analyze --effects sensor_creep</code> fits it: a held "
       "load reads 1 + gain of its value after a few tau. The intervals are 95 % (1.96 standard "
-      "errors). Grey: the recording's zeros do not show the creep (it is left out of the mean); "
+      "errors, each the larger of the deviance curvature's and the step-clustered sandwich's). "
+      "Grey: the recording's zeros do not show the creep (it is left out of the mean); "
       "hollow: no standard error. Red: the recordings' weighted mean and its 95 % band.</p>",
       escape(on_top_of_config(f.config_creep)));
   html += "<p><b>" + escape(verdict_text(f)) + "</b></p>";

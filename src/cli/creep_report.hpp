@@ -11,6 +11,7 @@
 
 #include "gaitmon/config.hpp"
 #include "gaitmon/creep.hpp"
+#include "gaitmon/discrepancy.hpp"
 
 namespace gaitmon::cli {
 
@@ -18,7 +19,11 @@ namespace gaitmon::cli {
 struct RecordingCreep {
   std::filesystem::path session;
   std::size_t steps = 0;
+  /// Each standard error the larger of the fit's two: the curvature's and the step-clustered
+  /// sandwich's (ParamEstimate::robust_se), so that walks of one pair are not called two.
   MeasuredCreep creep;
+  MeasuredCreep curvature;       ///< the same with the curvature's standard errors
+  MeasuredCreep sandwich;        ///< and with the sandwich's
   double zero_before_pct = 0.0;  ///< the zero channel's held-out NRMSE without and with it
   double zero_after_pct = 0.0;
   bool shown = false;  ///< effect_undone_in_readings: the zeros show it and the data determine it
@@ -40,6 +45,10 @@ struct CreepFindings {
 
 /// "none_shows", "one_shows", "disagree" or "agree".
 std::string_view verdict_name(CreepVerdict v);
+
+/// The creep of a fit's gain and tau, each standard error the larger of the two it has (NaN where
+/// the curvature gives none).
+MeasuredCreep larger_errors(const ParamEstimate& gain, const ParamEstimate& tau);
 
 /// " on top of the config's [sensor_creep] (gain G, tau T s)" where it undoes a creep, else empty.
 std::string on_top_of_config(const SensorCreepSettings& config_creep);

@@ -40,11 +40,12 @@ struct AreaUsed {
   CellReadingEvidence cells;
 };
 
-// " name=value+-se" per parameter, "(no SE)" where the data do not determine it.
+// " name=value+-se" per parameter, "(no SE)" where the data do not determine it, and the
+// sandwich's error where it has one.
 std::string params_text(const std::vector<ParamEstimate>& params) {
   std::string text;
   for (const ParamEstimate& p : params) {
-    text += fmt::format(" {}={}", p.name, estimate_text(p.value, p.se, "+-"));
+    text += fmt::format(" {}={}", p.name, param_text(p, "+-"));
   }
   return text;
 }
@@ -62,7 +63,7 @@ void print_candidates(const std::vector<CandidateResult>& list) {
 
 nlohmann::json params_json(const std::vector<ParamEstimate>& params) {
   nlohmann::json j = nlohmann::json::object();
-  for (const ParamEstimate& p : params) j[p.name] = {{"value", p.value}, {"se", p.se}};
+  for (const ParamEstimate& p : params) j[p.name] = p;
   return j;
 }
 

@@ -184,7 +184,7 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
   for (const EffectEstimate& e : r.named_effects) {
     named += "<li><b>" + escape(e.name) + "</b>: ";
     for (const ParamEstimate& p : e.params) {
-      named += fmt::format("{} = {}; ", escape(p.name), estimate_text(p.value, p.se, " &plusmn; "));
+      named += fmt::format("{} = {}; ", escape(p.name), param_text(p, " &plusmn; "));
     }
     named += "</li>";
   }
@@ -201,8 +201,7 @@ std::string render_discrepancy_html(const std::string& session_name, const Discr
     for (const CandidateResult& c : list) {
       std::string params;
       for (const ParamEstimate& p : c.params) {
-        params +=
-            fmt::format("{} = {}<br>", escape(p.name), estimate_text(p.value, p.se, " &plusmn; "));
+        params += fmt::format("{} = {}<br>", escape(p.name), param_text(p, " &plusmn; "));
       }
       candidates += fmt::format(
           "<tr><td>{}</td><td>{:.2f}</td><td>{:.1f}</td><td>{:.2f}</td><td>{:.1f}</td><td>{:.0f}"

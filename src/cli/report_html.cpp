@@ -624,6 +624,10 @@ std::string estimate_cell(const ParamEstimate& p) {
   return fmt::format("{} ({})", num(p.value), std::isfinite(p.se) ? num(p.se) : "undetermined");
 }
 
+std::string sandwich_cell(const ParamEstimate& p) {
+  return std::isfinite(p.se) && std::isfinite(p.robust_se) ? num(p.robust_se) : "&ndash;";
+}
+
 // Without it the parameters and model forces below could be read as the baseline's.
 std::string effects_section(const ExtendedModelFit& fit) {
   const EffectPlacement placed = place_effects(fit);
@@ -654,16 +658,16 @@ std::string effects_section(const ExtendedModelFit& fit) {
                    placed.on_top.size() == 1 ? "is" : "are");
   }
   out +=
-      "<table><tr><th>effect</th><th>parameter</th><th>value (SE)</th><th>in each step's "
-      "fit</th></tr>";
+      "<table><tr><th>effect</th><th>parameter</th><th>value (SE)</th><th>step-clustered "
+      "sandwich SE</th><th>in each step's fit</th></tr>";
   for (const EffectEstimate& e : fit.effects) {
     const std::string_view place = effect_inside_tissue_fit(e.name)    ? "inside"
                                    : effect_undone_in_readings(fit, e) ? "undone in the readings"
                                                                        : "on top";
     for (const ParamEstimate& p : e.params) {
       fmt::format_to(std::back_inserter(out),
-                     "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>", escape(e.name),
-                     escape(p.name), estimate_cell(p), place);
+                     "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                     escape(e.name), escape(p.name), estimate_cell(p), sandwich_cell(p), place);
     }
   }
   fmt::format_to(std::back_inserter(out),

@@ -23,9 +23,11 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // the spread is 2 SE each side: chi-square 8 on 1 degree of freedom, p 0.0047, under 0.01.
 CreepFindings two_walks_apart() {
   CreepFindings f;
-  f.recordings = {{"a.csv", 30, {0.30, 0.01, 1.0, 0.1}, 0.4, 0.1, true},
-                  {"b.csv", 31, {0.34, 0.01, 1.2, 0.1}, 0.4, 0.1, true},
-                  {"c.csv", 29, {0.20, kNaN, 0.5, kNaN}, 0.2, 0.19, false}};
+  const MeasuredCreep a_used{0.30, 0.01, 1.0, 0.1}, b_used{0.34, 0.01, 1.2, 0.1};
+  const MeasuredCreep c_used{0.20, kNaN, 0.5, kNaN};
+  f.recordings = {{"a.csv", 30, a_used, {0.30, 0.008, 1.0, 0.1}, a_used, 0.4, 0.1, true},
+                  {"b.csv", 31, b_used, b_used, {0.34, 0.006, 1.2, 0.05}, 0.4, 0.1, true},
+                  {"c.csv", 29, c_used, c_used, c_used, 0.2, 0.19, false}};
   CreepAgreement a;
   a.recordings = 2;
   a.mean = {0.32, 0.01 / std::sqrt(2.0), 1.1, 0.1 / std::sqrt(2.0)};
@@ -46,6 +48,20 @@ std::vector<double> numbers_after(const std::string& text, const std::string& at
     out.push_back(std::stod((*it)[1].str()));
   }
   return out;
+}
+
+// Each error is the larger of the two a fit gives; the curvature's alone where the sandwich has
+// none, and none where the curvature has none.
+TEST(CreepReport, AWalksErrorsAreTheLargerOfTheCurvaturesAndTheSandwichs) {
+  const MeasuredCreep c = larger_errors({"gain", 0.3, 0.01, 0.02}, {"tau_s", 2.0, 0.2, 0.1});
+  EXPECT_EQ(c.gain, 0.3);
+  EXPECT_EQ(c.gain_se, 0.02);
+  EXPECT_EQ(c.tau_s, 2.0);
+  EXPECT_EQ(c.tau_se_s, 0.2);
+  const MeasuredCreep no_sandwich =
+      larger_errors({"gain", 0.3, 0.01, kNaN}, {"tau_s", 2.0, kNaN, kNaN});
+  EXPECT_EQ(no_sandwich.gain_se, 0.01);
+  EXPECT_TRUE(std::isnan(no_sandwich.tau_se_s));
 }
 
 TEST(CreepReport, TheVerdictFollowsTheAgreementAndHowManyShowACreep) {
@@ -74,6 +90,10 @@ TEST(CreepReport, TheJsonHoldsEveryRecordingWithNullWhereThereIsNoStandardError)
   EXPECT_EQ(j["recordings"][1]["gain"], 0.34);
   EXPECT_TRUE(j["recordings"][2]["gain_se"].is_null());
   EXPECT_TRUE(j["recordings"][2]["tau_se_s"].is_null());
+  EXPECT_EQ(j["recordings"][0]["gain_se_curvature"], 0.008);
+  EXPECT_EQ(j["recordings"][0]["gain_se_sandwich"], 0.01);
+  EXPECT_EQ(j["recordings"][1]["tau_se_sandwich_s"], 0.05);
+  EXPECT_TRUE(j["recordings"][2]["gain_se_sandwich"].is_null());
   EXPECT_FALSE(j["recordings"][2]["shows_creep"].get<bool>());
   EXPECT_EQ(j["agreement"]["degrees_of_freedom"], 1);
   EXPECT_EQ(j["agreement"]["gain_chi2"], 8.0);

@@ -1,5 +1,6 @@
 // The analyze report drawn from analyses made by hand: the summary, the parameter table beside
-// Appendix I, the regions nothing was fitted in, the step table, links, escaping and no nan.
+// Appendix I, the effects' parameters with both errors, the regions nothing was fitted in, the
+// step table, links, escaping and no nan.
 #include "src/cli/report_html.hpp"
 
 #include <gtest/gtest.h>
@@ -146,6 +147,31 @@ TEST(ReportHtml, SummarisesTheSessionAndItsSettings) {
                   "rate at contact ends, P free."));
   EXPECT_TRUE(has(other, "<b>--fit seed8</b>: all eight parameters are free"));
   EXPECT_FALSE(has(other, "C and d0 are <b>declared</b>"));
+}
+
+// Each effect's parameter with both its errors: the curvature's, and the step-clustered
+// sandwich's where there is one; none where the data do not determine the parameter.
+TEST(ReportHtml, TablesTheEffectsParametersWithBothErrors) {
+  const Fixture f;
+  ExtendedModelFit fit;
+  fit.effects = {
+      {"stress_relaxation",
+       {{"strength", 0.3, 0.01, 0.025},
+        {"tau_s", 0.2, 0.02, std::numeric_limits<double>::quiet_NaN()}}},
+      {"hysteresis", {{"strength", 0.0, std::numeric_limits<double>::quiet_NaN(), 0.5}}}};
+  ReportInput input = f.input();
+  input.extended = &fit;
+  const std::string html = render_report_html(input);
+  EXPECT_TRUE(has(html, "<th>value (SE)</th><th>step-clustered sandwich SE</th>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>stress_relaxation</td><td>strength</td><td>0.3 (0.01)</td>"
+                  "<td>0.025</td><td>inside</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>stress_relaxation</td><td>tau_s</td><td>0.2 (0.02)</td>"
+                  "<td>&ndash;</td><td>inside</td></tr>"));
+  EXPECT_TRUE(has(html,
+                  "<tr><td>hysteresis</td><td>strength</td><td>0 (undetermined)</td>"
+                  "<td>&ndash;</td><td>inside</td></tr>"));
 }
 
 TEST(ReportHtml, TablesEachParameterBesideAppendixI) {
