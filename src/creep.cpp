@@ -46,6 +46,27 @@ void CreepCorrection::undo(Frame& frame) {
   }
 }
 
+CellsAtZero loaded_cells_at_zero(std::span<const Step> steps) {
+  constexpr double kLoadedBits = 2.0;
+  constexpr double kAtZeroBits = 0.5;
+  CellsAtZero out;
+  for (const Step& step : steps) {
+    const std::vector<double>& zero = step.sensor_zero_bits;
+    std::vector<char> loaded(zero.size(), 0);
+    for (const Frame& frame : step.stance) {
+      for (std::size_t c = 0; c < frame.bits.size() && c < zero.size(); ++c) {
+        if (frame.bits[c] - zero[c] >= kLoadedBits) loaded[c] = 1;
+      }
+    }
+    for (std::size_t c = 0; c < zero.size(); ++c) {
+      if (!loaded[c]) continue;
+      ++out.loaded;
+      if (zero[c] < kAtZeroBits) ++out.at_zero;
+    }
+  }
+  return out;
+}
+
 std::optional<CreepCorrection> creep_correction_of(const SensorCreepSettings& creep) {
   if (creep.gain == 0.0) return std::nullopt;
   return CreepCorrection(creep.gain, creep.tau_s);

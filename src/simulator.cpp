@@ -219,6 +219,8 @@ void validate(const SimulationOptions& o) {
           "must be in [0, 10]");
   require(o.noise_sd_bits >= 0.0 && o.noise_sd_bits <= 50.0, "noise_sd_bits", "must be in [0, 50]");
   require(o.max_bias_bits >= 0 && o.max_bias_bits <= 50, "max_bias_bits", "must be in [0, 50]");
+  require(o.min_bias_bits >= 0 && o.min_bias_bits <= o.max_bias_bits, "min_bias_bits",
+          "must be in [0, max_bias_bits]");
   require(o.tissue_step_sd_pct >= 0.0 && o.tissue_step_sd_pct <= 100.0, "tissue_step_sd_pct",
           "must be in [0, 100]");
   require(o.placement_sd_mm >= 0.0 && o.placement_sd_mm <= 10.0, "placement_sd_mm",
@@ -343,6 +345,7 @@ void write_truth(const SimulationTruth& truth, const std::filesystem::path& path
                   {"stance_fraction", o.timing.stance_fraction},
                   {"jitter_pct", o.timing.jitter_pct},
                   {"noise_sd_bits", o.noise_sd_bits},
+                  {"min_bias_bits", o.min_bias_bits},
                   {"max_bias_bits", o.max_bias_bits},
                   {"tissue_step_sd_pct", o.tissue_step_sd_pct},
                   {"placement_sd_mm", o.placement_sd_mm},
@@ -532,7 +535,7 @@ SimulationTruth simulate_session(const Config& config, const SimulationOptions& 
   for (Foot foot : kFeet) {
     auto& bias = truth.dc_bias_bits[static_cast<std::size_t>(foot)];
     bias.resize(sensor_count);
-    for (int& b : bias) b = rng.uniform_int(0, options.max_bias_bits);
+    for (int& b : bias) b = rng.uniform_int(options.min_bias_bits, options.max_bias_bits);
   }
 
   std::array<std::vector<StanceTally>, 2> tallies{std::vector<StanceTally>(stances[0].size()),

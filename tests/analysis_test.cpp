@@ -467,6 +467,12 @@ TEST(AnalyseSession, ThePooledMeansStandardErrorHoldsTheChainsSharedError) {
 // Measured on 12 sessions each of +10 and -10 % (sizes 37-38, 41-42, 45-46, seeds 1-4) the
 // heel's and metatarsals' cbar is called in 12 of 12 (the default fit: 0 to 6 of 12).
 TEST(AnalyseSession, AtOneMPerSessionTheFeetsCbarDifferenceIsFound) {
+  if (test::kSanitized) {
+    GTEST_SKIP()
+        << "three minute-long walks take too long under the sanitizers; the analysis at one m per "
+           "session runs under them in AtOneMPerSessionThePooledMeanHoldsThatMsErrorOnce, "
+           "the feet's comparison in FindsADriftAndADifferenceBetweenTheFeetAndNeitherWithout";
+  }
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-asymmetry-shared-m");
   const auto [own, shared] = at_own_and_shared_m(
@@ -511,6 +517,12 @@ TEST(AnalyseSession, AtOneMPerSessionTheFeetsCbarDifferenceIsFound) {
 // times larger. On 24 sessions (README, "Drift over the session") the heel's and the
 // metatarsals' cbar drift was called in 53 of 72 at one m, in 5 at each step's own.
 TEST(AnalyseSession, AtOneMPerSessionACbarDriftIsFound) {
+  if (test::kSanitized) {
+    GTEST_SKIP()
+        << "two minute-long walks take too long under the sanitizers; the analysis at one m per "
+           "session runs under them in AtOneMPerSessionThePooledMeanHoldsThatMsErrorOnce, "
+           "the trend in FindsADriftAndADifferenceBetweenTheFeetAndNeitherWithout";
+  }
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-drift-shared-m");
   const auto [own, shared] = at_own_and_shared_m(
@@ -794,6 +806,11 @@ std::array<double, 4> z_against(const std::array<const Estimate*, 4>& e,
 // too (pool_region_steps), which takes the metatarsals' pooled posteriors at each step's own m
 // from 1.57 / 1.50 / 1.34 / 1.48 to 1.01 / 0.99 / 0.97 / 0.98 (204 region-steps).
 TEST(AnalyseSession, EachStepsStandardErrorWithTheChainsErrorHoldsItsErrorAgainstTheTissue) {
+  if (test::kSanitized) {
+    GTEST_SKIP() << "twelve 10-s walks analysed twice take too long under the sanitizers; each "
+                    "step's error with the chain's runs under them in monitor_test, the pools in "
+                    "ThePooledMeansStandardErrorHoldsTheChainsSharedError";
+  }
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-step-total-se");
   const Region regions[] = {Region::Heel, Region::MidfootPosterior, Region::MidfootAnterior,
@@ -954,6 +971,11 @@ TEST(AnalyseSession, AtOneMPerSessionAStepAtItsOwnMIsLeftOutOfThePool) {
 // sessions. Measured here: ln kbar 0.73, n 0.90 over four pools (the steps' scatter alone 5.3 and
 // 4.8; with stop 54's SDs 0.91 and 0.92, with stop 53's 1.34 and 1.34).
 TEST(AnalyseSession, TheToesPooledStandardErrorHoldsTheirLargerChainError) {
+  if (test::kSanitized) {
+    GTEST_SKIP() << "four 30-s walks take too long under the sanitizers; the pools, the toes' "
+                    "among them, run under them in "
+                    "ThePooledMeansStandardErrorHoldsTheChainsSharedError";
+  }
   const Config config = load_config(default_config_path());
   const auto dir = test::scratch_dir("analysis-pooled-toes");
   std::array<std::vector<double>, 2> z_total, z_steps;

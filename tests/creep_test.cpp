@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "gaitmon/segmentation.hpp"
 #include "gaitmon/simulator.hpp"
 
 namespace gaitmon {
@@ -83,6 +84,30 @@ TEST(CreepCorrection, OfTheConfigIsNoneAtGainZero) {
   ASSERT_TRUE(creep.has_value());
   EXPECT_DOUBLE_EQ(creep->gain(), 0.3);
   EXPECT_DOUBLE_EQ(creep->tau_s(), 2.0);
+}
+
+// A cell counts where some stance frame read 2 bits or more over its zero, and rests at 0 where
+// that zero is under half a bit. Four cells over two steps, worked by hand: step 1 loads cells 0
+// (zero 0.2: at 0) and 3 (zero 3.0), not cell 1 (1.4 bits over its zero of 0.6) nor cell 2 (never
+// over 0); step 2 loads cells 1 (zero 0.4: at 0) and 2 (zero 0.5: not under half a bit). 2 of 4.
+TEST(LoadedCellsAtZero, CountsTheLoadedCellsWhoseZeroIsUnderHalfABit) {
+  const auto frame = [](std::vector<std::uint8_t> bits) {
+    Frame f;
+    f.bits = std::move(bits);
+    return f;
+  };
+  Step one;
+  one.sensor_zero_bits = {0.2, 0.6, 0.0, 3.0};
+  one.stance = {frame({1, 2, 0, 4}), frame({3, 1, 0, 10})};
+  Step two;
+  two.sensor_zero_bits = {0.0, 0.4, 0.5, 3.0};
+  two.stance = {frame({0, 3, 3, 4})};
+  const std::vector<Step> steps{one, two};
+  const CellsAtZero counted = loaded_cells_at_zero(steps);
+  EXPECT_EQ(counted.loaded, 4u);
+  EXPECT_EQ(counted.at_zero, 2u);
+  EXPECT_DOUBLE_EQ(counted.pct(), 50.0);
+  EXPECT_EQ(loaded_cells_at_zero({}).pct(), 0.0);
 }
 
 // Two recordings, worked by hand: weights 1 / se^2 of 100 and 25 give a mean gain of

@@ -713,10 +713,42 @@ TEST(Simulator, RejectsBadOptions) {
   o.tissue_asymmetry_pct = -50.5;
   EXPECT_THROW(run(o), std::invalid_argument);
   o = short_options(1);
+  o.min_bias_bits = 3;
+  o.max_bias_bits = 2;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
+  o.min_bias_bits = -1;
+  EXPECT_THROW(run(o), std::invalid_argument);
+  o = short_options(1);
   EllipsoidParams flat = seed_means(Region::Toe1);
   flat.C_mm = 0.0;
   o.region_params[index_of(Region::Toe1)] = flat;
   EXPECT_THROW(run(o), std::invalid_argument);
+}
+
+// Each cell's dc bias is drawn from min..max. With the default 0-2 bits a third of the cells sit
+// at 0 and read their noise clipped there in the swing; from 3 bits up (six noise SDs) none does.
+TEST(Simulator, DcBiasIsDrawnFromMinToMax) {
+  const auto dir = test::scratch_dir("sim-bias");
+  SimulationOptions o = short_options(3);
+  const SimulationTruth floor =
+      simulate_session(shipped_config(), o, dir / "a.csv", dir / "a.json");
+  o.min_bias_bits = 3;
+  o.max_bias_bits = 5;
+  const SimulationTruth above =
+      simulate_session(shipped_config(), o, dir / "b.csv", dir / "b.json");
+  for (const auto& bias : above.dc_bias_bits) {
+    for (int b : {3, 4, 5}) EXPECT_NE(std::find(bias.begin(), bias.end(), b), bias.end()) << b;
+    for (int b : bias) {
+      EXPECT_GE(b, 3);
+      EXPECT_LE(b, 5);
+    }
+  }
+  EXPECT_GT(floor.clipped_low_samples, 0u);
+  EXPECT_EQ(above.clipped_low_samples, 0u);
+  const nlohmann::json j = nlohmann::json::parse(test::read_text(dir / "b.json"));
+  EXPECT_EQ(j.at("options").at("min_bias_bits"), 3);
+  EXPECT_EQ(j.at("options").at("max_bias_bits"), 5);
 }
 
 TEST(Simulator, RasterisationNames) {

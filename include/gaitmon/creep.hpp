@@ -28,6 +28,7 @@
 
 #include "gaitmon/config.hpp"
 #include "gaitmon/frame.hpp"
+#include "gaitmon/segmentation.hpp"
 
 namespace gaitmon {
 
@@ -88,6 +89,23 @@ struct CreepAgreement {
 /// Throws std::invalid_argument for fewer than two creeps, a standard error that is not finite and
 /// positive, or min_p outside (0, 1].
 CreepAgreement creep_agreement(std::span<const MeasuredCreep> creeps, double min_p = 0.01);
+
+/// The cells a walk's steps loaded that rest at 0 in the swing. A reading is clipped at 0, so a
+/// cell whose zero is within the noise of 0 shows less of the creep it holds than it holds, and a
+/// creep measured from the zeros comes out low (simulated walks of gain 0.2, noise 0.5 bits: 3 %
+/// low where 9 % of the loaded cells rest at 0, 8.5 % where 25 % do, none where none do; README,
+/// "Sensor creep of the insoles").
+struct CellsAtZero {
+  /// (step, cell) pairs where some stance frame read 2 bits or more over the step's zero.
+  std::size_t loaded = 0;
+  /// Of them, those whose zero (the mean of the step's swing windows) is under half a bit.
+  std::size_t at_zero = 0;
+  double pct() const {
+    return loaded == 0 ? 0.0 : 100.0 * static_cast<double>(at_zero) / static_cast<double>(loaded);
+  }
+};
+
+CellsAtZero loaded_cells_at_zero(std::span<const Step> steps);
 
 /// The correction that undoes a config's [sensor_creep], or none when its gain is 0 (the readings
 /// are then passed on untouched, not rounded again).

@@ -128,7 +128,11 @@ struct SimulationOptions {
   /// spot of the cell grid every step, so the raster's error in the measured area changes from
   /// step to step instead of repeating (README, "How honest the standard errors are").
   double placement_sd_mm = 0.0;
-  int max_bias_bits = 2;  ///< per-sensor dc bias, uniform integer in 0..max, [0, 50]
+  /// Per-sensor dc bias, a uniform integer in min..max bits, 0 <= min <= max <= 50. A cell whose
+  /// bias is under about two noise SDs reads its noise clipped at 0 in the swing (README, "Sensor
+  /// creep of the insoles": what that does to a creep measured from the zeros).
+  int min_bias_bits = 0;
+  int max_bias_bits = 2;
   /// Per region; empty means the seed's Appendix I means for the size (Config::seed_tissue).
   std::array<std::optional<EllipsoidParams>, kRegionCount> region_params;
   /// Named physical effects (simulation_effect_names()), applied in this order.

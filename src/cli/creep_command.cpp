@@ -72,6 +72,7 @@ RecordingCreep measure_creep(const fs::path& session, const Config& config) {
   out.zero_before_pct = fit.zero_baseline_heldout_nrmse_pct;
   out.zero_after_pct = fit.zero_extended_heldout_nrmse_pct;
   out.shown = effect_undone_in_readings(fit, fit.effects.front());
+  out.cells_at_zero_pct = loaded_cells_at_zero(steps).pct();
   return out;
 }
 
@@ -117,14 +118,15 @@ void run_creep(const GlobalOptions& global, const CreepArgs& args) {
       "sensor creep of each recording{}, as analyze --effects sensor_creep fits it (+- the larger "
       "of the curvature's and the step-clustered sandwich's standard errors):\n",
       on_top_of_config(found.config_creep));
-  fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {}\n", "recording", "steps", "gain", "tau_s",
-             "zero channel held out", "shows it");
+  fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {:<8}  {}\n", "recording", "steps", "gain",
+             "tau_s", "zero channel held out", "shows it", "cells at 0");
   for (const RecordingCreep& r : found.recordings) {
-    fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {}\n", r.session.filename().string(), r.steps,
+    fmt::print("{:<32} {:>5}  {:<20} {:<20} {:<24} {:<8}  {:.0f} %\n",
+               r.session.filename().string(), r.steps,
                estimate_text(r.creep.gain, r.creep.gain_se, " +- "),
                estimate_text(r.creep.tau_s, r.creep.tau_se_s, " +- "),
                fmt::format("{:.3f} -> {:.3f} %", r.zero_before_pct, r.zero_after_pct),
-               r.shown ? "yes" : "no");
+               r.shown ? "yes" : "no", r.cells_at_zero_pct);
   }
   if (shown.size() < found.recordings.size()) {
     fmt::print(
@@ -132,6 +134,9 @@ void run_creep(const GlobalOptions& global, const CreepArgs& args) {
         "{:.0f} % better with the creep, or its gain or tau has no standard error: analyze would "
         "not undo it there\n",
         DiscrepancySettings{}.min_zero_shrink_pct);
+  }
+  if (const std::string note = cells_at_zero_note(found.recordings); !note.empty()) {
+    fmt::print("{}\n", note);
   }
   if (found.agreement) fmt::print("{}\n", agreement_text(*found.agreement, found.recordings));
   fmt::print("{}\n", verdict_text(found));

@@ -27,6 +27,7 @@ struct RecordingCreep {
   double zero_before_pct = 0.0;  ///< the zero channel's held-out NRMSE without and with it
   double zero_after_pct = 0.0;
   bool shown = false;  ///< effect_undone_in_readings: the zeros show it and the data determine it
+  double cells_at_zero_pct = 0.0;  ///< loaded_cells_at_zero: where the zeros hide part of a creep
 };
 
 enum class CreepVerdict { NoneShows, OneShows, Disagree, Agree };
@@ -55,6 +56,11 @@ std::string on_top_of_config(const SensorCreepSettings& config_creep);
 
 /// The weighted means of the recordings that show a creep and their spread against their errors.
 std::string agreement_text(const CreepAgreement& a, std::span<const RecordingCreep> recordings);
+
+/// Where loaded cells rest at 0 in the swing in some recording (kCellsAtZeroNotePct of them or
+/// more), that the gain comes out low there and by how much on simulated walks; else empty.
+std::string cells_at_zero_note(std::span<const RecordingCreep> recordings);
+inline constexpr double kCellsAtZeroNotePct = 5.0;
 
 /// What the recordings say, in one sentence: nothing to paste, or that they agree.
 std::string verdict_text(const CreepFindings& f);

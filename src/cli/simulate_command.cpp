@@ -166,6 +166,11 @@ void run_simulate(const GlobalOptions& global, SimulateArgs& args) {
     }
   }
   if (args.effect_params_given) apply_effect_params(args.effect_params, options);
+  if (options.min_bias_bits > options.max_bias_bits) {
+    throw CLI::ValidationError("--min-bias",
+                               fmt::format("{} is more than --max-bias ({})", options.min_bias_bits,
+                                           options.max_bias_bits));
+  }
   if (args.truth.empty()) {
     args.truth = args.out;
     args.truth.replace_extension(".truth.json");
@@ -266,8 +271,14 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& global) {
                   "puts every footprint on its region's centre")
       ->check(number_in(0.0, 10.0))
       ->capture_default_str();
+  sub->add_option(
+         "--min-bias", args->options.min_bias_bits,
+         "Per-sensor dc bias, uniform integer MIN..MAX bits: the least (at most --max-bias; "
+         "over twice --noise, no cell's swing reading is clipped at 0)")
+      ->check(CLI::Range(0, 50))
+      ->capture_default_str();
   sub->add_option("--max-bias", args->options.max_bias_bits,
-                  "Per-sensor dc bias, uniform integer 0..MAX bits")
+                  "Per-sensor dc bias, uniform integer MIN..MAX bits: the most")
       ->check(CLI::Range(0, 50))
       ->capture_default_str();
   sub->add_option("--param", args->params,

@@ -25,9 +25,9 @@ CreepFindings two_walks_apart() {
   CreepFindings f;
   const MeasuredCreep a_used{0.30, 0.01, 1.0, 0.1}, b_used{0.34, 0.01, 1.2, 0.1};
   const MeasuredCreep c_used{0.20, kNaN, 0.5, kNaN};
-  f.recordings = {{"a.csv", 30, a_used, {0.30, 0.008, 1.0, 0.1}, a_used, 0.4, 0.1, true},
-                  {"b.csv", 31, b_used, b_used, {0.34, 0.006, 1.2, 0.05}, 0.4, 0.1, true},
-                  {"c.csv", 29, c_used, c_used, c_used, 0.2, 0.19, false}};
+  f.recordings = {{"a.csv", 30, a_used, {0.30, 0.008, 1.0, 0.1}, a_used, 0.4, 0.1, true, 0.0},
+                  {"b.csv", 31, b_used, b_used, {0.34, 0.006, 1.2, 0.05}, 0.4, 0.1, true, 4.9},
+                  {"c.csv", 29, c_used, c_used, c_used, 0.2, 0.19, false, 2.5}};
   CreepAgreement a;
   a.recordings = 2;
   a.mean = {0.32, 0.01 / std::sqrt(2.0), 1.1, 0.1 / std::sqrt(2.0)};
@@ -97,12 +97,31 @@ TEST(CreepReport, TheJsonHoldsEveryRecordingWithNullWhereThereIsNoStandardError)
   EXPECT_FALSE(j["recordings"][2]["shows_creep"].get<bool>());
   EXPECT_EQ(j["agreement"]["degrees_of_freedom"], 1);
   EXPECT_EQ(j["agreement"]["gain_chi2"], 8.0);
+  EXPECT_EQ(j["recordings"][1]["loaded_cells_at_zero_pct"], 4.9);
 
   f.agreement->agree = true;
   const nlohmann::json agreed = nlohmann::json::parse(creep_json_text(f));
   EXPECT_EQ(agreed["verdict"], "agree");
   EXPECT_EQ(agreed["sensor_creep_to_paste"]["gain"], 0.32);
   EXPECT_EQ(agreed["sensor_creep_to_paste"]["tau_s"], 1.1);
+}
+
+// The note on cells that rest at 0 comes where one recording has 5 % of its loaded cells there or
+// more, counts those recordings and gives the most, and is on the page too.
+TEST(CreepReport, CellsAtZeroAreNotedFromFivePerCentOfTheLoadedOnes) {
+  CreepFindings f = two_walks_apart();
+  EXPECT_EQ(cells_at_zero_note(f.recordings), "");
+  EXPECT_EQ(render_creep_html(f).find("rest at 0"), std::string::npos);
+  f.recordings[2].cells_at_zero_pct = 5.0;
+  f.recordings[0].cells_at_zero_pct = 26.4;
+  const std::string note = cells_at_zero_note(f.recordings);
+  EXPECT_NE(note.find("in 2 of the 3 recordings 5 % or more of the cells the steps loaded rest at "
+                      "0 in the swing (up to 26 %)"),
+            std::string::npos)
+      << note;
+  EXPECT_NE(note.find("the gain comes out low"), std::string::npos) << note;
+  EXPECT_NE(render_creep_html(f).find("(up to 26 %)"), std::string::npos);
+  EXPECT_NE(render_creep_html(f).find("<td>26</td>"), std::string::npos);
 }
 
 // The spread printed is of the recordings in the mean: the one whose zeros show no creep (0.20)

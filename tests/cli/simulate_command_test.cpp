@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <string>
 
 #include "test_support.hpp"
@@ -220,14 +221,26 @@ TEST(SimulateCommand, CellsCreepAsTheConfigsSensorCreepSays) {
   EXPECT_TRUE(truth_of(dir / "plain.csv").at("options").at("effects").empty());
 }
 
+struct UsageError {
+  const char* args;
+  const char* says;
+};
+
+// Each is refused with exit code 2 and its message, and no session is written.
+void expect_usage_errors(const fs::path& dir, std::span<const UsageError> cases) {
+  for (const UsageError& c : cases) {
+    int status = -1;
+    const std::string out = simulate(dir / "bad.csv", c.args, &status);
+    EXPECT_EQ(status, 2) << c.args << "\n" << out;
+    EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
+    EXPECT_FALSE(fs::exists(dir / "bad.csv")) << c.args;
+  }
+}
+
 // An empty --effect-params was taken for the defaults, and of two equal keys nlohmann::json kept
 // the last without a word; a subject the session header cannot hold failed only at the writing.
 TEST(SimulateCommand, EmptyOrDuplicateEffectParamsAndAMultiLineSubjectAreUsageErrors) {
-  const auto dir = test::scratch_dir("simulate-bad-text");
-  const struct {
-    const char* args;
-    const char* says;
-  } bad[] = {
+  const UsageError bad[] = {
       {"--effect hysteresis --effect-params ''", "--effect-params: is empty"},
       {R"(--effect hysteresis --effect-params '{"strength":0.1,"strength":0.2}')",
        "--effect-params: key 'strength' is given twice"},
@@ -238,12 +251,24 @@ TEST(SimulateCommand, EmptyOrDuplicateEffectParamsAndAMultiLineSubjectAreUsageEr
       {"--subject 'two\nlines'", "--subject: contains a line break"},
       {"--subject ' padded'", "--subject: starts or ends with a blank"},
   };
-  for (const auto& c : bad) {
-    int status = -1;
-    const std::string out = simulate(dir / "bad.csv", c.args, &status);
-    EXPECT_EQ(status, 2) << c.args << "\n" << out;
-    EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
-    EXPECT_FALSE(fs::exists(dir / "bad.csv")) << c.args;
+  expect_usage_errors(test::scratch_dir("simulate-bad-text"), bad);
+}
+
+// --min-bias and --max-bias are each within range on their own; together the least must not be
+// more than the most, which only the pair can say.
+TEST(SimulateCommand, ALeastBiasAboveTheMostIsAUsageError) {
+  const auto dir = test::scratch_dir("simulate-bias");
+  const UsageError bad[] = {
+      {"--min-bias 3", "--min-bias: 3 is more than --max-bias (2)"},
+      {"--min-bias 4 --max-bias 3", "--min-bias: 4 is more than --max-bias (3)"},
+  };
+  expect_usage_errors(dir, bad);
+  int status = -1;
+  const std::string out = simulate(dir / "ok.csv", "--min-bias 2 --max-bias 2", &status);
+  ASSERT_EQ(status, 0) << out;
+  const nlohmann::json truth = nlohmann::json::parse(test::read_text(dir / "ok.truth.json"));
+  for (const auto& [foot, bias] : truth.at("dc_bias_bits").items()) {
+    for (const auto& b : bias) EXPECT_EQ(b.get<int>(), 2) << foot;
   }
 }
 
