@@ -256,6 +256,9 @@ std::string render_creep_html(const CreepFindings& f) {
     html += "<pre>" + escape(agreement_text(*f.agreement, f.recordings)) + "</pre>";
   }
   if (!f.advice.empty()) html += "<pre>" + escape(f.advice) + "</pre>";
+  if (const std::string note = cells_at_zero_note(f.recordings); !note.empty()) {
+    html += "<p>" + escape(note) + "</p>";
+  }
   html += forest_panel(f, "gain", &MeasuredCreep::gain, &MeasuredCreep::gain_se);
   html += forest_panel(f, "tau (s)", &MeasuredCreep::tau_s, &MeasuredCreep::tau_se_s);
   html +=
@@ -271,11 +274,7 @@ std::string render_creep_html(const CreepFindings& f) {
         estimate_text(r.creep.tau_s, r.creep.tau_se_s, " &plusmn; "), r.zero_before_pct,
         r.zero_after_pct, r.shown ? "yes" : "no", r.cells_at_zero_pct);
   }
-  html += "</table>";
-  if (const std::string note = cells_at_zero_note(f.recordings); !note.empty()) {
-    html += "<p>" + escape(note) + "</p>";
-  }
-  return html + "</body></html>\n";
+  return html + "</table></body></html>\n";
 }
 
 }  // namespace gaitmon::cli
