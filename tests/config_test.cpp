@@ -28,7 +28,7 @@ constexpr const char* kMain = "gaitmon.toml";
 constexpr const char* kInsoles = "insoles.toml";
 constexpr const char* kTissue = "tissue_seed_appendix_i.toml";
 
-fs::path shipped_config() {
+fs::path shipped_config_path() {
   return test::source_dir() / "config" / kMain;
 }
 
@@ -105,8 +105,8 @@ void edit_file(const fs::path& path, const Edit& edit) {
 }
 
 TEST(Config, ShippedConfigHasTheDocumentedDefaults) {
-  const Config config = load_config(shipped_config());
-  EXPECT_EQ(config.source, shipped_config());
+  const Config config = load_config(shipped_config_path());
+  EXPECT_EQ(config.source, shipped_config_path());
   EXPECT_DOUBLE_EQ(config.sample_rate_hz, 100.0);
   EXPECT_DOUBLE_EQ(config.sensor.width_mm, 7.5);
   EXPECT_DOUBLE_EQ(config.sensor.height_mm, 15.0);
@@ -132,7 +132,7 @@ TEST(Config, ShippedConfigHasTheDocumentedDefaults) {
 }
 
 TEST(Config, NewtonsPerBitOfTheShippedCalibration) {
-  const Config config = load_config(shipped_config());
+  const Config config = load_config(shipped_config_path());
   // 64 N/cm^2 / 255 bits x 1.125 cm^2 = 0.282353 N, worked out by hand.
   EXPECT_NEAR(config.calibration.newtons_per_bit(112.5), 0.28235, 1e-5);
   EXPECT_DOUBLE_EQ(config.sensor.area_mm2(), 112.5);
@@ -171,7 +171,7 @@ TEST(Config, InsoleLayoutsEqualTheSeedRegionCsv) {
   const fs::path csv = test::shared_dir() / "seed-data" / "insole_sensor_regions.csv";
   if (!fs::exists(csv)) GTEST_SKIP() << "seed data missing: " << csv;
   const auto expected = read_region_csv(csv);
-  const Config config = load_config(shipped_config());
+  const Config config = load_config(shipped_config_path());
   // Appendix B's counts (Table 1 states 130 and 162 for 41-42 and 45-46).
   const std::vector<std::size_t> counts{93, 107, 116, 129, 151, 161};
   for (InsoleSize size : kInsoleSizes) {
@@ -193,7 +193,7 @@ TEST(Config, InsoleLayoutsEqualTheSeedRegionCsv) {
 }
 
 TEST(Config, SeedTissueMatchesAppendixI) {
-  const Config config = load_config(shipped_config());
+  const Config config = load_config(shipped_config_path());
   const SeedTissueStats& heel = config.tissue(InsoleSize::S37_38, Region::Heel);
   EXPECT_DOUBLE_EQ(heel.mean.d0_mm, 16.4);
   EXPECT_DOUBLE_EQ(heel.sd.d0_mm, 0.9);
@@ -221,7 +221,7 @@ TEST(Config, SeedTissueMatchesAppendixI) {
 TEST(Config, SeedTissueEqualsTheAppendixICsv) {
   const fs::path csv = test::shared_dir() / "seed-data" / "seed_table_I_results.csv";
   if (!fs::exists(csv)) GTEST_SKIP() << "seed data missing: " << csv;
-  const Config config = load_config(shipped_config());
+  const Config config = load_config(shipped_config_path());
   std::ifstream in(csv);
   std::string line;
   std::getline(in, line);
@@ -296,9 +296,9 @@ TEST(Config, DefaultConfigPathHonoursTheEnvironment) {
   const std::optional<std::string> saved =
       before ? std::optional<std::string>(before) : std::nullopt;
   ::unsetenv("GAITMON_CONFIG");
-  EXPECT_EQ(default_config_path(), shipped_config());
+  EXPECT_EQ(default_config_path(), shipped_config_path());
   ::setenv("GAITMON_CONFIG", "", 1);
-  EXPECT_EQ(default_config_path(), shipped_config());
+  EXPECT_EQ(default_config_path(), shipped_config_path());
   ::setenv("GAITMON_CONFIG", "/somewhere/else.toml", 1);
   EXPECT_EQ(default_config_path(), fs::path("/somewhere/else.toml"));
   if (saved) {
@@ -563,7 +563,7 @@ INSTANTIATE_TEST_SUITE_P(Rules, ConfigRefusal, ::testing::ValuesIn(kRefusals),
 // The [fit] bounds: min(mean - 3 SD) and max(mean + 3 SD) of Appendix I over all sizes and
 // regions, worked out by hand from seed-data/seed_table_I_results.csv (floors where negative).
 TEST(Config, FitBoundsAreDerivedFromAppendixI) {
-  const FitBounds b = load_config(shipped_config()).fit_bounds;
+  const FitBounds b = load_config(shipped_config_path()).fit_bounds;
   EXPECT_DOUBLE_EQ(b.A_mm.lower, 20.0);              // toe1 35-36: 39.2 - 3 x 6.0
   EXPECT_DOUBLE_EQ(b.A_mm.upper, 213.5);             // heel 43-44: 140.6 + 3 x 24.3
   EXPECT_DOUBLE_EQ(b.B_mm.lower, 10.2);              // toe2 35-36: 16.2 - 3 x 2.0
@@ -602,7 +602,7 @@ TEST(Config, FitBoundsAreValidated) {
 }
 
 TEST(Config, WireAndSerialDefaults) {
-  const Config config = load_config(shipped_config());
+  const Config config = load_config(shipped_config_path());
   EXPECT_EQ(config.wire.sync, (std::vector<std::uint8_t>{0xA5, 0x5A}));
   EXPECT_EQ(config.wire.crc, CrcKind::Crc16CcittFalse);
   EXPECT_FALSE(config.wire.crc_big_endian);
@@ -704,7 +704,7 @@ TEST(Config, WireAndSerialAreValidated) {
 }
 
 TEST(Config, RingAndMonitorHaveTheDocumentedDefaults) {
-  const Config config = load_config(shipped_config());
+  const Config config = load_config(shipped_config_path());
   EXPECT_EQ(config.ring.capacity_frames, 4096u);
   EXPECT_EQ(config.monitor.workers, 2);
   EXPECT_EQ(config.monitor.max_step_backlog, 32);
@@ -748,7 +748,7 @@ TEST(Config, RingAndMonitorAreValidated) {
 }
 
 TEST(Config, LcmDefaultsWorkOnOneMachineWithoutNetwork) {
-  const LcmSettings lcm = load_config(shipped_config()).lcm;
+  const LcmSettings lcm = load_config(shipped_config_path()).lcm;
   EXPECT_EQ(lcm.url, "udpm://239.255.76.67:7667?ttl=0");
   EXPECT_FALSE(lcm.raw_enabled);
   EXPECT_EQ(lcm.channels.frame, "GAITMON_FRAME");
@@ -828,8 +828,8 @@ namespace gaitmon {
 namespace {
 
 TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
-  EXPECT_TRUE(load_config(shipped_config()).model.effects.empty());
-  EXPECT_EQ(load_config(shipped_config()).model.effects_window_steps, 100);
+  EXPECT_TRUE(load_config(shipped_config_path()).model.effects.empty());
+  EXPECT_EQ(load_config(shipped_config_path()).model.effects_window_steps, 100);
   EXPECT_EQ(ModelSettings{}.effects_window_steps, 100);
   const std::vector<Refusal> cases = {
       {"ModelUnknownEffect", kMain, replace("effects = []", R"(effects = ["ghosting"])"),
@@ -864,7 +864,7 @@ TEST(Config, ModelEffectsDefaultToNoneAndAreValidated) {
 // [model] m_per_session: off by default; on, analyze and the live monitor take one m per region
 // over the steps (the monitor over its window), which the effects' fits cannot share.
 TEST(Config, ModelRunningMIsOffByDefaultAndValidated) {
-  const ModelSettings shipped = load_config(shipped_config()).model;
+  const ModelSettings shipped = load_config(shipped_config_path()).model;
   EXPECT_FALSE(shipped.m_per_session);
   EXPECT_EQ(shipped.m_window_steps, 200);
   EXPECT_FALSE(ModelSettings{}.m_per_session);
@@ -897,7 +897,7 @@ TEST(Config, ModelRunningMIsOffByDefaultAndValidated) {
 // [model] area: auto as shipped (analyze takes the footprint the session's cells call for, the
 // live monitor the footprint); else one of analyze's areas, and nothing else.
 TEST(Config, ModelAreaIsAutoAsShippedAndValidated) {
-  EXPECT_EQ(load_config(shipped_config()).model.area, "auto");
+  EXPECT_EQ(load_config(shipped_config_path()).model.area, "auto");
   EXPECT_EQ(ModelSettings{}.area, "auto");
   const std::vector<Refusal> cases = {
       {"ModelAreaUnknown", kMain, replace(R"(area = "auto")", R"(area = "cells")"), "model.area",
@@ -916,13 +916,13 @@ TEST(Config, ModelAreaIsAutoAsShippedAndValidated) {
 // every region's SD for kbar and cbar, as the shipped file documents them; each must be there,
 // known and in [0, 100].
 TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
-  const AsymmetrySettings a = load_config(shipped_config()).asymmetry;
+  const AsymmetrySettings a = load_config(shipped_config_path()).asymmetry;
   using PerRegion = std::array<double, kRegionCount>;
   EXPECT_EQ(a.per_step.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.5, 2.0, 1.0, 1.0, 3.0}));
   EXPECT_EQ(a.per_step.cbar_pair_sd_pct, (PerRegion{3.0, 6.0, 4.5, 5.5, 5.5, 9.5, 9.5, 12.5}));
   EXPECT_EQ(a.m_per_session.kbar_pair_sd_pct, (PerRegion{1.0, 4.5, 4.5, 2.0, 2.0, 0.5, 1.0, 3.0}));
   EXPECT_EQ(a.m_per_session.cbar_pair_sd_pct, (PerRegion{0.5, 1.5, 1.0, 1.0, 1.0, 3.5, 3.5, 3.5}));
-  const AsymmetrySettings mean = load_config(shipped_config()).asymmetry_footprint_mean;
+  const AsymmetrySettings mean = load_config(shipped_config_path()).asymmetry_footprint_mean;
   EXPECT_EQ(mean.per_step.kbar_pair_sd_pct, (PerRegion{1.0, 7.0, 6.0, 2.0, 2.5, 9.0, 1.5, 5.0}));
   EXPECT_EQ(mean.per_step.cbar_pair_sd_pct, (PerRegion{1.5, 10.5, 4.0, 4.0, 5.0, 5.5, 5.5, 15.5}));
   EXPECT_EQ(mean.m_per_session.kbar_pair_sd_pct,
@@ -964,7 +964,7 @@ TEST(Config, AsymmetryPairSdsAreReadPerRegionAndValidated) {
 // region's chain SD and step SD for kbar, n, cbar and m, as the shipped file documents them;
 // kbar's and cbar's in [0, 1000] (per cent), n's and m's in [0, 1].
 TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
-  const PoolingSettings p = load_config(shipped_config()).pooling;
+  const PoolingSettings p = load_config(shipped_config_path()).pooling;
   using PerRegion = std::array<double, kRegionCount>;
   EXPECT_EQ(p.per_step.kbar_chain_sd_pct, (PerRegion{4.0, 6.5, 6.5, 5.5, 4.5, 10.5, 102.5, 18.5}));
   EXPECT_EQ(p.per_step.n_chain_sd, (PerRegion{0.02, 0.025, 0.025, 0.04, 0.03, 0.065, 0.0, 0.075}));
@@ -988,7 +988,7 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
   EXPECT_EQ(p.m_per_session.cbar_step_sd_pct,
             (PerRegion{0.0, 22.5, 9.5, 15.0, 5.0, 109.5, 0.0, 0.0}));
   EXPECT_EQ(p.m_per_session.m_step_sd, (PerRegion{0.0, 0.075, 0.01, 0.08, 0.05, 0.175, 0.0, 0.04}));
-  const PoolingSettings mean = load_config(shipped_config()).pooling_footprint_mean;
+  const PoolingSettings mean = load_config(shipped_config_path()).pooling_footprint_mean;
   EXPECT_EQ(mean.per_step.kbar_chain_sd_pct,
             (PerRegion{5.0, 19.0, 13.0, 13.0, 7.5, 24.5, 0.0, 16.0}));
   EXPECT_EQ(mean.per_step.n_chain_sd, (PerRegion{0.03, 0.08, 0.06, 0.08, 0.05, 0.15, 0.0, 0.075}));
@@ -1038,7 +1038,7 @@ TEST(Config, PoolingChainSdsAreReadPerRegionAndValidated) {
 }
 
 TEST(Config, LogLevelDefaultsToInfoAndIsRead) {
-  EXPECT_EQ(load_config(shipped_config()).log.level, "info");
+  EXPECT_EQ(load_config(shipped_config_path()).log.level, "info");
   EXPECT_EQ(LogSettings{}.level, "info");
   for (const std::string& level : log_level_names()) {
     const fs::path dir = copy_config("LogRead-" + level);

@@ -21,8 +21,8 @@
 namespace gaitmon {
 namespace {
 
-constexpr double kW = 7.5;
-constexpr double kH = 15.0;
+using test::kCellHeightMm;
+using test::kCellWidthMm;
 constexpr double kCellArea = 112.5;
 
 using test::cells_of;
@@ -369,7 +369,7 @@ TEST(ContactEllipse, RandomPatternsNeverThrowOrGiveNaN) {
       const int half = unit(rng) < 0.3 ? 1 : 0;
       for (int x = 0; x < w; ++x) {
         if (unit(rng) < fill) {
-          cells.push_back({(x + 0.5 * half) * kW, y * kH, y == 0});
+          cells.push_back({(x + 0.5 * half) * kCellWidthMm, y * kCellHeightMm, y == 0});
           distinct.insert({2 * x + half, y});
         }
       }
@@ -428,16 +428,17 @@ TEST(ContactEllipse, MomentEllipseOfACellBlockHasTheRectanglesRadii) {
   for (const auto& [nr, nc] : {std::pair{1, 1}, {3, 1}, {2, 5}, {6, 4}}) {
     std::vector<ActiveCell> cells;
     for (int i = 0; i < nr; ++i) {
-      for (int j = 0; j < nc; ++j) cells.push_back({10.0 + kW * i, -20.0 + kH * j});
+      for (int j = 0; j < nc; ++j)
+        cells.push_back({10.0 + kCellWidthMm * i, -20.0 + kCellHeightMm * j});
     }
     const ContactEllipse e = detail::moment_ellipse(cells, CellSize{});
     SCOPED_TRACE(std::to_string(nr) + " x " + std::to_string(nc));
     EXPECT_EQ(e.kase, EllipseCase::Boundary);
-    EXPECT_NEAR(e.ra_mm, nr * kW / std::sqrt(std::numbers::pi), 1e-9);
-    EXPECT_NEAR(e.rb_mm, nc * kH / std::sqrt(std::numbers::pi), 1e-9);
+    EXPECT_NEAR(e.ra_mm, nr * kCellWidthMm / std::sqrt(std::numbers::pi), 1e-9);
+    EXPECT_NEAR(e.rb_mm, nc * kCellHeightMm / std::sqrt(std::numbers::pi), 1e-9);
     EXPECT_NEAR(e.angle_rad, 0.0, 1e-9);
-    EXPECT_NEAR(e.cx_mm, 10.0 + kW * (nr - 1) / 2.0, 1e-9);
-    EXPECT_NEAR(e.cy_mm, -20.0 + kH * (nc - 1) / 2.0, 1e-9);
+    EXPECT_NEAR(e.cx_mm, 10.0 + kCellWidthMm * (nr - 1) / 2.0, 1e-9);
+    EXPECT_NEAR(e.cy_mm, -20.0 + kCellHeightMm * (nc - 1) / 2.0, 1e-9);
     EXPECT_NEAR(e.area_mm2, nr * nc * kCellArea, 1e-9);
   }
 }

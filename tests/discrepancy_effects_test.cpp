@@ -14,17 +14,17 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
-#include <numbers>
 #include <string>
 #include <vector>
 
 #include "gaitmon/simulator.hpp"
 #include "gaitmon/tissue_model.hpp"
+#include "test_support.hpp"
 
 namespace gaitmon::discrepancy_detail {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using test::kPi;
 constexpr std::size_t kFrames = 60;
 
 // A stance of one region: a half-sine of area, depth and force, 10-ms frames.
@@ -251,7 +251,7 @@ TEST(DiscrepancyEffects, ThoseThatGiveTheirSlopeGiveApplysSlopeFrameByFrame) {
 
 constexpr double kFrameS = 0.01;
 constexpr double kStanceS = 0.6;
-const EllipsoidParams kHeelTissue{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
+using test::kHeel;
 
 double frame_time(int k) {
   return static_cast<double>(k) / 100.0;
@@ -281,8 +281,8 @@ std::vector<Unit> heel_contacts(int contacts) {
       const double ddot = 6.0 * kPi / kStanceS * std::cos(kPi * x);
       u.t.push_back(frame_time(k));
       u.d_mm.push_back(d);
-      u.area.push_back(contact_area_mm2(kHeelTissue, d));
-      u.y.push_back(force_n(kHeelTissue, d, ddot, ModelVariant::Correct));
+      u.area.push_back(contact_area_mm2(kHeel, d));
+      u.y.push_back(force_n(kHeel, d, ddot, ModelVariant::Correct));
     }
     u.t_pre_zero_s = frame_time(first - 20);
     u.t_post_zero_s = frame_time(last + 20);

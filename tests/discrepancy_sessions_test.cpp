@@ -29,10 +29,7 @@
 namespace gaitmon {
 namespace {
 
-const Config& shipped_config() {
-  static const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  return config;
-}
+using test::shipped_config;
 
 struct SessionCase {
   std::string effect;

@@ -27,10 +27,7 @@
 namespace gaitmon {
 namespace {
 
-const Config& shipped_config() {
-  static const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  return config;
-}
+using test::shipped_config;
 
 // A cell ceiling at region level, written out from the physics rather than from the candidate:
 // over a paraboloid pressure peaking at p0 the cells read it capped at c, so the force falls

@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <numbers>
 #include <optional>
 #include <random>
 #include <span>
@@ -26,9 +25,9 @@
 namespace gaitmon {
 namespace {
 
-constexpr double kW = 7.5;
-constexpr double kH = 15.0;
-constexpr double kPi = std::numbers::pi;
+using test::kCellHeightMm;
+using test::kCellWidthMm;
+using test::kPi;
 
 /// Every cell of a cols x rows grid reading p = peak (1 - rho^2) of an axis-aligned ellipse at
 /// its centre, 0 outside the contact and capped at `ceiling`, as a region's cells read without
@@ -38,8 +37,8 @@ std::vector<LoadedCell> raster(double cx, double cy, double rA, double rB, doubl
   std::vector<LoadedCell> cells;
   for (int j = 0; j < rows; ++j) {
     for (int i = 0; i < cols; ++i) {
-      const double x = i * kW;
-      const double y = j * kH;
+      const double x = i * kCellWidthMm;
+      const double y = j * kCellHeightMm;
       const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
       cells.push_back({x, y, std::min(ceiling, std::max(0.0, peak * (1.0 - rho2)))});
     }
@@ -58,7 +57,7 @@ std::vector<LoadedCell> sampled_cap(double cx, double cy, double rA, double rB, 
 /// The free fit's area, where it is a cap.
 std::optional<double> free_area(std::span<const LoadedCell> cells,
                                 std::span<const CellCentre> unloaded = {}) {
-  const auto f = free_footprint(cells, CellSize{kW, kH}, unloaded);
+  const auto f = free_footprint(cells, CellSize{kCellWidthMm, kCellHeightMm}, unloaded);
   return f ? std::optional<double>(f->area_mm2) : std::nullopt;
 }
 
@@ -116,10 +115,12 @@ TEST(Footprint, TwoRowsDetermineItWithTheAspect) {
   const double rB = 12.0;
   const auto cells = sampled_cap(31.0, 7.5, rA, rB, 60.0, 9, 2);
   ASSERT_GE(cells.size(), 8u);
-  const auto area = footprint_area_at_aspect_mm2(cells, CellSize{kW, kH}, rA / rB);
+  const auto area =
+      footprint_area_at_aspect_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm}, rA / rB);
   ASSERT_TRUE(area.has_value());
   EXPECT_NEAR(*area, kPi * rA * rB, 1e-9 * kPi * rA * rB);
-  const auto wrong = footprint_area_at_aspect_mm2(cells, CellSize{kW, kH}, 0.5 * rA / rB);
+  const auto wrong =
+      footprint_area_at_aspect_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm}, 0.5 * rA / rB);
   ASSERT_TRUE(wrong.has_value());
   EXPECT_GT(std::abs(*wrong / (kPi * rA * rB) - 1.0), 0.1);
 }
@@ -127,7 +128,8 @@ TEST(Footprint, TwoRowsDetermineItWithTheAspect) {
 TEST(Footprint, TheFreeFitGivesTheAspectAndThePeak) {
   const double rA = 24.3;
   const double rB = 41.7;
-  const auto fit = free_footprint(sampled_cap(31.1, 52.4, rA, rB, 87.0, 9, 8), CellSize{kW, kH});
+  const auto fit = free_footprint(sampled_cap(31.1, 52.4, rA, rB, 87.0, 9, 8),
+                                  CellSize{kCellWidthMm, kCellHeightMm});
   ASSERT_TRUE(fit.has_value());
   EXPECT_NEAR(fit->aspect, rA / rB, 1e-9);
   EXPECT_NEAR(fit->peak, 87.0, 1e-9);
@@ -259,7 +261,8 @@ TEST(Footprint, AtTheSharedAspectAPartialLoadScattersLessThanAlone) {
 TEST(Footprint, WithoutTheThresholdTheCapTakesInItsRim) {
   const double cx = 31.1, cy = 52.4, rA = 24.3, rB = 41.7, peak = 87.0;
   const std::vector<LoadedCell> region = raster(cx, cy, rA, rB, peak, 9, 8);
-  const auto area = footprint_area_unthresholded_mm2(region, CellSize{kW, kH}, rA / rB, 0.4 * peak);
+  const auto area = footprint_area_unthresholded_mm2(region, CellSize{kCellWidthMm, kCellHeightMm},
+                                                     rA / rB, 0.4 * peak);
   ASSERT_TRUE(area.has_value());
   EXPECT_NEAR(*area, kPi * rA * rB, 1e-9 * kPi * rA * rB);
 }
@@ -274,8 +277,8 @@ TEST(Footprint, ACeilingWidensTheFootprintAsDerived) {
   const double cx = 31.1, cy = 52.4, rA = 24.3, rB = 41.7, peak = 120.0;
   for (const double L : {0.1, 0.2, 0.3, 0.45, 0.6}) {
     const std::vector<LoadedCell> region = raster(cx, cy, rA, rB, peak, 11, 10, peak * (1.0 - L));
-    const auto area =
-        footprint_area_unthresholded_mm2(region, CellSize{kW, kH}, rA / rB, 0.05 * peak);
+    const auto area = footprint_area_unthresholded_mm2(
+        region, CellSize{kCellWidthMm, kCellHeightMm}, rA / rB, 0.05 * peak);
     ASSERT_TRUE(area.has_value()) << L;
     const double phi = (1.0 + L + L * L) / (1.0 + L);
     const double widened = *area / (kPi * rA * rB);
@@ -335,14 +338,14 @@ std::vector<LoadedCell> mean_raster(double cx, double cy, double rA, double rB, 
     for (int i = 0; i < cols; ++i) {
       double sum = 0.0;
       for (int a = 0; a < kFine; ++a) {
-        const double x = i * kW + kW * ((a + 0.5) / kFine - 0.5);
+        const double x = i * kCellWidthMm + kCellWidthMm * ((a + 0.5) / kFine - 0.5);
         for (int b = 0; b < kFine; ++b) {
-          const double y = j * kH + kH * ((b + 0.5) / kFine - 0.5);
+          const double y = j * kCellHeightMm + kCellHeightMm * ((b + 0.5) / kFine - 0.5);
           const double rho2 = std::pow((x - cx) / rA, 2) + std::pow((y - cy) / rB, 2);
           sum += std::max(0.0, 1.0 - rho2);
         }
       }
-      cells.push_back({i * kW, j * kH, peak * sum / (kFine * kFine)});
+      cells.push_back({i * kCellWidthMm, j * kCellHeightMm, peak * sum / (kFine * kFine)});
     }
   }
   return cells;
@@ -366,9 +369,12 @@ TEST(Footprint, OnAveragingCellsTheCellMeanFitRecoversTheArea) {
     std::vector<LoadedCell> loaded;
     std::vector<CellCentre> unloaded;
     split(cells, threshold, loaded, unloaded);
-    const auto mean = footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, aspect, threshold);
-    const auto centre = footprint_area_at_aspect_mm2(loaded, CellSize{kW, kH}, aspect);
-    const auto rim = footprint_area_unthresholded_mm2(cells, CellSize{kW, kH}, aspect, threshold);
+    const auto mean = footprint_area_cell_mean_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm},
+                                                   aspect, threshold);
+    const auto centre =
+        footprint_area_at_aspect_mm2(loaded, CellSize{kCellWidthMm, kCellHeightMm}, aspect);
+    const auto rim = footprint_area_unthresholded_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm},
+                                                      aspect, threshold);
     ASSERT_TRUE(mean && centre && rim) << truth;
     std::printf(
         "contact %4.0f mm2 at (%.1f, %.1f), %2zu cells over 5 %% of the peak: cell-mean fit %.3f, "
@@ -392,7 +398,8 @@ TEST(Footprint, TheCellMeanFitHoldsThroughNoiseAndRounding) {
     const double rB = rA / 0.6;
     auto cells = mean_raster(28.0 + 0.13 * k, 42.0 + 0.29 * k, rA, rB, 40.0, 9, 7);
     for (LoadedCell& c : cells) c.load = std::round(c.load + noise(rng));
-    const auto area = footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 0.6, 4.0);
+    const auto area =
+        footprint_area_cell_mean_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm}, 0.6, 4.0);
     ASSERT_TRUE(area.has_value()) << k;
     ratio.push_back(*area / (kPi * rA * rB));
   }
@@ -408,13 +415,16 @@ TEST(Footprint, TheCellMeanFitHoldsThroughNoiseAndRounding) {
 // Too few cells over the threshold, or none: nothing; a bad cell size or aspect throws.
 TEST(Footprint, TheCellMeanFitNeedsFourLoadedCells) {
   const auto cells = mean_raster(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
-  EXPECT_TRUE(footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 20.0 / 35.0, 5.0));
-  EXPECT_FALSE(footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 20.0 / 35.0, 1000.0));
-  EXPECT_FALSE(footprint_area_cell_mean_mm2({}, CellSize{kW, kH}, 1.0, 5.0));
-  EXPECT_THROW((void)footprint_area_cell_mean_mm2(cells, CellSize{kW, 0.0}, 1.0, 5.0),
+  EXPECT_TRUE(
+      footprint_area_cell_mean_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm}, 20.0 / 35.0, 5.0));
+  EXPECT_FALSE(footprint_area_cell_mean_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm},
+                                            20.0 / 35.0, 1000.0));
+  EXPECT_FALSE(footprint_area_cell_mean_mm2({}, CellSize{kCellWidthMm, kCellHeightMm}, 1.0, 5.0));
+  EXPECT_THROW((void)footprint_area_cell_mean_mm2(cells, CellSize{kCellWidthMm, 0.0}, 1.0, 5.0),
                std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_cell_mean_mm2(cells, CellSize{kW, kH}, 0.0, 5.0),
-               std::invalid_argument);
+  EXPECT_THROW(
+      (void)footprint_area_cell_mean_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm}, 0.0, 5.0),
+      std::invalid_argument);
 }
 
 // Each reading's cap fits the cells that read so down to their noise (0.5 bits and rounding to
@@ -424,7 +434,7 @@ TEST(Footprint, TheCellMeanFitNeedsFourLoadedCells) {
 TEST(Footprint, EachReadingFitsItsOwnCellsToTheirNoiseAndTheOthersWorse) {
   std::mt19937_64 rng(11);
   std::normal_distribution<double> noise(0.0, 0.5);
-  const CellSize cell{kW, kH};
+  const CellSize cell{kCellWidthMm, kCellHeightMm};
   const double threshold = 4.0;
   double smallest_ratio = std::numeric_limits<double>::infinity();
   for (int k = 0; k < 12; ++k) {
@@ -468,7 +478,7 @@ TEST(Footprint, EachReadingFitsItsOwnCellsToTheirNoiseAndTheOthersWorse) {
 
 TEST(Footprint, OneRowOrTooFewCellsDoNotDetermineIt) {
   EXPECT_FALSE(footprint_area_at_aspect_mm2(sampled_cap(31.0, 0.0, 40.0, 12.0, 60.0, 9, 1),
-                                            CellSize{kW, kH}, 40.0 / 12.0)
+                                            CellSize{kCellWidthMm, kCellHeightMm}, 40.0 / 12.0)
                    .has_value());
   auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
   cells.resize(3);
@@ -522,17 +532,21 @@ TEST(Footprint, NonFiniteCellsGiveNothing) {
 
 TEST(Footprint, ABadCellSizeOrAspectThrows) {
   const auto cells = sampled_cap(30.0, 45.0, 20.0, 35.0, 50.0, 9, 7);
-  EXPECT_THROW((void)free_footprint(cells, CellSize{0.0, kH}), std::invalid_argument);
-  EXPECT_THROW((void)free_footprint(cells, CellSize{kW, std::nan("")}), std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{0.0, kH}, 1.0),
+  EXPECT_THROW((void)free_footprint(cells, CellSize{0.0, kCellHeightMm}), std::invalid_argument);
+  EXPECT_THROW((void)free_footprint(cells, CellSize{kCellWidthMm, std::nan("")}),
                std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{kW, kH}, 0.0),
+  EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{0.0, kCellHeightMm}, 1.0),
                std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{kW, kH}, std::nan("")),
+  EXPECT_THROW(
+      (void)footprint_area_at_aspect_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm}, 0.0),
+      std::invalid_argument);
+  EXPECT_THROW((void)footprint_area_at_aspect_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm},
+                                                  std::nan("")),
                std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_unthresholded_mm2(cells, CellSize{kW, 0.0}, 1.0, 5.0),
+  EXPECT_THROW((void)footprint_area_unthresholded_mm2(cells, CellSize{kCellWidthMm, 0.0}, 1.0, 5.0),
                std::invalid_argument);
-  EXPECT_THROW((void)footprint_area_unthresholded_mm2(cells, CellSize{kW, kH}, -1.0, 5.0),
+  EXPECT_THROW((void)footprint_area_unthresholded_mm2(cells, CellSize{kCellWidthMm, kCellHeightMm},
+                                                      -1.0, 5.0),
                std::invalid_argument);
 }
 

@@ -45,9 +45,7 @@ using test::RecordingPublisher;
 using ::testing::HasSubstr;
 using ::testing::Not;
 
-Config shipped_config() {
-  return load_config(test::source_dir() / "config" / "gaitmon.toml");
-}
+using test::shipped_config;
 
 // The first 30 s of the bundled demo: about 50 analysed steps, enough for every rule and short
 // enough for the sanitizer builds.

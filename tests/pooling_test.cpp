@@ -385,16 +385,9 @@ TEST(Pooling, MaterialEstimateNeedsAnOkFitWithACovariance) {
 
 // ---- Through the whole chain: simulate, segment, measure, fit each step, pool ----
 
-const Config& config() {
-  static const Config c = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  return c;
-}
+using test::shipped_config;
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using test::median;
 
 // Relative error of a fitted value on the pooled scale: kbar and cbar are fitted as logarithms.
 double rel_error(std::size_t k, double fitted, double truth) {
@@ -425,18 +418,20 @@ ChainResult run_chain(double tissue_step_sd_pct) {
     o.seed = seed;
     o.duration_s = 10.0;
     o.tissue_step_sd_pct = tissue_step_sd_pct;
-    const SimulationTruth truth = simulate_session(config(), o, dir / "s.csv", dir / "t.json");
-    const InsoleLayout layout(config().insole(size), config().sensor);
+    const SimulationTruth truth =
+        simulate_session(shipped_config(), o, dir / "s.csv", dir / "t.json");
+    const InsoleLayout layout(shipped_config().insole(size), shipped_config().sensor);
     std::map<std::pair<Foot, Region>, std::vector<std::pair<MaterialEstimate, MaterialVector>>>
         groups;
     ContactEllipseCache cache;
-    segment_session(dir / "s.csv", config(), [&](Step&& step) {
+    segment_session(dir / "s.csv", shipped_config(), [&](Step&& step) {
       if (step.status != StepStatus::Ok) return;
       const auto planned = std::find_if(truth.steps.begin(), truth.steps.end(), [&](const auto& t) {
         return t.foot == step.foot && std::abs(t.t_heel_strike_s - step.t_heel_strike_s) < 0.1;
       });
       ASSERT_NE(planned, truth.steps.end()) << step.t_heel_strike_s;
-      const StanceSeries stance = measure_stance(step, layout, config().calibration, &cache);
+      const StanceSeries stance =
+          measure_stance(step, layout, shipped_config().calibration, &cache);
       for (Region region : kRegions) {
         if (region == Region::Toe1 || region == Region::Toe2 || region == Region::Toes3_5) continue;
         RegionSeries series;
@@ -451,7 +446,7 @@ ChainResult run_chain(double tissue_step_sd_pct) {
         const std::size_t ri = index_of(region);
         const EllipsoidParams& p = truth.regions[ri].params;
         const auto estimate =
-            material_estimate(fit_region(series, p, config().fit_bounds, FitSettings{}));
+            material_estimate(fit_region(series, p, shipped_config().fit_bounds, FitSettings{}));
         if (!estimate) continue;
         const MaterialVector step_truth{std::log(p.kbar_n_per_mm3 * planned->kbar_factor[ri]), p.n,
                                         std::log(p.cbar_ns_per_mm3 * planned->cbar_factor[ri]),
@@ -462,8 +457,8 @@ ChainResult run_chain(double tissue_step_sd_pct) {
     for (const auto& [key, group] : groups) {
       std::vector<MaterialEstimate> estimates;
       for (const auto& [e, t] : group) estimates.push_back(e);
-      const PooledEstimates p =
-          pool_region_steps(estimates, key.second, config().pooling, config().fit_bounds);
+      const PooledEstimates p = pool_region_steps(estimates, key.second, shipped_config().pooling,
+                                                  shipped_config().fit_bounds);
       if (!p.pooled) continue;
       ++out.groups_pooled;
       between.push_back(std::sqrt(p.between_step[0][0]));

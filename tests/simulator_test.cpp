@@ -8,7 +8,6 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <numbers>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -22,12 +21,9 @@
 namespace gaitmon {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using test::kPi;
 
-const Config& shipped_config() {
-  static const Config config = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  return config;
-}
+using test::shipped_config;
 
 const InsoleLayout& layout_37_38() {
   static const InsoleLayout layout(shipped_config().insole(InsoleSize::S37_38),

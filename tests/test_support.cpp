@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -113,6 +114,18 @@ std::string run_gaitmon(const std::string& args, int* status) {
   std::string output;
   *status = run_command(gaitmon_binary().string() + " " + args, &output);
   return output;
+}
+
+const Config& shipped_config() {
+  static const Config config = load_config(source_dir() / "config" / "gaitmon.toml");
+  return config;
+}
+
+double median(std::vector<double> values) {
+  if (values.empty()) return kNaN;
+  std::sort(values.begin(), values.end());
+  const std::size_t n = values.size();
+  return n % 2 == 1 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
 }
 
 double sample_sd(const std::vector<double>& values) {

@@ -3,11 +3,15 @@
 #pragma once
 
 #include <filesystem>
+#include <limits>
+#include <numbers>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "gaitmon/config.hpp"
 #include "gaitmon/contact_ellipse.hpp"
+#include "gaitmon/tissue_model.hpp"
 
 namespace gaitmon::test {
 
@@ -18,6 +22,14 @@ inline constexpr bool kSanitized = true;
 #else
 inline constexpr bool kSanitized = false;
 #endif
+
+inline constexpr double kPi = std::numbers::pi;
+inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+/// The default cell's width and height (config/gaitmon.toml, [sensor]), mm.
+inline constexpr double kCellWidthMm = 7.5;
+inline constexpr double kCellHeightMm = 15.0;
+/// The seed's Appendix I means of the heel of size 37-38.
+inline const EllipsoidParams kHeel{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
 
 /// The source tree (for config/ and replay/).
 std::filesystem::path source_dir();
@@ -45,8 +57,12 @@ int run_command(const std::string& command, std::string* output = nullptr);
 /// Runs the gaitmon binary with `args` (a shell command line's rest), sets its exit status and
 /// returns its stdout and stderr together.
 std::string run_gaitmon(const std::string& args, int* status);
+/// The shipped config, config/gaitmon.toml, loaded once.
+const Config& shipped_config();
 /// The sample standard deviation (n - 1); needs at least two values.
 double sample_sd(const std::vector<double>& values);
+/// The median (of the middle two for an even count); NaN for none.
+double median(std::vector<double> values);
 /// Active cells of the default 7.5 x 15 mm size from a picture, most anterior row first: '#'
 /// active, '.' inactive. A row starting with '>' is shifted half a cell medially, as centred
 /// rows of different length are.

@@ -33,10 +33,7 @@
 namespace gaitmon {
 namespace {
 
-const Config& config() {
-  static const Config c = load_config(test::source_dir() / "config" / "gaitmon.toml");
-  return c;
-}
+using test::shipped_config;
 
 // One region over one measured stance, with both contact areas and the parameters the simulator
 // used.
@@ -78,14 +75,14 @@ std::vector<RegionStep> simulated_region_steps(
   options.rasterisation = rasterisation;
   options.region_params = region_params;
   const SimulationTruth truth =
-      simulate_session(config(), options, dir / "session.csv", dir / "truth.json");
-  const InsoleLayout layout(config().insole(size), config().sensor);
+      simulate_session(shipped_config(), options, dir / "session.csv", dir / "truth.json");
+  const InsoleLayout layout(shipped_config().insole(size), shipped_config().sensor);
   std::vector<RegionStep> out;
   ContactEllipseCache cache;
-  segment_session(dir / "session.csv", config(), [&](Step&& step) {
+  segment_session(dir / "session.csv", shipped_config(), [&](Step&& step) {
     if (step.status != StepStatus::Ok) return;
     const StanceSeries stance =
-        measure_stance(step, layout, config().calibration, &cache, cell_mean);
+        measure_stance(step, layout, shipped_config().calibration, &cache, cell_mean);
     for (Region region : kRegions) {
       RegionStep rs;
       rs.truth = truth.regions[index_of(region)].params;
@@ -127,12 +124,7 @@ const std::vector<RegionStep>& recovery_data() {
   return data;
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using test::median;
 
 double rel_error(double fitted, double truth) {
   return std::abs(fitted - truth) / truth;
@@ -181,7 +173,7 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
   };
   for (const RegionStep& rs : recovery_data()) {
     const RegionSeries& series = rs.series(area);
-    const RegionFit fit = fit_region(series, rs.truth, config().fit_bounds, settings);
+    const RegionFit fit = fit_region(series, rs.truth, shipped_config().fit_bounds, settings);
     ++r.fits;
     if (fit.status != FitStatus::Ok) continue;
     ++ok;
@@ -208,8 +200,8 @@ Recovery recover(Smoothing smoothing, AreaSource area) {
   for (const auto& [key, pool] : pools) {
     std::vector<MaterialEstimate> estimates;
     for (const auto& [e, truth] : pool) estimates.push_back(e);
-    const PooledEstimates p =
-        pool_region_steps(estimates, std::get<2>(key), config().pooling, config().fit_bounds);
+    const PooledEstimates p = pool_region_steps(
+        estimates, std::get<2>(key), shipped_config().pooling, shipped_config().fit_bounds);
     for (std::size_t i = 0; i < pool.size(); ++i) {
       for (std::size_t k = 0; k < 4; ++k) {
         add_pooled(std::get<2>(key), k,
@@ -327,7 +319,7 @@ const std::vector<OffMeanGroup>& off_mean_groups() {
       const InsoleSize size = sizes[s % 3];
       std::array<std::optional<EllipsoidParams>, kRegionCount> params;
       for (Region region : kRegions) {
-        EllipsoidParams p = config().tissue(size, region).mean;
+        EllipsoidParams p = shipped_config().tissue(size, region).mean;
         p.kbar_n_per_mm3 *= kFactors[pick()];
         p.n *= kFactors[pick()];
         p.cbar_ns_per_mm3 *= kFactors[pick()];
@@ -339,7 +331,7 @@ const std::vector<OffMeanGroup>& off_mean_groups() {
                                  Rasterisation::CellCentre, CellMeanFootprint::Skip, params);
       for (Region region : kRegions) {
         if (!area_determined(region)) continue;
-        const EllipsoidParams& mean = config().tissue(size, region).mean;
+        const EllipsoidParams& mean = shipped_config().tissue(size, region).mean;
         const EllipsoidParams& truth = *params[index_of(region)];
         OffMeanGroup g;
         g.truth = {truth.kbar_n_per_mm3, truth.n, truth.cbar_ns_per_mm3, truth.m};
@@ -431,7 +423,7 @@ TEST(TissueFitRecovery, FollowsATissueAwayFromTheAppendixMeans) {
     ASSERT_GE(groups[g].steps.size(), 10u);
     std::vector<MaterialEstimate> estimates;
     for (const RegionStep& rs : groups[g].steps) {
-      const RegionFit fit = fit_region(rs.footprint, rs.truth, config().fit_bounds, {});
+      const RegionFit fit = fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, {});
       ASSERT_EQ(fit.status, FitStatus::Ok) << region_name(rs.region);
       const auto v = material_values(fit);
       for (std::size_t k = 0; k < 4; ++k) fitted[g][k].push_back(v[k]);
@@ -439,8 +431,9 @@ TEST(TissueFitRecovery, FollowsATissueAwayFromTheAppendixMeans) {
       if (fit.m.at_bound) ++m_at_bound;
       if (const auto e = material_estimate(fit)) estimates.push_back(*e);
     }
-    const PooledEstimates pool = pool_region_steps(estimates, groups[g].steps.front().region,
-                                                   config().pooling, config().fit_bounds);
+    const PooledEstimates pool =
+        pool_region_steps(estimates, groups[g].steps.front().region, shipped_config().pooling,
+                          shipped_config().fit_bounds);
     if (!pool.pooled) continue;
     ++pools;
     // The pool holds ln kbar, n, ln cbar, m.
@@ -499,14 +492,15 @@ TEST(TissueFitRecovery, OneMPerSessionFollowsTheTruthFurtherAndLowersTheDampingE
       series.push_back(rs.footprint);
       declared.push_back(rs.truth);
     }
-    const auto m = fit_shared_damping_exponent(series, declared, config().fit_bounds, {});
+    const auto m = fit_shared_damping_exponent(series, declared, shipped_config().fit_bounds, {});
     ASSERT_TRUE(m.has_value());
     EXPECT_EQ(static_cast<std::size_t>(m->stances), series.size());
     FitSettings at;
     at.declared_m = m->m;
     for (std::size_t i = 0; i < series.size(); ++i) {
-      const auto v = material_values(fit_region(series[i], declared[i], config().fit_bounds, {}));
-      const RegionFit fit = fit_region(series[i], declared[i], config().fit_bounds, at);
+      const auto v =
+          material_values(fit_region(series[i], declared[i], shipped_config().fit_bounds, {}));
+      const RegionFit fit = fit_region(series[i], declared[i], shipped_config().fit_bounds, at);
       ASSERT_EQ(fit.status, FitStatus::Ok);
       const auto w = material_values(fit);
       for (std::size_t k = 0; k < 4; ++k) {
@@ -540,7 +534,8 @@ TEST(TissueFitRecovery, StandardErrorsDescribeTheStepToStepScatterNotTheChainsSh
       groups;
   for (const RegionStep& rs : recovery_data()) {
     if (!area_determined(rs.region)) continue;
-    const RegionFit fit = fit_region(rs.footprint, rs.truth, config().fit_bounds, FitSettings{});
+    const RegionFit fit =
+        fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, FitSettings{});
     if (fit.status != FitStatus::Ok) continue;
     if (const auto e = material_estimate(fit)) {
       groups[{rs.session, rs.foot, rs.region}].emplace_back(
@@ -555,7 +550,8 @@ TEST(TissueFitRecovery, StandardErrorsDescribeTheStepToStepScatterNotTheChainsSh
     const double steps = static_cast<double>(group.size());
     std::vector<MaterialEstimate> estimates;
     for (const auto& [e, truth] : group) estimates.push_back(e);
-    const PooledEstimates pooled = pool_steps(estimates, material_bounds(config().fit_bounds));
+    const PooledEstimates pooled =
+        pool_steps(estimates, material_bounds(shipped_config().fit_bounds));
     for (std::size_t k = 0; k < 4; ++k) {
       double mean_error = 0.0;
       for (const auto& [e, truth] : group) mean_error += (e.value[k] - truth[k]) / steps;
@@ -625,8 +621,9 @@ TEST(TissueFitRecovery, FreeScaleIsNotTheDefaultBecauseTheChainDoesNotDetermineP
   for (const RegionStep& rs : recovery_data()) {
     if (!area_determined(rs.region)) continue;
     ++fits;
-    const RegionFit f = fit_region(rs.footprint, rs.truth, config().fit_bounds, free_scale);
-    const RegionFit d = fit_region(rs.footprint, rs.truth, config().fit_bounds, FitSettings{});
+    const RegionFit f = fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, free_scale);
+    const RegionFit d =
+        fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, FitSettings{});
     if (f.status != FitStatus::Ok || d.status != FitStatus::Ok) continue;
     e_p.push_back(rel_error(f.A_mm.value * f.B_mm.value, rs.truth.A_mm * rs.truth.B_mm));
     se_log_p.push_back(2.0 * f.A_mm.se / f.A_mm.value);  // A = sqrt(P A/B / pi)
@@ -697,7 +694,7 @@ StepBound one_step_bound(const SimulatedRegion& simulated, Region region, Insole
   StepBound b;
   b.region = region;
   b.size = size;
-  const Config& c = config();
+  const Config& c = shipped_config();
   const double cell_mm2 = c.sensor.area_mm2();
   const double bit_n = c.calibration.newtons_per_bit(cell_mm2);
   std::vector<double> area_rate;
@@ -746,7 +743,7 @@ const std::vector<StepBound>& one_step_bounds() {
       options.size = size;
       options.duration_s = 0.1;  // only the truth's regions are needed
       const SimulationTruth truth =
-          simulate_session(config(), options, dir / "session.csv", dir / "truth.json");
+          simulate_session(shipped_config(), options, dir / "session.csv", dir / "truth.json");
       for (Region region : kRegions) {
         out.push_back(one_step_bound(truth.regions[index_of(region)], region, size));
       }
@@ -784,7 +781,7 @@ TEST(OneStepBound, TheFitScattersAsTheBoundSaysOnExactAreas) {
       [](const StepBound& b) { return b.region == Region::Heel && b.size == InsoleSize::S41_42; });
   ASSERT_NE(it, one_step_bounds().end());
   const StepBound& b = *it;
-  const EllipsoidParams& truth = config().tissue(b.size, b.region).mean;
+  const EllipsoidParams& truth = shipped_config().tissue(b.size, b.region).mean;
   std::mt19937_64 rng(42);
   std::normal_distribution<double> unit(0.0, 1.0);
   std::vector<double> ln_kbar;
@@ -797,7 +794,7 @@ TEST(OneStepBound, TheFitScattersAsTheBoundSaysOnExactAreas) {
     for (std::size_t i = 0; i < noisy.force_n.size(); ++i) {
       noisy.force_n[i] += b.noise_sd_n[i] * unit(rng);
     }
-    const RegionFit fit = fit_region(noisy, truth, config().fit_bounds, FitSettings{});
+    const RegionFit fit = fit_region(noisy, truth, shipped_config().fit_bounds, FitSettings{});
     ASSERT_EQ(fit.status, FitStatus::Ok);
     ln_kbar.push_back(std::log(fit.kbar_n_per_mm3.value / truth.kbar_n_per_mm3));
     n.push_back(fit.n.value / truth.n - 1.0);
@@ -852,7 +849,7 @@ RegionSeries model_series(const EllipsoidParams& p, ModelVariant variant, int fr
   return s;
 }
 
-const EllipsoidParams kHeel{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
+using test::kHeel;
 
 // Exact model series are fitted raw: a polynomial would only distort them.
 FitSettings raw(ModelVariant model = ModelVariant::Correct) {
@@ -943,7 +940,7 @@ TEST(TissueFit, StandardErrorsFollowTheDataJacobianAtTheOptimum) {
   std::mt19937 rng(11);
   std::normal_distribution<double> noise(0.0, 2.0);
   for (double& f : s.force_n) f += noise(rng);
-  const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, raw());
+  const RegionFit fit = fit_region(s, kHeel, shipped_config().fit_bounds, raw());
   ASSERT_EQ(fit.status, FitStatus::Ok) << fit.reason;
   ASSERT_TRUE(fit.material_covariance.has_value());
   for (const Estimate* e : {&fit.kbar_n_per_mm3, &fit.n, &fit.cbar_ns_per_mm3, &fit.m}) {
@@ -997,7 +994,7 @@ TEST(TissueFit, DeclaredMFitsTheOthersAtThatM) {
   const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
   FitSettings at_truth = raw();
   at_truth.declared_m = kHeel.m;
-  const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, at_truth);
+  const RegionFit fit = fit_region(s, kHeel, shipped_config().fit_bounds, at_truth);
   ASSERT_EQ(fit.status, FitStatus::Ok) << fit.reason;
   EXPECT_NEAR(fit.kbar_n_per_mm3.value, kHeel.kbar_n_per_mm3, kHeel.kbar_n_per_mm3 * 0.01);
   EXPECT_NEAR(fit.n.value, kHeel.n, kHeel.n * 0.01);
@@ -1015,7 +1012,7 @@ TEST(TissueFit, DeclaredMFitsTheOthersAtThatM) {
   EXPECT_GT((*fit.material_covariance)[2][2], 0.0);
   FitSettings off = raw();
   off.declared_m = kHeel.m - 0.3;
-  const RegionFit wrong = fit_region(s, kHeel, config().fit_bounds, off);
+  const RegionFit wrong = fit_region(s, kHeel, shipped_config().fit_bounds, off);
   ASSERT_EQ(wrong.status, FitStatus::Ok) << wrong.reason;
   EXPECT_EQ(wrong.m.value, kHeel.m - 0.3);
   EXPECT_GT(wrong.final_cost, 10.0 * fit.final_cost + 1e-6);
@@ -1042,7 +1039,7 @@ TEST(TissueFit, DeclaredMsSlopeFollowsTheFitsAtNeighbouringM) {
   const auto fitted_at = [&](double m) {
     FitSettings settings = raw();
     settings.declared_m = m;
-    return fit_region(s, kHeel, config().fit_bounds, settings);
+    return fit_region(s, kHeel, shipped_config().fit_bounds, settings);
   };
   const auto theta = [](const RegionFit& f) {
     return std::array<double, 3>{std::log(f.kbar_n_per_mm3.value), f.n.value,
@@ -1065,7 +1062,8 @@ TEST(TissueFit, DeclaredMsSlopeFollowsTheFitsAtNeighbouringM) {
                 slope[k], numeric);
     EXPECT_NEAR(slope[k], numeric, 0.03 * std::abs(numeric) + 1e-4) << k;
   }
-  EXPECT_FALSE(fit_region(s, kHeel, config().fit_bounds, raw()).material_slope_on_m.has_value())
+  EXPECT_FALSE(
+      fit_region(s, kHeel, shipped_config().fit_bounds, raw()).material_slope_on_m.has_value())
       << "m fitted: no slope on it";
 }
 
@@ -1073,15 +1071,15 @@ TEST(TissueFit, DeclaredMIsRefusedOutsideTheDefaultFitAndTheBoundsOfM) {
   const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
   FitSettings settings = raw();
   settings.declared_m = 0.5;  // below the bounds' 0.82
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, settings), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, settings), std::invalid_argument);
   settings.declared_m = 1.0;
   settings.mode = FitMode::Seed8;
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, settings), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, settings), std::invalid_argument);
   settings.mode = FitMode::Identifiable;
   settings.free_scale = true;
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, settings), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, settings), std::invalid_argument);
   const std::array<RegionSeries, 1> one{s};
-  EXPECT_THROW(fit_shared_damping_exponent(one, {}, config().fit_bounds, raw()),
+  EXPECT_THROW(fit_shared_damping_exponent(one, {}, shipped_config().fit_bounds, raw()),
                std::invalid_argument);
 }
 
@@ -1100,7 +1098,8 @@ TEST(TissueFit, SharedDampingExponentOfSeveralStancesIsTheirs) {
     stances.push_back(model_series(p, ModelVariant::Correct, 50 + 4 * i));
     declared.push_back(p);
   }
-  const auto shared = fit_shared_damping_exponent(stances, declared, config().fit_bounds, raw());
+  const auto shared =
+      fit_shared_damping_exponent(stances, declared, shipped_config().fit_bounds, raw());
   ASSERT_TRUE(shared.has_value());
   EXPECT_NEAR(shared->m, 0.95, 0.005);
   EXPECT_EQ(shared->stances, 6);
@@ -1132,7 +1131,8 @@ TEST(TissueFit, SharedDampingExponentsStandardErrorIsItsScatter) {
       const double peak = *std::max_element(s.force_n.begin(), s.force_n.end());
       for (double& f : s.force_n) f += 0.01 * peak * unit(rng);
     }
-    const auto shared = fit_shared_damping_exponent(noisy, declared, config().fit_bounds, raw());
+    const auto shared =
+        fit_shared_damping_exponent(noisy, declared, shipped_config().fit_bounds, raw());
     ASSERT_TRUE(shared.has_value());
     ASSERT_FALSE(shared->at_bound);
     m.push_back(shared->m);
@@ -1148,7 +1148,7 @@ TEST(TissueFit, SharedDampingExponentsStandardErrorIsItsScatter) {
 
 TEST(TissueFit, RecoversANoiseFreeModelSeries) {
   const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
-  const RegionFit fit = fit_region(s, kHeel, config().fit_bounds, raw());
+  const RegionFit fit = fit_region(s, kHeel, shipped_config().fit_bounds, raw());
   ASSERT_EQ(fit.status, FitStatus::Ok) << fit.reason << " " << fit.solver_message;
   EXPECT_NEAR(fit.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
   EXPECT_NEAR(fit.n.value, 0.294, 0.294 * 0.03);
@@ -1187,8 +1187,8 @@ TEST(TissueFit, SecondOrderRatesAtTheContactEndsRecoverTheDampingCloser) {
   }
   FitSettings second_order = raw();
   second_order.end_rate = EndRate::SecondOrder;
-  const RegionFit two = fit_region(s, kHeel, config().fit_bounds, raw());
-  const RegionFit three = fit_region(s, kHeel, config().fit_bounds, second_order);
+  const RegionFit two = fit_region(s, kHeel, shipped_config().fit_bounds, raw());
+  const RegionFit three = fit_region(s, kHeel, shipped_config().fit_bounds, second_order);
   ASSERT_EQ(two.status, FitStatus::Ok) << two.reason;
   ASSERT_EQ(three.status, FitStatus::Ok) << three.reason;
   const double two_cbar = rel_error(two.cbar_ns_per_mm3.value, kHeel.cbar_ns_per_mm3);
@@ -1231,7 +1231,7 @@ TEST(TissueFit, DeclaredCAndD0OnlyRescaleKbarAndCbar) {
   EllipsoidParams other = kHeel;
   other.C_mm = 40.0;
   other.d0_mm = 10.0;
-  FitBounds wide = config().fit_bounds;
+  FitBounds wide = shipped_config().fit_bounds;
   wide.kbar_n_per_mm3 = {1e-4, 10.0};
   wide.cbar_ns_per_mm3 = {1e-5, 1.0};
   const RegionFit a = fit_region(s, kHeel, wide, raw());
@@ -1263,7 +1263,7 @@ TEST(TissueFit, Seed8ReportsCAndD0Undetermined) {
   const RegionSeries s = model_series(kHeel, ModelVariant::Correct, 60);
   FitSettings settings;
   settings.mode = FitMode::Seed8;
-  const RegionFit fit = fit_region(s, EllipsoidParams{}, config().fit_bounds, settings);
+  const RegionFit fit = fit_region(s, EllipsoidParams{}, shipped_config().fit_bounds, settings);
   EXPECT_NE(std::find(fit.undetermined.begin(), fit.undetermined.end(), "C_mm"),
             fit.undetermined.end());
   EXPECT_NE(std::find(fit.undetermined.begin(), fit.undetermined.end(), "d0_mm"),
@@ -1278,7 +1278,7 @@ TEST(TissueFit, Seed8OnASimulatedRegionStepReportsCAndD0Undetermined) {
   FitSettings settings;
   settings.mode = FitMode::Seed8;
   const RegionFit fit =
-      fit_region(data.front().footprint, EllipsoidParams{}, config().fit_bounds, settings);
+      fit_region(data.front().footprint, EllipsoidParams{}, shipped_config().fit_bounds, settings);
   EXPECT_NE(std::find(fit.undetermined.begin(), fit.undetermined.end(), "C_mm"),
             fit.undetermined.end());
   EXPECT_NE(std::find(fit.undetermined.begin(), fit.undetermined.end(), "d0_mm"),
@@ -1295,8 +1295,9 @@ TEST(TissueFit, SeedEq25SessionNeedsTheSeedEq25Model) {
   std::vector<double> e_seed, e_correct, nrmse_seed, nrmse_correct;
   for (const RegionStep& rs : steps) {
     if (rs.contact_frames < 10) continue;
-    const RegionFit a = fit_region(rs.footprint, rs.truth, config().fit_bounds, seed);
-    const RegionFit b = fit_region(rs.footprint, rs.truth, config().fit_bounds, FitSettings{});
+    const RegionFit a = fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, seed);
+    const RegionFit b =
+        fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, FitSettings{});
     if (a.status != FitStatus::Ok || b.status != FitStatus::Ok) continue;
     e_seed.push_back(rel_error(a.cbar_ns_per_mm3.value, rs.truth.cbar_ns_per_mm3));
     e_correct.push_back(rel_error(b.cbar_ns_per_mm3.value, rs.truth.cbar_ns_per_mm3));
@@ -1314,8 +1315,9 @@ TEST(TissueFit, SeedEq25SessionNeedsTheSeedEq25Model) {
 
 TEST(TissueFit, SeedEq25FitRecoversANoiseFreeSeedEq25Series) {
   const RegionSeries s = model_series(kHeel, ModelVariant::SeedEq25, 60);
-  const RegionFit a = fit_region(s, kHeel, config().fit_bounds, raw(ModelVariant::SeedEq25));
-  const RegionFit b = fit_region(s, kHeel, config().fit_bounds, raw());
+  const RegionFit a =
+      fit_region(s, kHeel, shipped_config().fit_bounds, raw(ModelVariant::SeedEq25));
+  const RegionFit b = fit_region(s, kHeel, shipped_config().fit_bounds, raw());
   ASSERT_EQ(a.status, FitStatus::Ok);
   EXPECT_NEAR(a.kbar_n_per_mm3.value, 0.117, 0.117 * 0.05);
   EXPECT_NEAR(a.n.value, 0.294, 0.294 * 0.05);
@@ -1328,8 +1330,9 @@ TEST(TissueFit, SeedEq25FitRecoversANoiseFreeSeedEq25Series) {
 // form finds a cbar that is off by about that factor, while its own recovers the truth.
 TEST(TissueFit, MaterialRateFitRecoversANoiseFreeMaterialRateSeries) {
   const RegionSeries s = model_series(kHeel, ModelVariant::MaterialRate, 60);
-  const RegionFit a = fit_region(s, kHeel, config().fit_bounds, raw(ModelVariant::MaterialRate));
-  const RegionFit b = fit_region(s, kHeel, config().fit_bounds, raw());
+  const RegionFit a =
+      fit_region(s, kHeel, shipped_config().fit_bounds, raw(ModelVariant::MaterialRate));
+  const RegionFit b = fit_region(s, kHeel, shipped_config().fit_bounds, raw());
   ASSERT_EQ(a.status, FitStatus::Ok) << a.reason;
   ASSERT_EQ(b.status, FitStatus::Ok) << b.reason;
   EXPECT_NEAR(a.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
@@ -1357,7 +1360,7 @@ TEST(TissueFit, OnAMaterialRateSessionTheFootprintAbsorbsTheDamping) {
   std::vector<double> ratio, nrmse;
   for (const RegionStep& rs : steps) {
     if (rs.contact_frames < 10 || !area_determined(rs.region)) continue;
-    const RegionFit fit = fit_region(rs.footprint, rs.truth, config().fit_bounds, material);
+    const RegionFit fit = fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, material);
     if (fit.status != FitStatus::Ok) continue;
     ratio.push_back(fit.cbar_ns_per_mm3.value / rs.truth.cbar_ns_per_mm3);
     nrmse.push_back(fit.nrmse_pct);
@@ -1387,7 +1390,8 @@ TEST(TissueFit, OnACoverageRasterTheFootprintOverReadsAndTheStiffnessExponentIsB
     std::vector<double> ratio, nrmse;
     for (const RegionStep& rs : steps) {
       if (rs.contact_frames < 10 || !area_determined(rs.region)) continue;
-      const RegionFit fit = fit_region(rs.footprint, rs.truth, config().fit_bounds, FitSettings{});
+      const RegionFit fit =
+          fit_region(rs.footprint, rs.truth, shipped_config().fit_bounds, FitSettings{});
       if (fit.status != FitStatus::Ok) continue;
       ratio.push_back(fit.n.value / rs.truth.n);
       nrmse.push_back(fit.nrmse_pct);
@@ -1417,7 +1421,7 @@ TEST(TissueFit, OnACoverageRasterTheCellMeanFootprintRecoversTheStiffnessExponen
       for (const RegionStep& rs : steps) {
         if (rs.contact_frames < 10 || !area_determined(rs.region)) continue;
         const RegionFit fit =
-            fit_region(rs.series(area), rs.truth, config().fit_bounds, FitSettings{});
+            fit_region(rs.series(area), rs.truth, shipped_config().fit_bounds, FitSettings{});
         if (fit.status != FitStatus::Ok) continue;
         n.push_back(fit.n.value / rs.truth.n);
         kbar.push_back(fit.kbar_n_per_mm3.value / rs.truth.kbar_n_per_mm3);
@@ -1455,7 +1459,7 @@ TEST(TissueFit, NoContactAndTooFewFrames) {
     s.area_mm2.push_back(0.0);
     s.force_n.push_back(0.0);
   }
-  const RegionFit none = fit_region(s, kHeel, config().fit_bounds, FitSettings{});
+  const RegionFit none = fit_region(s, kHeel, shipped_config().fit_bounds, FitSettings{});
   EXPECT_EQ(none.status, FitStatus::NoContact);
   EXPECT_EQ(none.frames, 0);
   EXPECT_EQ(none.model_force_n.size(), 20u);
@@ -1463,7 +1467,7 @@ TEST(TissueFit, NoContactAndTooFewFrames) {
   s.area_mm2[6] = 700.0;
   s.force_n[5] = 50.0;
   s.force_n[6] = 80.0;
-  const RegionFit few = fit_region(s, kHeel, config().fit_bounds, FitSettings{});
+  const RegionFit few = fit_region(s, kHeel, shipped_config().fit_bounds, FitSettings{});
   EXPECT_EQ(few.status, FitStatus::Failed);
   EXPECT_EQ(few.reason, "too_few_frames");
   EXPECT_EQ(fit_status_name(few.status), "fit_failed");
@@ -1472,7 +1476,8 @@ TEST(TissueFit, NoContactAndTooFewFrames) {
 TEST(TissueFit, LengthMismatchThrows) {
   RegionSeries s = model_series(kHeel, ModelVariant::Correct, 30);
   s.force_n.pop_back();
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, FitSettings{}), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, FitSettings{}),
+               std::invalid_argument);
 }
 
 // A transform between the tissue and the cells, written out here on its own: a relaxing
@@ -1505,7 +1510,7 @@ TEST(TissueFit, AForceTransformFindsTheTissueUnderIt) {
   const RegionSeries tissue = model_series(kHeel, ModelVariant::Correct, 60);
   const ForceTransform t = relaxing(tissue);
   const RegionSeries reported = through(tissue, t);
-  const RegionFit with = fit_region(reported, kHeel, config().fit_bounds, raw(), &t);
+  const RegionFit with = fit_region(reported, kHeel, shipped_config().fit_bounds, raw(), &t);
   ASSERT_EQ(with.status, FitStatus::Ok) << with.reason << " " << with.solver_message;
   EXPECT_NEAR(with.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
   EXPECT_NEAR(with.n.value, 0.294, 0.294 * 0.03);
@@ -1517,7 +1522,7 @@ TEST(TissueFit, AForceTransformFindsTheTissueUnderIt) {
   for (std::size_t i = 0; i < reported.force_n.size(); ++i) {
     EXPECT_NEAR(with.model_force_n[i], reported.force_n[i], 0.01 * 300.0) << i;
   }
-  const RegionFit without = fit_region(reported, kHeel, config().fit_bounds, raw());
+  const RegionFit without = fit_region(reported, kHeel, shipped_config().fit_bounds, raw());
   ASSERT_EQ(without.status, FitStatus::Ok);
   EXPECT_GT(without.nrmse_pct, 2.0 * with.nrmse_pct);
 
@@ -1525,7 +1530,7 @@ TEST(TissueFit, AForceTransformFindsTheTissueUnderIt) {
   const std::vector<RegionSeries> stances{reported, tissue};
   const std::vector<const ForceTransform*> transforms{&t, nullptr};
   const RegionFit session =
-      fit_region_session(stances, kHeel, config().fit_bounds, raw(), transforms);
+      fit_region_session(stances, kHeel, shipped_config().fit_bounds, raw(), transforms);
   ASSERT_EQ(session.status, FitStatus::Ok);
   EXPECT_NEAR(session.kbar_n_per_mm3.value, 0.117, 0.117 * 0.03);
   EXPECT_NEAR(session.n.value, 0.294, 0.294 * 0.03);
@@ -1538,8 +1543,8 @@ TEST(TissueFit, AnIdentityTransformChangesNothing) {
   identity.linear = [](std::span<const double> in, std::span<double> out) {
     std::copy(in.begin(), in.end(), out.begin());
   };
-  const RegionFit with = fit_region(s, kHeel, config().fit_bounds, raw(), &identity);
-  const RegionFit without = fit_region(s, kHeel, config().fit_bounds, raw());
+  const RegionFit with = fit_region(s, kHeel, shipped_config().fit_bounds, raw(), &identity);
+  const RegionFit without = fit_region(s, kHeel, shipped_config().fit_bounds, raw());
   EXPECT_DOUBLE_EQ(with.kbar_n_per_mm3.value, without.kbar_n_per_mm3.value);
   EXPECT_DOUBLE_EQ(with.n.value, without.n.value);
   EXPECT_DOUBLE_EQ(with.cbar_ns_per_mm3.value, without.cbar_ns_per_mm3.value);
@@ -1552,25 +1557,27 @@ TEST(TissueFit, AForceTransformIsRefusedWhereItCannotBeUsed) {
   ForceTransform t = relaxing(s);
   FitSettings seed8 = raw();
   seed8.mode = FitMode::Seed8;
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, seed8, &t), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, seed8, &t), std::invalid_argument);
   FitSettings free_scale = raw();
   free_scale.free_scale = true;
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, free_scale, &t), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, free_scale, &t),
+               std::invalid_argument);
   const std::vector<RegionSeries> two{s, s};
   const std::vector<const ForceTransform*> one{&t};
-  EXPECT_THROW(fit_region_session(two, kHeel, config().fit_bounds, raw(), one),
+  EXPECT_THROW(fit_region_session(two, kHeel, shipped_config().fit_bounds, raw(), one),
                std::invalid_argument);
   t.offset_n.pop_back();
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, raw(), &t), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, raw(), &t), std::invalid_argument);
   ForceTransform no_map;
   no_map.offset_n.assign(s.t_s.size(), 0.0);
-  EXPECT_THROW(fit_region(s, kHeel, config().fit_bounds, raw(), &no_map), std::invalid_argument);
+  EXPECT_THROW(fit_region(s, kHeel, shipped_config().fit_bounds, raw(), &no_map),
+               std::invalid_argument);
 }
 
 TEST(TissueFit, SessionFitSharesOneParameterSet) {
   const std::vector<RegionSeries> stances{model_series(kHeel, ModelVariant::Correct, 50),
                                           model_series(kHeel, ModelVariant::Correct, 60)};
-  const RegionFit fit = fit_region_session(stances, kHeel, config().fit_bounds, raw());
+  const RegionFit fit = fit_region_session(stances, kHeel, shipped_config().fit_bounds, raw());
   ASSERT_EQ(fit.status, FitStatus::Ok);
   EXPECT_EQ(fit.frames, 110);
   EXPECT_EQ(fit.model_force_n.size(), 110u);
@@ -1607,7 +1614,7 @@ TEST(TissueFit, FreeScaleFindsTheContactScaleOfANoiseFreeSeries) {
     EllipsoidParams declared = kHeel;
     declared.A_mm *= std::sqrt(scale);
     declared.B_mm *= std::sqrt(scale);
-    const RegionFit f = fit_region(s, declared, config().fit_bounds, free_scale);
+    const RegionFit f = fit_region(s, declared, shipped_config().fit_bounds, free_scale);
     ASSERT_EQ(f.status, FitStatus::Ok) << f.reason << " " << f.solver_message;
     EXPECT_NEAR(std::acos(-1.0) * f.A_mm.value * f.B_mm.value / true_p, 1.0, 0.005) << scale;
     EXPECT_NEAR(f.A_mm.value / f.B_mm.value, kHeel.A_mm / kHeel.B_mm, 1e-9);
@@ -1621,7 +1628,7 @@ TEST(TissueFit, FreeScaleFindsTheContactScaleOfANoiseFreeSeries) {
     EXPECT_TRUE(std::isfinite(f.A_mm.se));
     EXPECT_TRUE(f.undetermined.empty());
 
-    const RegionFit d = fit_region(s, declared, config().fit_bounds, raw());
+    const RegionFit d = fit_region(s, declared, shipped_config().fit_bounds, raw());
     ASSERT_EQ(d.status, FitStatus::Ok) << d.reason;
     EXPECT_FALSE(d.A_mm.free);
     EXPECT_DOUBLE_EQ(d.A_mm.value, declared.A_mm);

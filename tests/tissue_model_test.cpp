@@ -7,15 +7,16 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numbers>
 #include <stdexcept>
 #include <utility>
 #include <vector>
 
+#include "test_support.hpp"
+
 namespace gaitmon {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using test::kPi;
 
 /// Gauss-Legendre nodes and weights on [lo, hi], by Newton iteration on P_n.
 struct Quadrature {
@@ -87,7 +88,7 @@ double pressure_quadrature(const EllipsoidParams& p, double d, double ddot, Mode
 }
 
 // The seed's Appendix I means (size 37-38) for three regions, plus a made-up stiff case.
-const EllipsoidParams kHeel{80.2, 80.7, 69.9, 16.4, 0.117, 0.294, 0.011, 1.18};
+using test::kHeel;
 const EllipsoidParams kMet3_5{139.7, 141.0, 116.5, 11.6, 0.140, 0.311, 0.023, 1.08};
 const EllipsoidParams kToe2{43.7, 17.6, 36.3, 7.2, 0.144, 0.310, 0.012, 1.11};
 const EllipsoidParams kOdd{50.0, 90.0, 30.0, 5.0, 0.5, 1.5, 0.05, 0.4};

@@ -12,10 +12,8 @@
 #include <chrono>
 #include <csignal>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -27,13 +25,6 @@ namespace gaitmon {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string read_all(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
 
 std::string calibrate(const std::string& args, int* status) {
   std::string output;
@@ -58,13 +49,13 @@ fs::path config_taking(const fs::path& tables, const fs::path& dir) {
     fs::copy_file(test::source_dir() / "config" / name, config_dir / name,
                   fs::copy_options::overwrite_existing);
   }
-  std::string config_text = read_all(config_dir / "gaitmon.toml");
+  std::string config_text = test::read_text(config_dir / "gaitmon.toml");
   const auto from = config_text.find("[asymmetry]\n");
   const auto to = config_text.find("[wire]\n");
   if (from == std::string::npos || to == std::string::npos || to < from) {
     throw std::runtime_error("the shipped config has no [asymmetry] ... [wire] to replace");
   }
-  config_text.replace(from, to - from, read_all(tables) + "\n");
+  config_text.replace(from, to - from, test::read_text(tables) + "\n");
   test::write_text(config_dir / "gaitmon.toml", config_text);
   return config_dir / "gaitmon.toml";
 }
@@ -127,7 +118,7 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
                             "\n[asymmetry.m_per_session] (one m per region over the session)"}) {
     EXPECT_NE(out.find(table), std::string::npos) << table << "\n" << out;
   }
-  const auto json = nlohmann::json::parse(read_all(dir / "out" / "calibration.json"));
+  const auto json = nlohmann::json::parse(test::read_text(dir / "out" / "calibration.json"));
   ASSERT_EQ(json.at("designs").size(), 1U);
   const auto& design = json.at("designs").at(0);
   EXPECT_EQ(design.at("sessions").get<int>(), 4);
@@ -164,7 +155,8 @@ TEST(CalibrateCommand, WritesTablesThatAConfigTakesInPlaceOfItsOwn) {
       "measure otherwise here. The chain's SDs here hold for the config's;",
       otherwise);
   EXPECT_NE(out.find("\ncalibrate: " + note), std::string::npos) << out;
-  EXPECT_NE(read_all(dir / "out" / "calibration.toml").find("# Note: " + note), std::string::npos);
+  EXPECT_NE(test::read_text(dir / "out" / "calibration.toml").find("# Note: " + note),
+            std::string::npos);
 
   const Config config = load_config(config_taking(dir / "out" / "calibration.toml", dir));
   for (const bool shared_m : {false, true}) {
@@ -208,8 +200,9 @@ TEST(CalibrateCommand, OnTheCoverageRasterTheSessionsAreAnalysedWithFootprintMea
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("placement SD 0 mm; coverage raster, area footprint-mean)"), std::string::npos)
       << out;
-  const auto centre = nlohmann::json::parse(read_all(dir / "centre" / "calibration.json"));
-  const auto coverage = nlohmann::json::parse(read_all(dir / "coverage" / "calibration.json"));
+  const auto centre = nlohmann::json::parse(test::read_text(dir / "centre" / "calibration.json"));
+  const auto coverage =
+      nlohmann::json::parse(test::read_text(dir / "coverage" / "calibration.json"));
   EXPECT_EQ(centre.at("designs").at(0).at("rasterisation"), "centre");
   EXPECT_EQ(coverage.at("designs").at(0).at("rasterisation"), "coverage");
   EXPECT_NE(centre.at("designs").at(0).at("per_step"), coverage.at("designs").at(0).at("per_step"));
@@ -219,7 +212,7 @@ TEST(CalibrateCommand, OnTheCoverageRasterTheSessionsAreAnalysedWithFootprintMea
     EXPECT_NE(out.find(table), std::string::npos) << table << "\n" << out;
   }
   EXPECT_EQ(out.find("\n[pooling] ("), std::string::npos) << out;
-  const std::string toml = read_all(dir / "coverage" / "calibration.toml");
+  const std::string toml = test::read_text(dir / "coverage" / "calibration.toml");
   EXPECT_NE(toml.find("\n[pooling]\n# no design here simulated cells that read at their centres "
                       "(centre raster): the values of "),
             std::string::npos)
@@ -267,7 +260,7 @@ TEST(CalibrateCommand, SettleMeasuresAgainWithItsOwnTablesUntilTheyMeasureThemse
     const std::string out =
         calibrate(std::string(c.design) + " --settle --out " + (dir / "settled").string(), &status);
     ASSERT_EQ(status, 0) << out;
-    const auto json = nlohmann::json::parse(read_all(dir / "settled" / "calibration.json"));
+    const auto json = nlohmann::json::parse(test::read_text(dir / "settled" / "calibration.json"));
     const auto& settle = json.at("settle");
     ASSERT_EQ(settle.at("outcome").get<std::string>(), c.outcome) << out;
     const auto moved = settle.at("moved").get<std::vector<int>>();
@@ -292,7 +285,7 @@ TEST(CalibrateCommand, SettleMeasuresAgainWithItsOwnTablesUntilTheyMeasureThemse
     }
     EXPECT_NE(out.find("\ncalibrate: " + settle.at("note").get<std::string>()), std::string::npos)
         << out;
-    EXPECT_NE(read_all(dir / "settled" / "calibration.toml")
+    EXPECT_NE(test::read_text(dir / "settled" / "calibration.toml")
                   .find("# Note: " + settle.at("note").get<std::string>()),
               std::string::npos);
 
@@ -302,7 +295,7 @@ TEST(CalibrateCommand, SettleMeasuresAgainWithItsOwnTablesUntilTheyMeasureThemse
                                    " calibrate " + c.design + " --out " + (dir / "again").string(),
                                &again_out);
     ASSERT_EQ(status, 0) << again_out;
-    const auto again = nlohmann::json::parse(read_all(dir / "again" / "calibration.json"));
+    const auto again = nlohmann::json::parse(test::read_text(dir / "again" / "calibration.json"));
     ASSERT_EQ(again.at("designs").size(), 1U);
     const std::vector<std::string> otherwise = measured_otherwise(again.at("designs").at(0));
     if (std::string(c.outcome) == "nothing_moved") {
@@ -361,7 +354,7 @@ TEST(CalibrateCommand, ADesignsFileGivesEachTableTheLargestOfTheDesignsThatMeasu
                      "measure it):\n"),
             std::string::npos)
       << out;
-  const auto json = nlohmann::json::parse(read_all(dir / "out" / "calibration.json"));
+  const auto json = nlohmann::json::parse(test::read_text(dir / "out" / "calibration.json"));
   ASSERT_EQ(json.at("designs").size(), 2U);
   const auto& one = json.at("designs").at(0);
   const auto& two = json.at("designs").at(1);
@@ -503,15 +496,15 @@ TEST(CalibrateCommand, AStopSignalRemovesTheScratchSessionsAndWritesNothing) {
       ::kill(pid, SIGKILL);
       ::waitpid(pid, &wstatus, 0);
     }
-    EXPECT_TRUE(started) << read_all(log);
+    EXPECT_TRUE(started) << test::read_text(log);
     EXPECT_EQ(ended, pid) << "still running 120 s on";
-    EXPECT_TRUE(WIFSIGNALED(wstatus) && WTERMSIG(wstatus) == signal) << read_all(log);
-    EXPECT_TRUE(fs::is_empty(tmp)) << read_all(log);
+    EXPECT_TRUE(WIFSIGNALED(wstatus) && WTERMSIG(wstatus) == signal) << test::read_text(log);
+    EXPECT_TRUE(fs::is_empty(tmp)) << test::read_text(log);
     EXPECT_FALSE(fs::exists(dir / "out" / "calibration.json"));
-    EXPECT_NE(read_all(log).find(fmt::format("calibrate: stopped by {}; nothing written",
-                                             signal == SIGINT ? "SIGINT" : "SIGTERM")),
+    EXPECT_NE(test::read_text(log).find(fmt::format("calibrate: stopped by {}; nothing written",
+                                                    signal == SIGINT ? "SIGINT" : "SIGTERM")),
               std::string::npos)
-        << read_all(log);
+        << test::read_text(log);
   }
 }
 

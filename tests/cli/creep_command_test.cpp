@@ -19,7 +19,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-const auto run = &test::run_gaitmon;
+using test::run_gaitmon;
 
 // A 20-s walk on insoles of `size` whose cells creep by `gain` at `tau_s`, as DIR/NAME.
 std::string walk(const fs::path& dir, const std::string& name, int seed, double gain, double tau_s,
@@ -27,10 +27,10 @@ std::string walk(const fs::path& dir, const std::string& name, int seed, double 
   const std::string session = (dir / name).string();
   int status = -1;
   const std::string out =
-      run("simulate --size " + size + " --duration 20 --seed " + std::to_string(seed) +
-              " --effect sensor_creep --effect-params '{\"gain\":" + std::to_string(gain) +
-              ",\"tau_s\":" + std::to_string(tau_s) + "}' --out " + session + options,
-          &status);
+      run_gaitmon("simulate --size " + size + " --duration 20 --seed " + std::to_string(seed) +
+                      " --effect sensor_creep --effect-params '{\"gain\":" + std::to_string(gain) +
+                      ",\"tau_s\":" + std::to_string(tau_s) + "}' --out " + session + options,
+                  &status);
   if (status != 0) throw std::runtime_error("simulate failed: " + out);
   return session;
 }
@@ -72,7 +72,7 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
   int status = -1;
   const fs::path out_dir = dir / "out";
   const std::string agreed =
-      run("creep " + one_pair + " --out " + out_dir.string() + " --report", &status);
+      run_gaitmon("creep " + one_pair + " --out " + out_dir.string() + " --report", &status);
   ASSERT_EQ(status, 0) << agreed;
   const std::map<std::string, Row> as_read = rows_of(agreed);
   ASSERT_EQ(as_read.size(), 3u) << agreed;
@@ -116,8 +116,8 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
   config.replace(config.find(shipped), shipped.size(),
                  "\ngain = " + section[1].str() + "\ntau_s = " + section[2].str() + "\n");
   test::write_text(config_dir / "gaitmon.toml", config);
-  const std::string left =
-      run("--config " + (config_dir / "gaitmon.toml").string() + " creep " + one_pair, &status);
+  const std::string left = run_gaitmon(
+      "--config " + (config_dir / "gaitmon.toml").string() + " creep " + one_pair, &status);
   ASSERT_EQ(status, 0) << left;
   EXPECT_NE(left.find("on top of the config's [sensor_creep] (gain " + section[1].str()),
             std::string::npos)
@@ -136,9 +136,9 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
   }
 
   const std::string two_pairs =
-      run("creep " + one_pair + " " + walk(dir, "other.csv", 10, 0.15, 0.5) + " --out " +
-              out_dir.string(),
-          &status);
+      run_gaitmon("creep " + one_pair + " " + walk(dir, "other.csv", 10, 0.15, 0.5) + " --out " +
+                      out_dir.string(),
+                  &status);
   ASSERT_EQ(status, 0) << two_pairs;
   EXPECT_NE(two_pairs.find("they disagree"), std::string::npos) << two_pairs;
   EXPECT_EQ(two_pairs.find("[sensor_creep]"), std::string::npos) << two_pairs;
@@ -150,7 +150,7 @@ TEST(CreepCommand, WalksOfOnePairAgreeAndThoseOfTwoPairsDoNot) {
   EXPECT_FALSE(fs::exists(out_dir / "creep.html"));
 
   const std::string alone =
-      run("creep " + (dir / "a.csv").string() + " --out " + out_dir.string(), &status);
+      run_gaitmon("creep " + (dir / "a.csv").string() + " --out " + out_dir.string(), &status);
   ASSERT_EQ(status, 0) << alone;
   EXPECT_NE(alone.find("one recording shows a creep"), std::string::npos) << alone;
   const nlohmann::json one = nlohmann::json::parse(test::read_text(out_dir / "creep.json"));
@@ -173,7 +173,7 @@ TEST(CreepCommand, TheRealRecordingsDisagree) {
     sessions += " " + (real / ("gaitpdb_" + std::string(name) + ".csv")).string();
   }
   int status = -1;
-  const std::string out = run("creep" + sessions, &status);
+  const std::string out = run_gaitmon("creep" + sessions, &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("the 3 recordings that show it"), std::string::npos) << out;
   EXPECT_NE(out.find("they disagree"), std::string::npos) << out;
@@ -204,7 +204,8 @@ TEST(CreepCommand, TheStandardErrorsCoverTheSpreadOfTenWalksOfOnePair) {
                           pair.size);
     }
     int status = -1;
-    const std::string out = run("creep" + walks + " --out " + (dir / "out").string(), &status);
+    const std::string out =
+        run_gaitmon("creep" + walks + " --out " + (dir / "out").string(), &status);
     ASSERT_EQ(status, 0) << out;
     const nlohmann::json found = nlohmann::json::parse(test::read_text(dir / "out" / "creep.json"));
     ASSERT_FALSE(found["agreement"].is_null()) << out;
@@ -236,7 +237,8 @@ TEST(CreepCommand, WalksWhoseZerosClearTheFloorGiveTheCreepWithoutABias) {
                         " --min-bias 3 --max-bias 5");
   }
   int status = -1;
-  const std::string out = run("creep" + walks + " --out " + (dir / "out").string(), &status);
+  const std::string out =
+      run_gaitmon("creep" + walks + " --out " + (dir / "out").string(), &status);
   ASSERT_EQ(status, 0) << out;
   const nlohmann::json found = nlohmann::json::parse(test::read_text(dir / "out" / "creep.json"));
   ASSERT_EQ(found["verdict"], "agree") << out;
@@ -254,45 +256,45 @@ TEST(CreepCommand, BadInputIsAClearErrorNamingIt) {
   const auto dir = test::scratch_dir("creep-command-bad");
   const std::string a = walk(dir, "a.csv", 7, 0.3, 2.0);
   int status = -1;
-  std::string out = run("creep " + a + " " + a, &status);
+  std::string out = run_gaitmon("creep " + a + " " + a, &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("is given twice"), std::string::npos) << out;
 
-  out = run("creep " + a + " " + (dir / "missing.csv").string(), &status);
+  out = run_gaitmon("creep " + a + " " + (dir / "missing.csv").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("missing.csv"), std::string::npos) << out;
 
   // Two steps a foot: too few to hold the creep out over five folds.
   const std::string short_walk = (dir / "short.csv").string();
-  run("simulate --size 41-42 --duration 3 --seed 7 --out " + short_walk, &status);
+  run_gaitmon("simulate --size 41-42 --duration 3 --seed 7 --out " + short_walk, &status);
   ASSERT_EQ(status, 0);
   // An earlier run's creep.json is removed before the work, so a failed run leaves none.
   const fs::path out_dir = dir / "out";
   test::write_text(out_dir / "creep.json", "{}\n");
-  out = run("creep " + a + " " + short_walk + " --out " + out_dir.string(), &status);
+  out = run_gaitmon("creep " + a + " " + short_walk + " --out " + out_dir.string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("short.csv"), std::string::npos) << out;
   EXPECT_NE(out.find("need at least 5"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(out_dir / "creep.json"));
   EXPECT_FALSE(fs::exists(out_dir / "creep.json.partial"));
 
-  out = run("creep " + a + " --report", &status);
+  out = run_gaitmon("creep " + a + " --report", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--report requires --out"), std::string::npos) << out;
 
-  out = run("creep " + a + " --out " + a, &status);
+  out = run_gaitmon("creep " + a + " --out " + a, &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--out"), std::string::npos) << out;
 
   // A recording kept in the output folder under an output's name is never removed as one.
   const fs::path kept = out_dir / "creep.json";
   fs::copy_file(a, kept);
-  out = run("creep " + a + " " + kept.string() + " --out " + out_dir.string(), &status);
+  out = run_gaitmon("creep " + a + " " + kept.string() + " --out " + out_dir.string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("is the file this command reads"), std::string::npos) << out;
   EXPECT_TRUE(fs::exists(kept));
 
-  out = run("creep " + a + " --min-p 1.5", &status);
+  out = run_gaitmon("creep " + a + " --min-p 1.5", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--min-p"), std::string::npos) << out;
 }

@@ -5,7 +5,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <limits>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <string>
@@ -16,7 +15,7 @@
 namespace gaitmon::cli {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+using test::kNaN;
 
 // Two walks that show a creep, 0.30 and 0.34 +- 0.01 (tau 1.0 and 1.2 +- 0.1 s), and one whose
 // zeros do not (0.20, no SE). Weighted alike, their mean is the midpoint with SE 0.01 / sqrt 2;

@@ -12,7 +12,7 @@
 namespace gaitmon {
 namespace {
 
-const auto run = &test::run_gaitmon;
+using test::run_gaitmon;
 
 std::string first_line(const std::filesystem::path& path) {
   std::ifstream in(path);
@@ -23,7 +23,7 @@ std::string first_line(const std::filesystem::path& path) {
 
 TEST(Cli, HelpListsTheSubcommands) {
   int status = -1;
-  const std::string out = run("--help", &status);
+  const std::string out = run_gaitmon("--help", &status);
   EXPECT_EQ(status, 0);
   EXPECT_NE(out.find("simulate"), std::string::npos) << out;
   EXPECT_NE(out.find("segment"), std::string::npos) << out;
@@ -32,11 +32,12 @@ TEST(Cli, HelpListsTheSubcommands) {
 TEST(Cli, SimulateThenSegmentWritesTheDocumentedFiles) {
   const auto dir = test::scratch_dir("cli-sim");
   int status = -1;
-  std::string out = run(
+  std::string out = run_gaitmon(
       "simulate --size 39-40 --duration 12 --seed 4 --out " + (dir / "s.csv").string(), &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_TRUE(std::filesystem::exists(dir / "s.truth.json"));
-  out = run("segment " + (dir / "s.csv").string() + " --out " + (dir / "seg").string(), &status);
+  out = run_gaitmon("segment " + (dir / "s.csv").string() + " --out " + (dir / "seg").string(),
+                    &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_EQ(first_line(dir / "seg" / "steps.csv"),
             "foot,step,t_heel_strike_s,t_toe_off_s,stance_s,peak_force_n,status");
@@ -56,7 +57,7 @@ TEST(Cli, SegmentEndsAStepAtAGapAndSaysSo) {
   const auto dir = test::scratch_dir("cli-gap");
   int status = -1;
   std::string out =
-      run("simulate --duration 10 --seed 3 --out " + (dir / "s.csv").string(), &status);
+      run_gaitmon("simulate --duration 10 --seed 3 --out " + (dir / "s.csv").string(), &status);
   ASSERT_EQ(status, 0) << out;
   std::ifstream in(dir / "s.csv");
   std::ofstream gap(dir / "gap.csv");
@@ -70,7 +71,8 @@ TEST(Cli, SegmentEndsAStepAtAGapAndSaysSo) {
     gap << line << "\n";
   }
   gap.close();
-  out = run("segment " + (dir / "gap.csv").string() + " --out " + (dir / "seg").string(), &status);
+  out = run_gaitmon("segment " + (dir / "gap.csv").string() + " --out " + (dir / "seg").string(),
+                    &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("time gaps over max_gap_s: L 1, R 1"), std::string::npos) << out;
   std::ifstream steps(dir / "seg" / "steps.csv");
@@ -87,18 +89,11 @@ TEST(Cli, SegmentEndsAStepAtAGapAndSaysSo) {
   EXPECT_GE(rows, 14) << "10 s of walking at 1.1 s a stride: about 9 steps a foot";
 }
 
-std::string read_all(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 TEST(Cli, TheBundledDemoIsReproducedByTheCommandInReplayReadme) {
   const auto dir = test::scratch_dir("cli-demo");
   const auto replay = test::source_dir() / "replay";
   // The command as the README prints it, with the output moved to the scratch folder.
-  const std::string readme = read_all(replay / "README.md");
+  const std::string readme = test::read_text(replay / "README.md");
   const std::string prefix = "build/gaitmon simulate ";
   const auto at = readme.find(prefix);
   ASSERT_NE(at, std::string::npos) << "replay/README.md shows no simulate command";
@@ -108,10 +103,11 @@ TEST(Cli, TheBundledDemoIsReproducedByTheCommandInReplayReadme) {
   ASSERT_NE(out_at, std::string::npos) << args;
   args.replace(out_at, out_arg.size(), "--out " + (dir / "demo.csv").string());
   int status = -1;
-  const std::string out = run("simulate " + args, &status);
+  const std::string out = run_gaitmon("simulate " + args, &status);
   ASSERT_EQ(status, 0) << out;
-  EXPECT_TRUE(read_all(dir / "demo.csv") == read_all(replay / "demo-simulated-37-38.csv"));
-  EXPECT_NE(read_all(replay / "demo-simulated-37-38.csv").find("# note: SIMULATED"),
+  EXPECT_TRUE(test::read_text(dir / "demo.csv") ==
+              test::read_text(replay / "demo-simulated-37-38.csv"));
+  EXPECT_NE(test::read_text(replay / "demo-simulated-37-38.csv").find("# note: SIMULATED"),
             std::string::npos);
 }
 
@@ -119,8 +115,8 @@ TEST(Cli, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   const auto dir = test::scratch_dir("cli-bad");
   test::write_text(dir / "bad.csv", test::session_head() + test::session_row("0.0,X"));
   int status = -1;
-  const std::string out =
-      run("segment " + (dir / "bad.csv").string() + " --out " + (dir / "o").string(), &status);
+  const std::string out = run_gaitmon(
+      "segment " + (dir / "bad.csv").string() + " --out " + (dir / "o").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("bad.csv:6"), std::string::npos) << out;
   // Nothing at all: not even the folder the run made.
@@ -128,7 +124,8 @@ TEST(Cli, BadSessionFailsNamingTheLineAndLeavesNoOutput) {
   // Into a folder that was there, the run leaves it as it was.
   std::filesystem::create_directories(dir / "kept");
   test::write_text(dir / "kept" / "notes.txt", "mine\n");
-  run("segment " + (dir / "bad.csv").string() + " --out " + (dir / "kept").string(), &status);
+  run_gaitmon("segment " + (dir / "bad.csv").string() + " --out " + (dir / "kept").string(),
+              &status);
   EXPECT_EQ(status, 2);
   EXPECT_TRUE(std::filesystem::exists(dir / "kept" / "notes.txt"));
   EXPECT_FALSE(std::filesystem::exists(dir / "kept" / "frames.csv.partial"));
@@ -140,11 +137,12 @@ TEST(Cli, BadConfigFailsNamingTheFileAndKey) {
     std::filesystem::copy_file(test::source_dir() / "config" / name, dir / name);
   }
   test::write_text(dir / "gaitmon.toml",
-                   read_all(dir / "gaitmon.toml") + "\n[surprise]\nvalue = 1\n");
+                   test::read_text(dir / "gaitmon.toml") + "\n[surprise]\nvalue = 1\n");
   int status = -1;
-  const std::string out = run("--config " + (dir / "gaitmon.toml").string() +
-                                  " simulate --duration 1 --out " + (dir / "x.csv").string(),
-                              &status);
+  const std::string out =
+      run_gaitmon("--config " + (dir / "gaitmon.toml").string() + " simulate --duration 1 --out " +
+                      (dir / "x.csv").string(),
+                  &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("gaitmon.toml"), std::string::npos) << out;
   EXPECT_NE(out.find("surprise"), std::string::npos) << out;
@@ -161,14 +159,14 @@ TEST(Cli, ASessionWithoutACompleteStepIsRefusedByAnalyzeAndDiscrepancy) {
   }
   const std::string session = test::write_text(dir / "standing.csv", text).string();
   int status = -1;
-  std::string out = run("analyze " + session + " --out " + (dir / "a").string(), &status);
+  std::string out = run_gaitmon("analyze " + session + " --out " + (dir / "a").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find(session + ": no complete step to fit in 300 and 300 frames"),
             std::string::npos)
       << out;
   EXPECT_TRUE(!std::filesystem::exists(dir / "a") || std::filesystem::is_empty(dir / "a"));
 
-  out = run("discrepancy " + session + " --out " + (dir / "d").string(), &status);
+  out = run_gaitmon("discrepancy " + session + " --out " + (dir / "d").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find(session + ": 0 complete steps, need at least 5 (one per fold of --folds)"),
             std::string::npos)
@@ -183,7 +181,7 @@ TEST(Cli, ASessionWithoutFramesIsBadInputForEveryCommandThatReadsOne) {
   for (const std::string command : {"segment", "analyze", "discrepancy"}) {
     int status = -1;
     const std::string out =
-        run(command + " " + session + " --out " + (dir / command).string(), &status);
+        run_gaitmon(command + " " + session + " --out " + (dir / command).string(), &status);
     EXPECT_EQ(status, 2) << command << "\n" << out;
     EXPECT_NE(out.find("gaitmon: bad input: " + session + ": no frames"), std::string::npos)
         << command << "\n"
@@ -191,7 +189,7 @@ TEST(Cli, ASessionWithoutFramesIsBadInputForEveryCommandThatReadsOne) {
     EXPECT_FALSE(std::filesystem::exists(dir / command)) << command;
   }
   int status = -1;
-  const std::string out = run(
+  const std::string out = run_gaitmon(
       "replay " + session + " --speed max --lcm-url file://" + (dir / "log").string() + "?mode=w",
       &status);
   EXPECT_EQ(status, 2) << out;
@@ -206,15 +204,15 @@ TEST(Cli, AnOutFolderThatCannotBeOneIsAUsageErrorBeforeAnyWork) {
   const std::string file = test::write_text(dir / "file.txt", "mine\n").string();
   for (const std::string command : {"segment", "analyze", "discrepancy"}) {
     int status = -1;
-    std::string out = run(command + " " + demo + " --out ''", &status);
+    std::string out = run_gaitmon(command + " " + demo + " --out ''", &status);
     EXPECT_EQ(status, 2) << command << "\n" << out;
     EXPECT_NE(out.find("--out: the path is empty"), std::string::npos) << command << "\n" << out;
-    out = run(command + " " + demo + " --out " + file, &status);
+    out = run_gaitmon(command + " " + demo + " --out " + file, &status);
     EXPECT_EQ(status, 2) << command << "\n" << out;
     EXPECT_NE(out.find("--out: " + file + " exists and is not a folder"), std::string::npos)
         << command << "\n"
         << out;
-    EXPECT_EQ(read_all(file), "mine\n");
+    EXPECT_EQ(test::read_text(file), "mine\n");
   }
 }
 
@@ -222,17 +220,18 @@ TEST(Cli, AnOutFolderThatCannotBeOneIsAUsageErrorBeforeAnyWork) {
 // deleted, as an earlier run's output, before it was read.
 TEST(Cli, TheSessionIsNeverRemovedAsAnEarlierRunsOutput) {
   const auto dir = test::scratch_dir("cli-out-input");
-  const std::string demo = read_all(test::demo_session());
+  const std::string demo = test::read_text(test::demo_session());
   for (const std::string command : {"segment", "analyze", "discrepancy"}) {
     const std::string name = command == "discrepancy" ? "discrepancy.json" : "steps.csv";
     const std::string session = test::write_text(dir / name, demo).string();
     int status = -1;
-    const std::string out = run(command + " " + session + " --out " + dir.string(), &status);
+    const std::string out =
+        run_gaitmon(command + " " + session + " --out " + dir.string(), &status);
     EXPECT_EQ(status, 2) << command << "\n" << out;
     EXPECT_NE(out.find("--out: " + session + " is the file this command reads"), std::string::npos)
         << command << "\n"
         << out;
-    EXPECT_EQ(read_all(session), demo) << command;
+    EXPECT_EQ(test::read_text(session), demo) << command;
   }
 }
 
@@ -242,9 +241,10 @@ TEST(Cli, AFailedRerunLeavesNoneOfTheCommandsEarlierOutputs) {
   const auto dir = test::scratch_dir("cli-rerun");
   int status = -1;
   std::string out =
-      run("simulate --duration 4 --seed 2 --out " + (dir / "s.csv").string(), &status);
+      run_gaitmon("simulate --duration 4 --seed 2 --out " + (dir / "s.csv").string(), &status);
   ASSERT_EQ(status, 0) << out;
-  out = run("segment " + (dir / "s.csv").string() + " --out " + (dir / "o").string(), &status);
+  out = run_gaitmon("segment " + (dir / "s.csv").string() + " --out " + (dir / "o").string(),
+                    &status);
   ASSERT_EQ(status, 0) << out;
   ASSERT_TRUE(std::filesystem::exists(dir / "o" / "steps.csv"));
   test::write_text(dir / "o" / "notes.txt", "mine\n");
@@ -261,12 +261,12 @@ TEST(Cli, AFailedRerunLeavesNoneOfTheCommandsEarlierOutputs) {
   };
   for (const auto& c : commands) {
     for (const std::string& name : c.outputs) test::write_text(dir / "o" / name, "earlier\n");
-    out = run(c.command + " " + bad + " --out " + (dir / "o").string(), &status);
+    out = run_gaitmon(c.command + " " + bad + " --out " + (dir / "o").string(), &status);
     EXPECT_EQ(status, 2) << c.command << "\n" << out;
     for (const std::string& name : c.outputs) {
       EXPECT_FALSE(std::filesystem::exists(dir / "o" / name)) << c.command << ": " << name;
     }
-    EXPECT_EQ(read_all(dir / "o" / "notes.txt"), "mine\n") << c.command;
+    EXPECT_EQ(test::read_text(dir / "o" / "notes.txt"), "mine\n") << c.command;
   }
 }
 
@@ -281,7 +281,8 @@ TEST(Cli, AHeaderRateTheTimesDisagreeWithIsWarnedOf) {
   }
   const std::string session = test::write_text(dir / "slow.csv", text).string();
   int status = -1;
-  const std::string out = run("segment " + session + " --out " + (dir / "o").string(), &status);
+  const std::string out =
+      run_gaitmon("segment " + session + " --out " + (dir / "o").string(), &status);
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find(session + ": the header says sample_rate_hz 100, but the times show 50 Hz"),
             std::string::npos)
@@ -293,48 +294,50 @@ TEST(Cli, AHeaderRateTheTimesDisagreeWithIsWarnedOf) {
 TEST(Cli, AWrongCommandLineIsExitCodeTwoAndSaysWhy) {
   const auto dir = test::scratch_dir("cli-usage");
   int status = -1;
-  std::string out =
-      run("analyze " + (dir / "absent.csv").string() + " --out " + (dir / "o").string(), &status);
+  std::string out = run_gaitmon(
+      "analyze " + (dir / "absent.csv").string() + " --out " + (dir / "o").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("absent.csv"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "o"));
 
   const std::string demo = test::demo_session().string();
-  out = run("discrepancy " + demo + " --out " + (dir / "d").string() + " --folds 1", &status);
+  out =
+      run_gaitmon("discrepancy " + demo + " --out " + (dir / "d").string() + " --folds 1", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--folds"), std::string::npos) << out;
 
-  out = run("analyze " + demo + " --out " + (dir / "a").string() +
-                " --effects hysteresis,stress_relaxation,hysteresis",
-            &status);
+  out = run_gaitmon("analyze " + demo + " --out " + (dir / "a").string() +
+                        " --effects hysteresis,stress_relaxation,hysteresis",
+                    &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--effects: 'hysteresis' is given twice"), std::string::npos) << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "a"));
-  out = run("analyze " + demo + " --out " + (dir / "a").string() + " --effects none,hysteresis",
-            &status);
+  out = run_gaitmon(
+      "analyze " + demo + " --out " + (dir / "a").string() + " --effects none,hysteresis", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--effects: none cannot be combined with an effect"), std::string::npos)
       << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "a"));
   // An empty name was "--effects:  not in {...}", the name itself invisible.
-  out = run("analyze " + demo + " --out " + (dir / "a").string() + " --effects ''", &status);
+  out =
+      run_gaitmon("analyze " + demo + " --out " + (dir / "a").string() + " --effects ''", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("--effects: an empty effect name (none for no effect)"), std::string::npos)
       << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "a"));
   // A folder as the session was "not a regular file; ... which a pipe cannot give".
-  out = run("analyze " + dir.string() + " --out " + (dir / "a").string(), &status);
+  out = run_gaitmon("analyze " + dir.string() + " --out " + (dir / "a").string(), &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("session: " + dir.string() + " is a folder, not a session"), std::string::npos)
       << out;
 
-  out = run("segment", &status);
+  out = run_gaitmon("segment", &status);
   EXPECT_EQ(status, 2) << out;
-  out = run("frobnicate", &status);
+  out = run_gaitmon("frobnicate", &status);
   EXPECT_EQ(status, 2) << out;
   EXPECT_NE(out.find("frobnicate"), std::string::npos) << out;
 
-  out = run("analyze --help", &status);
+  out = run_gaitmon("analyze --help", &status);
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find("--report"), std::string::npos) << out;
 }
@@ -364,7 +367,7 @@ TEST(Cli, ANumberOutsideItsRangeNanOrANegativeSeedIsAUsageError) {
   };
   for (const auto& c : cases) {
     int status = -1;
-    const std::string out = run(c.args, &status);
+    const std::string out = run_gaitmon(c.args, &status);
     EXPECT_EQ(status, 2) << c.args << "\n" << out;
     EXPECT_NE(out.find(c.says), std::string::npos) << c.args << "\n" << out;
   }
@@ -382,7 +385,7 @@ TEST(Cli, ANumberOutsideItsRangeNanOrANegativeSeedIsAUsageError) {
             std::string::npos)
       << piped;
   int status = -1;
-  const std::string out = run(simulate + "--stride 3 --seed 18446744073709551615", &status);
+  const std::string out = run_gaitmon(simulate + "--stride 3 --seed 18446744073709551615", &status);
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find("seed 18446744073709551615"), std::string::npos) << out;
 }
@@ -410,7 +413,7 @@ TEST(Cli, LogLevelComesFromTheConfigUnlessGivenOnTheCommandLine) {
   for (const char* name : {"gaitmon.toml", "insoles.toml", "tissue_seed_appendix_i.toml"}) {
     std::filesystem::copy_file(test::source_dir() / "config" / name, dir / name);
   }
-  std::string config = read_all(dir / "gaitmon.toml");
+  std::string config = test::read_text(dir / "gaitmon.toml");
   const std::string shipped = "[log]\n# How much";
   ASSERT_NE(config.find(shipped), std::string::npos);
   const auto level = config.find("level = \"info\"", config.find(shipped));
@@ -419,37 +422,37 @@ TEST(Cli, LogLevelComesFromTheConfigUnlessGivenOnTheCommandLine) {
   test::write_text(dir / "debug.toml", config);
 
   int status = -1;
-  std::string out =
-      run("simulate --size 37-38 --duration 8 --seed 3 --out " + (dir / "s.csv").string(), &status);
+  std::string out = run_gaitmon(
+      "simulate --size 37-38 --duration 8 --seed 3 --out " + (dir / "s.csv").string(), &status);
   ASSERT_EQ(status, 0) << out;
   const std::string analyze = " analyze " + (dir / "s.csv").string() + " --out ";
   const std::string debug_config = "--config " + (dir / "debug.toml").string();
 
-  out = run(debug_config + analyze + (dir / "a").string(), &status);
+  out = run_gaitmon(debug_config + analyze + (dir / "a").string(), &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
 
-  out = run(debug_config + " --log-level info" + analyze + (dir / "b").string(), &status);
+  out = run_gaitmon(debug_config + " --log-level info" + analyze + (dir / "b").string(), &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
 
-  out =
-      run("--config " + (dir / "gaitmon.toml").string() + analyze + (dir / "c").string(), &status);
+  out = run_gaitmon("--config " + (dir / "gaitmon.toml").string() + analyze + (dir / "c").string(),
+                    &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
 
-  out = run("--config " + (dir / "gaitmon.toml").string() + " --log-level debug" + analyze +
-                (dir / "d").string(),
-            &status);
+  out = run_gaitmon("--config " + (dir / "gaitmon.toml").string() + " --log-level debug" + analyze +
+                        (dir / "d").string(),
+                    &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
 
   // After the command's name, as users write them, the two options work the same.
-  out = run(analyze.substr(1) + (dir / "e").string() + " " + debug_config, &status);
+  out = run_gaitmon(analyze.substr(1) + (dir / "e").string() + " " + debug_config, &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("[debug] analysed"), std::string::npos) << out;
-  out = run(analyze.substr(1) + (dir / "f").string() + " " + debug_config + " --log-level info",
-            &status);
+  out = run_gaitmon(
+      analyze.substr(1) + (dir / "f").string() + " " + debug_config + " --log-level info", &status);
   ASSERT_EQ(status, 0) << out;
   EXPECT_EQ(out.find("[debug]"), std::string::npos) << out;
 }
